@@ -1,0 +1,63 @@
+"""Argument checks shared by the entry points of the core (run once, never per kernel call)."""
+
+import numpy as np
+
+from .exceptions import InputError
+
+
+def as_array(value, shape, name, exc=InputError):
+    """Return ``value`` as a C-contiguous float64 array of ``shape``, finite, or raise ``exc``.
+
+    ``shape`` may contain ``None`` for a free dimension.
+    """
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise exc(f"{name}: not a numeric array ({err})") from None
+    if arr.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, arr.shape)):
+        want = "x".join("*" if s is None else str(s) for s in shape) or "scalar"
+        raise exc(f"{name}: expected shape ({want}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise exc(f"{name}: contains NaN or Inf")
+    return np.ascontiguousarray(arr)
+
+
+def check_spd(mat, name, exc):
+    """Raise ``exc`` unless ``mat`` is symmetric positive definite."""
+    if not np.allclose(mat, mat.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(mat).max())):
+        raise exc(f"{name}: not symmetric")
+    try:
+        np.linalg.cholesky(mat)
+    except np.linalg.LinAlgError:
+        raise exc(f"{name}: not positive definite") from None
+
+
+def per_link_matrix(value, n, size, name, exc):
+    """Broadcast a scalar, a (size,) diagonal, a (size, size) matrix or an (n, size, size) stack.
+
+    Every block must be symmetric positive definite. Returns an (n, size, size) array.
+    """
+    arr = np.array(value, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.eye(size) * arr
+    elif arr.ndim == 1 and arr.shape == (size,):
+        arr = np.diag(arr)
+    if arr.ndim == 2:
+        arr = np.broadcast_to(arr, (n, size, size))
+    arr = as_array(arr, (n, size, size), name, exc)
+    for i in range(n):
+        check_spd(arr[i], f"{name}[{i}]", exc)
+    return arr
+
+
+def positive_vector(value, n, name, exc):
+    """Broadcast a scalar or an (n,) vector (or a diagonal matrix) of strictly positive entries."""
+    arr = np.array(value, dtype=np.float64)
+    if arr.ndim == 2:
+        if arr.shape != (n, n) or np.any(arr - np.diag(np.diag(arr))):
+            raise exc(f"{name}: must be a scalar, a vector of {n} or a diagonal {n}x{n} matrix")
+        arr = np.diag(arr)
+    arr = as_array(np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr, (n,), name, exc)
+    if np.any(arr <= 0.0):
+        raise exc(f"{name}: every entry must be > 0, got {arr.tolist()}")
+    return arr

@@ -1,0 +1,195 @@
+"""The per-link 6x13 reference regressor (eqs 13-14, NOTES.md 2) and its companions.
+
+``Y(Vdot_r, V_r, w, g) theta = M Vdot_r + C(w) V_r + G`` with the paper's 13
+parameters, ``C`` evaluated at the actual angular velocity ``w``:
+
+    force  = t1 (vdot_r + w x v_r - g) + alpha_r x h - w x (h x w_r)
+    moment = h x (vdot_r + w x v_r - g) + I_o alpha_r + w x (I_o w_r)
+             + I_o (w x w_r) - (t5 + t6 + t7) (w x w_r)
+
+``Ym(V) = Y(V, 0, w, 0)`` is the regressor of ``M V`` and
+``Yc(V) = Y(0, V, w, g)`` that of ``C(w) V + G`` (NOTES.md 4).
+"""
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array
+
+
+@njit(cache=True)
+def fill_regressor(Y, k, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz,
+                   wx, wy, wz, gx, gy, gz):
+    """Write ``Y(Vdot_r, V_r, w, g)`` (6x13) into ``Y[k]`` (eq 14 made linear in theta)."""
+    # a = vdot_r + w x v_r - g ; c = w x w_r ; d = alpha_r + c
+    ax = vdx + wy * vrz - wz * vry - gx
+    ay = vdy + wz * vrx - wx * vrz - gy
+    az = vdz + wx * vry - wy * vrx - gz
+    cx = wy * wrz - wz * wry
+    cy = wz * wrx - wx * wrz
+    cz = wx * wry - wy * wrx
+    dx = alx + cx
+    dy = aly + cy
+    dz = alz + cz
+    ww = wx * wrx + wy * wry + wz * wrz
+    # column 1: mass
+    Y[k, 0, 0] = ax
+    Y[k, 1, 0] = ay
+    Y[k, 2, 0] = az
+    Y[k, 3, 0] = 0.0
+    Y[k, 4, 0] = 0.0
+    Y[k, 5, 0] = 0.0
+    # columns 2-4: first moments h; force = (alpha^x - (w.w_r) I + w_r w^T) h, moment = -a^x h
+    Y[k, 0, 1] = wrx * wx - ww
+    Y[k, 0, 2] = wrx * wy - alz
+    Y[k, 0, 3] = wrx * wz + aly
+    Y[k, 1, 1] = wry * wx + alz
+    Y[k, 1, 2] = wry * wy - ww
+    Y[k, 1, 3] = wry * wz - alx
+    Y[k, 2, 1] = wrz * wx - aly
+    Y[k, 2, 2] = wrz * wy + alx
+    Y[k, 2, 3] = wrz * wz - ww
+    Y[k, 3, 1] = 0.0
+    Y[k, 3, 2] = az
+    Y[k, 3, 3] = -ay
+    Y[k, 4, 1] = -az
+    Y[k, 4, 2] = 0.0
+    Y[k, 4, 3] = ax
+    Y[k, 5, 1] = ay
+    Y[k, 5, 2] = -ax
+    Y[k, 5, 3] = 0.0
+    # columns 5-13 act on the moment only: col(E) = E d + w x (E w_r) [- c for t5..t7]
+    m11x, m11y, m11z = dx, wrx * wz, -wrx * wy            # t11: E = e_x e_x^T
+    m12x, m12y, m12z = -wry * wz, dy, wry * wx            # t12: E = e_y e_y^T
+    m13x, m13y, m13z = wrz * wy, -wrz * wx, dz            # t13: E = e_z e_z^T
+    for r in range(3):
+        for col in range(4, 13):
+            Y[k, r, col] = 0.0
+    Y[k, 3, 4] = m12x + m13x - cx
+    Y[k, 4, 4] = m12y + m13y - cy
+    Y[k, 5, 4] = m12z + m13z - cz
+    Y[k, 3, 5] = m11x + m13x - cx
+    Y[k, 4, 5] = m11y + m13y - cy
+    Y[k, 5, 5] = m11z + m13z - cz
+    Y[k, 3, 6] = m11x + m12x - cx
+    Y[k, 4, 6] = m11y + m12y - cy
+    Y[k, 5, 6] = m11z + m12z - cz
+    Y[k, 3, 7] = wz * wrx - dy                             # t8: E = -(e_x e_y^T + e_y e_x^T)
+    Y[k, 4, 7] = -dx - wz * wry
+    Y[k, 5, 7] = wy * wry - wx * wrx
+    Y[k, 3, 8] = -dz - wy * wrx                            # t9: E = -(e_x e_z^T + e_z e_x^T)
+    Y[k, 4, 8] = wx * wrx - wz * wrz
+    Y[k, 5, 8] = wy * wrz - dx
+    Y[k, 3, 9] = wz * wrz - wy * wry                       # t10: E = -(e_y e_z^T + e_z e_y^T)
+    Y[k, 4, 9] = wx * wry - dz
+    Y[k, 5, 9] = -dy - wx * wrz
+    Y[k, 3, 10] = m11x
+    Y[k, 4, 10] = m11y
+    Y[k, 5, 10] = m11z
+    Y[k, 3, 11] = m12x
+    Y[k, 4, 11] = m12y
+    Y[k, 5, 11] = m12z
+    Y[k, 3, 12] = m13x
+    Y[k, 4, 12] = m13y
+    Y[k, 5, 12] = m13z
+
+
+@njit(cache=True)
+def link_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
+    """``M Vdot + C(w) V + G`` of one link from its parameters ``th[o:o+13]`` (eq 13, V_r = V).
+
+    This is ``Y(Vdot, V, w, g) theta`` without forming Y (Newton-Euler about the frame origin).
+    """
+    m = th[o]
+    hx, hy, hz = th[o + 1], th[o + 2], th[o + 3]
+    t5, t6, t7 = th[o + 4], th[o + 5], th[o + 6]
+    t8, t9, t10 = th[o + 7], th[o + 8], th[o + 9]
+    Ixx = th[o + 10] + t6 + t7
+    Iyy = th[o + 11] + t5 + t7
+    Izz = th[o + 12] + t5 + t6
+    ax = vdx + wy * vz - wz * vy - gx
+    ay = vdy + wz * vx - wx * vz - gy
+    az = vdz + wx * vy - wy * vx - gz
+    # I_o alpha and I_o w
+    iax = Ixx * alx - t8 * aly - t9 * alz
+    iay = -t8 * alx + Iyy * aly - t10 * alz
+    iaz = -t9 * alx - t10 * aly + Izz * alz
+    iwx = Ixx * wx - t8 * wy - t9 * wz
+    iwy = -t8 * wx + Iyy * wy - t10 * wz
+    iwz = -t9 * wx - t10 * wy + Izz * wz
+    # h x w, then w x (h x w)
+    bx = hy * wz - hz * wy
+    by = hz * wx - hx * wz
+    bz = hx * wy - hy * wx
+    fx = m * ax + aly * hz - alz * hy - (wy * bz - wz * by)
+    fy = m * ay + alz * hx - alx * hz - (wz * bx - wx * bz)
+    fz = m * az + alx * hy - aly * hx - (wx * by - wy * bx)
+    nx = hy * az - hz * ay + iax + wy * iwz - wz * iwy
+    ny = hz * ax - hx * az + iay + wz * iwx - wx * iwz
+    nz = hx * ay - hy * ax + iaz + wx * iwy - wy * iwx
+    return fx, fy, fz, nx, ny, nz
+
+
+def link_regressor(Vdot_r, V_r, w, g=(0.0, 0.0, 0.0)):
+    """The reference regressor ``Y_r`` of one link (eq 19b), shape (6, 13).
+
+    Parameters
+    ----------
+    Vdot_r, V_r : array_like, shape (6,)
+        Reference spatial acceleration and velocity ``[linear; angular]``, link frame.
+    w : array_like, shape (3,)
+        Actual angular velocity of the link (where ``C(w)`` is evaluated).
+    g : array_like, shape (3,)
+        Gravity acceleration in the link frame.
+
+    Returns
+    -------
+    ndarray, shape (6, 13)
+        ``Y`` with ``Y @ theta == M Vdot_r + C(w) V_r + G`` for any ``theta``.
+    """
+    Vdot_r = as_array(Vdot_r, (6,), "Vdot_r")
+    V_r = as_array(V_r, (6,), "V_r")
+    w = as_array(w, (3,), "w")
+    g = as_array(g, (3,), "g")
+    Y = np.zeros((1, 6, 13))
+    fill_regressor(Y, 0, *Vdot_r, *V_r, *w, *g)
+    return Y[0]
+
+
+def mass_regressor(V):
+    """``Ym(V)``, shape (6, 13): ``Ym(V) theta = M V`` (NOTES.md 4)."""
+    V = as_array(V, (6,), "V")
+    return link_regressor(V, np.zeros(6), V[3:])
+
+
+def coriolis_gravity_regressor(V, g=(0.0, 0.0, 0.0)):
+    """``Yc(V)``, shape (6, 13): ``Yc(V) theta = C(w) V + G`` with ``w`` = V's angular part."""
+    V = as_array(V, (6,), "V")
+    return link_regressor(np.zeros(6), V, V[3:], g)
+
+
+def link_matrices(theta, w, g=(0.0, 0.0, 0.0)):
+    """The blocks of eq 14 (NOTES.md 2) from one link's 13 parameters: ``M``, ``C(w)``, ``G``.
+
+    These are the explicit matrices, used to check the regressor and for the
+    Lyapunov function of eq 26.
+    """
+    th = as_array(theta, (13,), "theta")
+    w = as_array(w, (3,), "w")
+    g = as_array(g, (3,), "g")
+    m, h = th[0], th[1:4]
+    P = _skew(h / m)
+    W = _skew(w)
+    t = th
+    I_o = np.array([[t[10] + t[5] + t[6], -t[7], -t[8]],
+                    [-t[7], t[11] + t[4] + t[6], -t[9]],
+                    [-t[8], -t[9], t[12] + t[4] + t[5]]])
+    I_c = I_o + m * P @ P
+    M = np.block([[m * np.eye(3), -m * P], [m * P, I_o]])
+    C = np.block([[m * W, -m * W @ P], [m * P @ W, W @ I_c + I_c @ W - m * P @ W @ P]])
+    G = -np.concatenate([m * g, m * P @ g])
+    return M, C, G
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
