@@ -1,0 +1,50 @@
+"""The ``rcac`` command: one entry point, one subcommand per tool.
+
+Each subcommand lives in its own module exposing ``add_arguments(parser)`` and
+``run(args) -> int``; modules are imported only when their subcommand runs, so
+``rcac --help`` stays fast and ``rcac experiment`` never imports rclpy.
+"""
+
+import argparse
+import importlib
+import sys
+
+#: subcommand -> (module, one-line help)
+SUBCOMMANDS = {
+    "experiment": ("rcac_ros.experiment", "run the paper's Section 4 experiment (both laws)"),
+    "bench": ("rcac_ros.bench", "time the controller against Pinocchio and the baseline"),
+    "record": ("rcac_ros.bag", "record the package's topics into a rosbag2 bag"),
+    "inspect": ("rcac_ros.inspect_bag", "summarise a bag and plot what it holds"),
+    "demo": ("rcac_ros.demo", "simulator + controller over ROS 2, bag, summary and plots"),
+    "payload-demo": ("rcac_ros.payload_demo", "panda with an unknown 2 kg payload attached"),
+}
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(prog="rcac", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module, help_text) in SUBCOMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.set_defaults(_module=module)
+        if name in sys.argv[1:2]:  # only the chosen subcommand imports its module
+            importlib.import_module(module).add_arguments(p)
+    return parser
+
+
+def main(argv=None):
+    if argv is not None:
+        sys.argv = [sys.argv[0]] + list(argv)
+    args = build_parser().parse_args()
+    from rcac_ros.core.exceptions import RcacError
+    try:
+        return importlib.import_module(args._module).run(args) or 0
+    except RcacError as err:
+        print(f"rcac {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

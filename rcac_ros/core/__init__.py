@@ -1,0 +1,16 @@
+"""rcac_ros.core: the pure core (numpy + numba, never rclpy).
+
+Model (constant) and state (per step) are kept apart, as in Pinocchio:
+:class:`RobotModel` is immutable; controllers and the simulator own their state.
+"""
+
+from .exceptions import ConfigError, GainError, InputError, ModelError, RcacError
+from .model import PARAMETER_NAMES, RobotModel, css_arm, theta_from_inertia
+from .regressor import (coriolis_gravity_regressor, link_matrices, link_regressor,
+                        mass_regressor)
+
+__all__ = [
+    "RcacError", "ModelError", "ConfigError", "GainError", "InputError",
+    "RobotModel", "css_arm", "theta_from_inertia", "PARAMETER_NAMES",
+    "link_regressor", "mass_regressor", "coriolis_gravity_regressor", "link_matrices",
+]

@@ -1,0 +1,32 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "rcac_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    package_data={package_name: ["data/*.yaml"]},
+    install_requires=["setuptools", "numpy", "numba", "pyyaml", "matplotlib", "rosbags",
+                      "yourdfpy"],
+    zip_safe=True,
+    maintainer="rcac_ros maintainers",
+    maintainer_email="rcac@example.com",
+    description="Recursive composite adaptive controller for serial manipulators (ROS 2).",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "rcac = rcac_ros.cli:main",
+            "controller = rcac_ros.nodes.controller_node:main",
+            "simulator = rcac_ros.nodes.simulator_node:main",
+        ],
+    },
+)
