@@ -209,6 +209,15 @@ class RobotModel:
         return cls.from_dict(doc, source=os.fspath(path))
 
     @classmethod
+    def from_urdf(cls, path_or_xml, base_link=None, tip_link=None):
+        """Load the serial chain from ``base_link`` to ``tip_link`` of a URDF (file or XML string).
+
+        See :func:`rcac_ros.core.urdf.model_from_urdf`.
+        """
+        from .urdf import model_from_urdf
+        return model_from_urdf(path_or_xml, base_link=base_link, tip_link=tip_link)
+
+    @classmethod
     def from_dict(cls, doc, source="model"):
         """Build a model from the parsed YAML schema (see :meth:`from_yaml`)."""
         if not isinstance(doc, dict):

@@ -1,0 +1,90 @@
+"""Inverse dynamics by the matrix-form recursive Newton-Euler algorithm (eqs 9, 11, 15, 16)."""
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array
+from .regressor import link_wrench
+from .spatial import P0, RF0, TH0, joint_rotation, pack_kinematics, transform_force_T, \
+    transform_motion, z_cross_rate
+
+
+@njit(cache=True)
+def rnea_kernel(kin, g, q, qd, qdd):
+    """tau for the packed model ``kin`` (rows ``[p, R_fix, theta]``) and gravity ``g`` (base).
+
+    Forward (i = 1..n):  V_i = T V_{i-1} + z6 qd_i                       (eq 9)
+                         Vdot_i = T Vdot_{i-1} + Tdot V_{i-1} + z6 qdd_i   (eq 11)
+                         F*_i = M_i Vdot_i + C_i V_i + G_i                 (eq 13)
+    Backward (i = n..1): F_i = (i+1 T_i)^T F_{i+1} + F*_i,  tau_i = z6^T F_i   (eqs 15, 16)
+    """
+    n = q.shape[0]
+    C = np.empty((n, 9), q.dtype)
+    Fs = np.empty((n, 6), q.dtype)
+    tau = np.empty(n, q.dtype)
+    vx = vy = vz = wx = wy = wz = 0.0
+    ax = ay = az = bx = by = bz = 0.0
+    gx, gy, gz = g[0], g[1], g[2]
+    for i in range(n):
+        row = kin[i]
+        joint_rotation(row, RF0, q[i], C, i)
+        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
+        tax, tay, taz, tbx, tby, tbz = transform_motion(C, i, px, py, pz, ax, ay, az, bx, by, bz)
+        dvx, dvy = z_cross_rate(qd[i], tvx, tvy)
+        dwx, dwy = z_cross_rate(qd[i], twx, twy)
+        vx, vy, vz, wx, wy, wz = tvx, tvy, tvz, twx, twy, twz + qd[i]
+        ax, ay, az = tax + dvx, tay + dvy, taz
+        bx, by, bz = tbx + dwx, tby + dwy, tbz + qdd[i]
+        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
+                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
+                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
+        f = link_wrench(row, TH0, ax, ay, az, bx, by, bz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+    fx = fy = fz = nx = ny = nz = 0.0
+    for i in range(n - 1, -1, -1):
+        if i < n - 1:
+            r = kin[i + 1]
+            fx, fy, fz, nx, ny, nz = transform_force_T(C, i + 1, r[P0], r[P0 + 1], r[P0 + 2],
+                                                       fx, fy, fz, nx, ny, nz)
+        fx, fy, fz = fx + Fs[i, 0], fy + Fs[i, 1], fz + Fs[i, 2]
+        nx, ny, nz = nx + Fs[i, 3], ny + Fs[i, 4], nz + Fs[i, 5]
+        tau[i] = nz
+    return tau
+
+
+def state_vectors(model, **vectors):
+    """Validate named joint-space vectors of length ``model.n`` (entry-point checks)."""
+    return [as_array(v, (model.n,), k) for k, v in vectors.items()]
+
+
+def inverse_dynamics(model, q, qd, qdd):
+    """Joint torques ``tau = M(q) qdd + C(q, qd) qd + G(q)`` by the paper's recursion.
+
+    Parameters
+    ----------
+    model : RobotModel
+    q, qd, qdd : array_like, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    InputError
+        If a vector has the wrong length or holds NaN/Inf.
+    """
+    q, qd, qdd = state_vectors(model, q=q, qd=qd, qdd=qdd)
+    return rnea_kernel(_kin(model), model.gravity, q, qd, qdd)
+
+
+def _kin(model):
+    """The packed kinematic/inertial rows of ``model``, built once and cached on it."""
+    kin = model.__dict__.get("_kin_cache")
+    if kin is None:
+        kin = pack_kinematics(model)
+        kin.setflags(write=False)
+        model.__dict__["_kin_cache"] = kin
+    return kin
