@@ -1,0 +1,472 @@
+"""``rcac inspect``: summarise a bag of the package's topics, compute metrics, plot.
+
+The summary lists every topic (type, count, rate from the receive stamps) and the
+bag's duration. The metrics are those of ``rcac experiment`` that the bag allows
+(tracking errors, estimate errors against the model's true parameters,
+prediction error, torques) plus the loop timing seen by the recorder (period
+between joint states, latency from a joint state to the effort that answers it).
+
+Times on the plots are simulated time: a joint state carries it in its header;
+the controller's outputs take the header stamp of the ``desired_state`` published
+in the same callback (nearest receive stamp), else that of the latest joint
+state received before them.
+"""
+
+import json
+import os
+import sys
+
+import numpy as np
+
+from rcac_ros import topics
+from rcac_ros.core.exceptions import ConfigError
+
+#: seconds at the end of the run for ``rms_tracking_error_last_5s``
+LAST_WINDOW = 5.0
+
+
+class TopicData:
+    """Messages of one topic: receive stamps (ns) and the decoded fields we use."""
+
+    def __init__(self, name, msgtype):
+        self.name = name
+        self.msgtype = msgtype
+        self.recv = []
+        self.stamp = []      # header stamp (s), for stamped types
+        self.values = []     # per message: array (or float)
+        self.names = None    # joint names (JointState)
+        self.velocity = []
+        self.dims = None     # MultiArray layout dims [(label, size), ...]
+
+    @property
+    def count(self):
+        return len(self.recv)
+
+    def finish(self):
+        """Convert the lists to arrays (ragged values stay a list)."""
+        self.recv = np.asarray(self.recv, dtype=np.int64)
+        self.stamp = np.asarray(self.stamp, dtype=float)
+        try:
+            self.values = np.asarray(self.values, dtype=float)
+        except ValueError:
+            pass
+        try:
+            self.velocity = np.asarray(self.velocity, dtype=float)
+        except ValueError:
+            pass
+        return self
+
+
+def _stamp(header):
+    return header.stamp.sec + 1e-9 * header.stamp.nanosec
+
+
+def read_bag(path):
+    """Read a bag into :class:`TopicData` per topic.
+
+    Parameters
+    ----------
+    path : str
+        rosbag2 directory (mcap or sqlite3).
+
+    Returns
+    -------
+    dict
+        topic -> TopicData, for every connection in the bag.
+    """
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import get_typestore, Stores
+
+    if not os.path.isdir(path):
+        raise ConfigError(f"bag: {path} is not a rosbag2 directory")
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    data = {}
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as err:  # rosbags raises several types for unreadable bags
+        raise ConfigError(f"bag: cannot open {path}: {err}") from err
+    try:
+        for conn in reader.connections:
+            data.setdefault(conn.topic, TopicData(conn.topic, conn.msgtype))
+        decoded = {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",
+                   "std_msgs/msg/Float64", "rosgraph_msgs/msg/Clock"}
+        for conn, stamp, raw in reader.messages():
+            td = data[conn.topic]
+            td.recv.append(stamp)
+            if conn.msgtype not in decoded:
+                continue
+            msg = typestore.deserialize_cdr(raw, conn.msgtype)
+            if conn.msgtype == "sensor_msgs/msg/JointState":
+                td.stamp.append(_stamp(msg.header))
+                td.values.append(np.array(msg.position, dtype=float))
+                td.velocity.append(np.array(msg.velocity, dtype=float))
+                if td.names is None:
+                    td.names = list(msg.name)
+            elif conn.msgtype == "std_msgs/msg/Float64MultiArray":
+                td.values.append(np.array(msg.data, dtype=float))
+                if td.dims is None:
+                    td.dims = [(d.label, int(d.size)) for d in msg.layout.dim]
+            elif conn.msgtype == "std_msgs/msg/Float64":
+                td.values.append(float(msg.data))
+            else:  # Clock
+                td.stamp.append(msg.clock.sec + 1e-9 * msg.clock.nanosec)
+    finally:
+        reader.close()
+    return {k: v.finish() for k, v in data.items()}
+
+
+def summary(data):
+    """Per-topic counts and rates, and the bag's duration.
+
+    Returns
+    -------
+    dict
+        ``{"duration_s", "messages", "sim_duration_s", "topics": {name: {type, count,
+        rate_hz}}}``; ``rate_hz`` is (count - 1) / (last - first receive stamp).
+    """
+    out = {"topics": {}}
+    first, last, total = None, None, 0
+    for name, td in sorted(data.items()):
+        rate = None
+        if td.count >= 2 and td.recv[-1] > td.recv[0]:
+            rate = (td.count - 1) / (1e-9 * (td.recv[-1] - td.recv[0]))
+        out["topics"][name] = {"type": td.msgtype, "count": td.count, "rate_hz": rate}
+        total += td.count
+        if td.count:
+            first = td.recv.min() if first is None else min(first, td.recv.min())
+            last = td.recv.max() if last is None else max(last, td.recv.max())
+    out["messages"] = total
+    out["duration_s"] = 0.0 if first is None else 1e-9 * float(last - first)
+    clock = data.get(topics.CLOCK)
+    out["sim_duration_s"] = (float(clock.stamp[-1] - clock.stamp[0])
+                             if clock is not None and clock.count >= 1 else None)
+    return out
+
+
+def format_summary(path, summ):
+    """The summary as text, ``ros2 bag info`` style."""
+    lines = [f"Bag:       {path}",
+             f"Duration:  {summ['duration_s']:.3f} s (receive stamps)"]
+    if summ["sim_duration_s"] is not None:
+        lines.append(f"Sim time:  {summ['sim_duration_s']:.3f} s (/clock)")
+    lines.append(f"Messages:  {summ['messages']}")
+    width = max([len(n) for n in summ["topics"]] + [5])
+    lines.append(f"  {'topic':<{width}}  {'type':<36} {'count':>8} {'rate (Hz)':>10}")
+    for name, info in summ["topics"].items():
+        rate = "-" if info["rate_hz"] is None else f"{info['rate_hz']:.1f}"
+        lines.append(f"  {name:<{width}}  {info['type']:<36} {info['count']:>8} {rate:>10}")
+    return "\n".join(lines)
+
+
+def _latest_before(ref_recv, ref_t, recv):
+    idx = np.searchsorted(ref_recv, recv, side="right") - 1
+    return ref_t[np.clip(idx, 0, len(ref_t) - 1)]
+
+
+def _nearest(ref_recv, ref_t, recv):
+    idx = np.clip(np.searchsorted(ref_recv, recv), 1, len(ref_recv) - 1) if len(ref_recv) > 1 \
+        else np.zeros(len(recv), dtype=int)
+    if len(ref_recv) > 1:
+        left = np.abs(recv - ref_recv[idx - 1]) <= np.abs(ref_recv[idx] - recv)
+        idx = np.where(left, idx - 1, idx)
+    return ref_t[idx]
+
+
+class Timeline:
+    """Maps receive stamps to simulated time (see the module docstring)."""
+
+    def __init__(self, data, controller_node=topics.CONTROLLER_NODE):
+        self.t0_recv = min((td.recv[0] for td in data.values() if td.count), default=0)
+        js = data.get("/" + topics.JOINT_STATES)
+        ds = data.get(f"/{controller_node}/{topics.DESIRED_STATE[2:]}")
+        clock = data.get(topics.CLOCK)
+        self.state = None
+        if js is not None and js.count and np.any(js.stamp != 0.0):
+            self.state = (js.recv, js.stamp)
+        elif clock is not None and clock.count:
+            self.state = (clock.recv, clock.stamp)
+        self.controller = None
+        if ds is not None and ds.count and np.any(ds.stamp != 0.0):
+            self.controller = (ds.recv, ds.stamp)
+
+    def state_time(self, td):
+        """Time of simulator-side messages (joint states, clock)."""
+        if td.msgtype in ("sensor_msgs/msg/JointState", "rosgraph_msgs/msg/Clock") \
+                and td.count and np.any(td.stamp != 0.0):
+            return td.stamp
+        if self.state is not None:
+            return _latest_before(*self.state, td.recv)
+        return 1e-9 * (td.recv - self.t0_recv)
+
+    def controller_time(self, td):
+        """Time of controller outputs (the state they answer)."""
+        if self.controller is not None:
+            return _nearest(*self.controller, td.recv)
+        if self.state is not None:
+            return _latest_before(*self.state, td.recv)
+        return 1e-9 * (td.recv - self.t0_recv)
+
+
+def loop_timing(data):
+    """Period between joint states and state -> effort latency, from receive stamps.
+
+    Each joint state is paired with the first effort command received after it and
+    before the next joint state; unanswered states are counted.
+
+    Returns
+    -------
+    dict or None
+        ``{"period_ms": array, "latency_ms": array, "unanswered": int}``.
+    """
+    js = data.get("/" + topics.JOINT_STATES)
+    eff = data.get("/" + topics.EFFORT_COMMANDS)
+    if js is None or js.count < 2:
+        return None
+    period = 1e-6 * np.diff(js.recv).astype(float)
+    latency = np.empty(0)
+    unanswered = js.count
+    if eff is not None and eff.count:
+        idx = np.searchsorted(eff.recv, js.recv, side="left")
+        ok = idx < eff.count
+        nxt = np.append(js.recv[1:], np.iinfo(np.int64).max)
+        ok[ok] &= eff.recv[idx[ok]] < nxt[ok]
+        latency = 1e-6 * (eff.recv[idx[ok]] - js.recv[ok]).astype(float)
+        unanswered = int(np.count_nonzero(~ok))
+    return {"period_ms": period, "latency_ms": latency, "unanswered": unanswered}
+
+
+def _percentiles(x, prefix, unit="ms"):
+    if len(x) == 0:
+        return {}
+    return {f"{prefix}_p50_{unit}": float(np.percentile(x, 50)),
+            f"{prefix}_p99_{unit}": float(np.percentile(x, 99)),
+            f"{prefix}_max_{unit}": float(np.max(x))}
+
+
+def load_truth(model):
+    """The true parameters (n, 13) of ``model`` ("css", "none", a YAML or URDF path)."""
+    if model in (None, "", "none"):
+        return None
+    from rcac_ros.core.model import css_arm, RobotModel
+    if model == "css":
+        return css_arm().theta()
+    if not os.path.exists(model):
+        raise ConfigError(f"model: {model} is neither 'css', 'none' nor an existing file")
+    if model.endswith((".urdf", ".xml")):
+        return RobotModel.from_urdf(model).theta()
+    return RobotModel.from_yaml(model).theta()
+
+
+def _estimates(td):
+    """Parameter estimates as (T, n, 13), using the layout dims when present."""
+    vals = td.values
+    if not isinstance(vals, np.ndarray) or vals.ndim != 2 or vals.shape[1] % 13:
+        raise ConfigError(f"bag: {td.name} does not hold n x 13 parameter estimates")
+    n = vals.shape[1] // 13
+    if td.dims and len(td.dims) == 2 and td.dims[0][1] * td.dims[1][1] == vals.shape[1]:
+        n = td.dims[0][1]
+    return vals.reshape(len(vals), n, -1)
+
+
+def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
+    """Metrics of ``rcac experiment`` that the bag allows, and the series to plot.
+
+    Parameters
+    ----------
+    data : dict
+        From :func:`read_bag`.
+    theta_true : ndarray (n, 13), optional
+        True parameters, for the estimate errors.
+    controller_node : str
+
+    Returns
+    -------
+    metrics : dict
+    series : dict
+        name -> (t, values) for the plots.
+    """
+    tl = Timeline(data, controller_node)
+    priv = f"/{controller_node}/"
+    metrics, series = {}, {}
+    te = data.get(priv + topics.TRACKING_ERROR[2:])
+    if te is not None and te.count and isinstance(te.values, np.ndarray):
+        t, e = tl.controller_time(te), te.values
+        series["tracking_error"] = (t, e)
+        metrics["rms_tracking_error"] = float(np.sqrt(np.mean(e ** 2)))
+        metrics["max_tracking_error"] = float(np.max(np.abs(e)))
+        last = t >= t[-1] - LAST_WINDOW
+        metrics["rms_tracking_error_last_5s"] = float(np.sqrt(np.mean(e[last] ** 2)))
+    eff = data.get("/" + topics.EFFORT_COMMANDS)
+    if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
+        series["effort"] = (tl.controller_time(eff), eff.values)
+        metrics["max_abs_torque"] = float(np.max(np.abs(eff.values)))
+    pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
+    if pe is not None and pe.count:
+        est = _estimates(pe)
+        series["parameter_estimates"] = (tl.controller_time(pe), est)
+        if theta_true is not None and theta_true.shape == est.shape[1:]:
+            err = est - theta_true
+            metrics["parameter_error_norm_start"] = float(np.linalg.norm(err[0]))
+            metrics["parameter_error_norm_end"] = float(np.linalg.norm(err[-1]))
+            metrics[f"link{est.shape[1]}_parameter_error_norm_end"] = \
+                float(np.linalg.norm(err[-1, -1]))
+    pr = data.get(priv + topics.PREDICTION_ERROR[2:])
+    if pr is not None and pr.count:
+        series["prediction_error"] = (tl.controller_time(pr), pr.values)
+        metrics["final_abs_prediction_error"] = float(abs(pr.values[-1]))
+    js = data.get("/" + topics.JOINT_STATES)
+    if js is not None and js.count:
+        ts = tl.state_time(js)
+        metrics["sim_time_start_s"] = float(ts[0])
+        metrics["sim_time_end_s"] = float(ts[-1])
+        metrics["joint_states"] = js.count
+    if eff is not None:
+        metrics["effort_commands"] = eff.count
+    timing = loop_timing(data)
+    if timing is not None:
+        series["timing"] = timing
+        metrics.update(_percentiles(timing["period_ms"], "state_period"))
+        metrics.update(_percentiles(timing["latency_ms"], "state_to_effort_latency"))
+        metrics["unanswered_states"] = timing["unanswered"]
+    return metrics, series
+
+
+def joint_names(data):
+    js = data.get("/" + topics.JOINT_STATES)
+    return js.names if js is not None else None
+
+
+def plot_timing(timing, path):
+    """Histograms of the joint-state period and the state -> effort latency."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, key, title in ((axes[0], "period_ms", "period between joint states"),
+                           (axes[1], "latency_ms", "joint state -> effort latency")):
+        x = timing[key]
+        if len(x):
+            hi = np.percentile(x, 99.9) * 1.2 + 1e-3
+            ax.hist(np.clip(x, 0, hi), bins=80, range=(0, hi), color="C0")
+            ax.axvline(np.median(x), color="C1", ls="--",
+                       label=f"median {np.median(x):.3f} ms")
+            ax.axvline(np.percentile(x, 99), color="C3", ls=":",
+                       label=f"p99 {np.percentile(x, 99):.3f} ms")
+            ax.legend()
+        ax.set_xlabel("ms (receive stamps)")
+        ax.set_ylabel("count")
+        ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="ROS 2"):
+    """Write the figures of the offline experiment from the bag's series.
+
+    Returns
+    -------
+    list of str
+        Paths written.
+    """
+    from rcac_ros import plots
+
+    os.makedirs(out_dir, exist_ok=True)
+    written = []
+    if "tracking_error" in series:
+        t, e = series["tracking_error"]
+        path = os.path.join(out_dir, "tracking_errors.png")
+        plots.plot_tracking_errors(t, {label: e}, path, joint_names=names)
+        written.append(path)
+    if "effort" in series:
+        t, tau = series["effort"]
+        path = os.path.join(out_dir, "efforts.png")
+        plots.plot_series(t, {label: tau}, path, "joint efforts (effort_controller/commands)",
+                          "torque (N m)")
+        written.append(path)
+    if "parameter_estimates" in series:
+        t, est = series["parameter_estimates"]
+        k = est.shape[1] - 1 if link is None else link - 1
+        if not 0 <= k < est.shape[1]:
+            raise ConfigError(f"link: must be in 1..{est.shape[1]}, got {link}")
+        truth = None
+        if theta_true is not None and theta_true.shape == est.shape[1:]:
+            truth = theta_true[k]
+        path = os.path.join(out_dir, f"estimates_link{k + 1}.png")
+        plots.plot_parameter_estimates(t, {label: est[:, k, :]}, truth, path, link=k + 1)
+        written.append(path)
+    if "prediction_error" in series:
+        t, pr = series["prediction_error"]
+        path = os.path.join(out_dir, "prediction_error.png")
+        plots.plot_series(t, {label: np.asarray(pr).reshape(-1, 1)}, path,
+                          "prediction error E", "E (N m)")
+        written.append(path)
+    if "timing" in series:
+        path = os.path.join(out_dir, "loop_timing.png")
+        plot_timing(series["timing"], path)
+        written.append(path)
+    return written
+
+
+def inspect(path, plots_dir=None, model="css", link=None, controller_node=topics.CONTROLLER_NODE):
+    """Read, summarise and (optionally) plot a bag; write metrics.json beside the plots.
+
+    Returns
+    -------
+    dict
+        ``{"summary", "metrics", "plots", "metrics_path"}``.
+    """
+    data = read_bag(path)
+    theta_true = load_truth(model)
+    summ = summary(data)
+    metrics, series = analyse(data, theta_true, controller_node)
+    result = {"summary": summ, "metrics": metrics, "plots": [], "metrics_path": None}
+    if plots_dir is not None:
+        result["plots"] = write_plots(series, plots_dir, theta_true, joint_names(data), link)
+        result["metrics_path"] = os.path.join(plots_dir, "metrics.json")
+        with open(result["metrics_path"], "w") as f:
+            json.dump({"bag": os.path.abspath(path), "summary": summ, "metrics": metrics}, f,
+                      indent=2)
+    return result
+
+
+def format_metrics(metrics):
+    width = max([len(k) for k in metrics] + [1])
+    lines = []
+    for key, value in metrics.items():
+        text = f"{value:.6g}" if isinstance(value, float) else str(value)
+        lines.append(f"  {key:<{width}}  {text}")
+    return "\n".join(lines)
+
+
+def add_arguments(parser):
+    parser.add_argument("bag", help="rosbag2 directory")
+    parser.add_argument("--plots", default=None, metavar="DIR",
+                        help="write the figures and metrics.json into DIR")
+    parser.add_argument("--model", default="css",
+                        help="true model for the estimate errors: 'css' (default, the paper's "
+                             "arm), 'none', or a model YAML / URDF")
+    parser.add_argument("--link", type=int, default=None,
+                        help="link (1-based) whose estimates are plotted (default: the last)")
+    parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
+                        help=f"controller node name (default: {topics.CONTROLLER_NODE})")
+
+
+def run(args):
+    result = inspect(args.bag, args.plots, args.model, args.link, args.controller_node)
+    print(format_summary(args.bag, result["summary"]))
+    if result["metrics"]:
+        print("Metrics:")
+        print(format_metrics(result["metrics"]))
+    for path in result["plots"]:
+        print(f"wrote {path}")
+    if result["metrics_path"]:
+        print(f"wrote {result['metrics_path']}")
+    return 0
+
+
+if __name__ == "__main__":
+    from rcac_ros.cli import main
+    sys.exit(main(["inspect"] + sys.argv[1:]))
