@@ -6,11 +6,21 @@ Model (constant) and state (per step) are kept apart, as in Pinocchio:
 
 from .exceptions import ConfigError, GainError, InputError, ModelError, RcacError
 from .model import PARAMETER_NAMES, RobotModel, css_arm, theta_from_inertia
+from .aba import forward_dynamics
+from .crba import mass_matrix
+from .kinematics import energy, forward_kinematics
+from .rcac import RecursiveCompositeController
 from .regressor import (coriolis_gravity_regressor, link_matrices, link_regressor,
                         mass_regressor)
+from .rnea import inverse_dynamics
+from .simulator import Simulator
+from .trajectory import PaperTrajectory, PolynomialTrajectory, SinusoidTrajectory
 
 __all__ = [
     "RcacError", "ModelError", "ConfigError", "GainError", "InputError",
     "RobotModel", "css_arm", "theta_from_inertia", "PARAMETER_NAMES",
     "link_regressor", "mass_regressor", "coriolis_gravity_regressor", "link_matrices",
+    "inverse_dynamics", "mass_matrix", "forward_dynamics", "forward_kinematics", "energy",
+    "RecursiveCompositeController", "Simulator",
+    "PaperTrajectory", "SinusoidTrajectory", "PolynomialTrajectory",
 ]

@@ -1,0 +1,389 @@
+"""The O(n) recursive composite adaptive controller (eqs 18-24, NOTES.md 3-4).
+
+Per control period ``h``, with ``s_i = V_i - V_ri``:
+
+    qd_r = qd_d - Lambda (q - q_d),   qdd_r = qdd_d - Lambda (qd - qd_d)           (eq 18)
+    V_ri = T V_r,i-1 + z6 qd_ri
+    Vdot_ri = T Vdot_r,i-1 + Tdot V_r,i-1 + z6 qdd_ri         (Tdot with the actual qd_i)
+    F_ri = (i+1 T_i)^T F_r,i+1 + Y_ri theta_hat_i + K_Di (V_ri - V_i)              (eq 19b)
+    tau_i = z6^T F_ri                                                               (eq 20)
+    a_1 = z6,  a_j = T_j a_j-1,  adot_j = Tdot_j a_j-1 + T_j adot_j-1     (joint 1's axis, frame j)
+    phi_j = a_j^T Ym_j(V_j),  psi_j = -adot_j^T Ym_j(V_j) + a_j^T Yc_j(V_j)   (eqs 21-22, O(n))
+    W_j = lambda (phi_j - phi_j^f) + psi_j^f,  y = tau_1^f,  E = sum_j W_j theta_hat_j - y
+    theta_hat_dot_i = -P_i (Y_ri^T s_i + gamma W_i^T E)                              (eq 24)
+
+Discretisation (the paper leaves it open): the filter ``lambda / (p + lambda)`` is
+discretised exactly, with a zero-order hold for the applied torque (held over the
+period, as it is) and a first-order hold for the sampled ``phi`` and ``psi``;
+``theta_hat`` takes one step of ``h`` after the torque is computed: explicit
+Euler in the tracking term ``Y_ri^T s_i``, implicit (backward Euler) in the
+prediction-error term. The latter is a rank-one system in the stacked
+``theta_hat``, solved in O(n) by Sherman-Morrison. It matters: with the paper's
+``P_i = 100 I`` and ``gamma = 0.1`` the explicit step is unstable at 2 ms
+(``h gamma W P W^T`` is far above 2), while the implicit one is stable for any
+gain and tends to eq 24 as ``h -> 0``.
+``gamma = 0`` is the direct adaptive controller, the paper's baseline.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array, per_link_matrix, positive_vector
+from .exceptions import GainError, InputError
+from .regressor import fill_regressor
+from .spatial import P0, RF0, joint_rotation, transform_force_T, transform_motion, z_cross_rate
+
+# packed constants per link: p (3), R_fix (9), Lambda (1), K_D (36), P (169)
+LAM, KD0, PG0, CONST_COLS = 12, 13, 49, 218
+# state per link: theta_hat, phi^f, psi^f, previous phi, previous psi (13 each), s_i (6)
+TH, PHF, PSF, PHP, PSP, S0, STATE_COLS = 0, 13, 26, 39, 52, 65, 71
+# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied, k, E, error
+I_G = 0
+(I_LAM, I_H, I_GAMMA, I_FE, I_FB0, I_FB1, I_Y, I_TAU1, I_K, I_E, I_ERR,
+ SCAL_LEN) = range(3, 15)
+
+INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
+
+
+@njit(cache=True)
+def check_vectors(n, a, b, c, d, e):
+    """0 if all five vectors have length n and are finite; else 1-5 (length) or 11-15 (NaN/Inf)."""
+    vecs = (a, b, c, d, e)
+    for k in range(5):
+        if vecs[k].shape[0] != n:
+            return k + 1
+    for k in range(5):
+        v = vecs[k]
+        for i in range(n):
+            if not math.isfinite(v[i]):
+                return k + 11
+    return 0
+
+
+def filter_coefficients(lam, h):
+    """Exact discretisation of ``lambda/(p+lambda)``: ``x^f_k = e x^f_k-1 + b0 x_k-1 + b1 (x_k - x_k-1)``.
+
+    ``b1 = 0`` is the zero-order hold; the first-order hold adds ``b1 = 1 - b0 / (lambda h)``.
+    """
+    e = math.exp(-lam * h)
+    return e, 1.0 - e, 1.0 - (1.0 - e) / (lam * h)
+
+
+@njit(cache=True)
+def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
+    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR])."""
+    n = const.shape[0]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    C = np.empty((n, 9), q.dtype)
+    Vr = np.empty((n, 6), q.dtype)
+    Yr = np.empty((n, 6, 13), q.dtype)
+    Ys = np.empty((2, 6, 13), q.dtype)
+    Wm = np.empty((n, 13), q.dtype)
+    Rn = np.empty((n, 13), q.dtype)
+    Un = np.empty((n, 13), q.dtype)
+    tau = np.empty(n, q.dtype)
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    y = 0.0 if first else fe * scal[I_Y] + fb0 * scal[I_TAU1]
+    vx = vy = vz = wx = wy = wz = 0.0                  # V_i
+    rvx = rvy = rvz = rwx = rwy = rwz = 0.0            # V_ri
+    dvx = dvy = dvz = dwx = dwy = dwz = 0.0            # Vdot_ri
+    avx = avy = avz = awx = awy = 0.0                  # a_j (joint 1's axis in frame j)
+    awz = 1.0
+    bvx = bvy = bvz = bwx = bwy = bwz = 0.0            # adot_j
+    gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
+    E = 0.0
+    for i in range(n):
+        row = const[i]
+        joint_rotation(row, RF0, q[i], C, i)
+        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+        qdi = qd[i]
+        qdr = qd_d[i] - row[LAM] * (q[i] - q_d[i])
+        qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
+        # eq 9
+        vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
+        wz += qdi
+        # eq 18: T V_r,i-1, then Tdot V_r,i-1 = -(z qd_i)^x (T V_r,i-1)
+        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
+                                                        rvx, rvy, rvz, rwx, rwy, rwz)
+        cvx, cvy = z_cross_rate(qdi, tvx, tvy)
+        cwx, cwy = z_cross_rate(qdi, twx, twy)
+        rvx, rvy, rvz, rwx, rwy, rwz = tvx, tvy, tvz, twx, twy, twz + qdr
+        dvx, dvy, dvz, dwx, dwy, dwz = transform_motion(C, i, px, py, pz,
+                                                        dvx, dvy, dvz, dwx, dwy, dwz)
+        dvx += cvx
+        dvy += cvy
+        dwx += cwx
+        dwy += cwy
+        dwz += qddr
+        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
+                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
+                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
+        if i > 0:
+            # adot_j = Tdot_j a_j-1 + T_j adot_j-1 ; a_j = T_j a_j-1
+            tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
+                                                            avx, avy, avz, awx, awy, awz)
+            cvx, cvy = z_cross_rate(qdi, tvx, tvy)
+            cwx, cwy = z_cross_rate(qdi, twx, twy)
+            bvx, bvy, bvz, bwx, bwy, bwz = transform_motion(C, i, px, py, pz,
+                                                            bvx, bvy, bvz, bwx, bwy, bwz)
+            bvx += cvx
+            bvy += cvy
+            bwx += cwx
+            bwy += cwy
+            avx, avy, avz, awx, awy, awz = tvx, tvy, tvz, twx, twy, twz
+        Vr[i, 0], Vr[i, 1], Vr[i, 2] = rvx, rvy, rvz
+        Vr[i, 3], Vr[i, 4], Vr[i, 5] = rwx, rwy, rwz
+        st = state[i]
+        st[S0], st[S0 + 1], st[S0 + 2] = vx - rvx, vy - rvy, vz - rvz
+        st[S0 + 3], st[S0 + 4], st[S0 + 5] = wx - rwx, wy - rwy, wz - rwz
+        # eq 19b's regressor, and Ym(V), Yc(V) for the filtered joint-1 torque
+        fill_regressor(Yr, i, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                       wx, wy, wz, gx, gy, gz)
+        fill_regressor(Ys, 0, vx, vy, vz, wx, wy, wz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                       wx, wy, wz, 0.0, 0.0, 0.0)
+        fill_regressor(Ys, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, vx, vy, vz, wx, wy, wz,
+                       wx, wy, wz, gx, gy, gz)
+        for c in range(13):
+            phi = (avx * Ys[0, 0, c] + avy * Ys[0, 1, c] + avz * Ys[0, 2, c]
+                   + awx * Ys[0, 3, c] + awy * Ys[0, 4, c] + awz * Ys[0, 5, c])
+            psi = (avx * Ys[1, 0, c] + avy * Ys[1, 1, c] + avz * Ys[1, 2, c]
+                   + awx * Ys[1, 3, c] + awy * Ys[1, 4, c] + awz * Ys[1, 5, c]
+                   - bvx * Ys[0, 0, c] - bvy * Ys[0, 1, c] - bvz * Ys[0, 2, c]
+                   - bwx * Ys[0, 3, c] - bwy * Ys[0, 4, c] - bwz * Ys[0, 5, c])
+            if first:
+                st[PHF + c] = phi
+                st[PSF + c] = 0.0
+            else:
+                st[PHF + c] = (fe * st[PHF + c] + fb0 * st[PHP + c]
+                               + fb1 * (phi - st[PHP + c]))
+                st[PSF + c] = (fe * st[PSF + c] + fb0 * st[PSP + c]
+                               + fb1 * (psi - st[PSP + c]))
+            st[PHP + c] = phi
+            st[PSP + c] = psi
+            w_c = lam * (phi - st[PHF + c]) + st[PSF + c]
+            Wm[i, c] = w_c
+            E += w_c * st[TH + c]
+    E -= y
+    fx = fy = fz = nx = ny = nz = 0.0
+    for i in range(n - 1, -1, -1):
+        row = const[i]
+        st = state[i]
+        if i < n - 1:
+            r = const[i + 1]
+            fx, fy, fz, nx, ny, nz = transform_force_T(C, i + 1, r[P0], r[P0 + 1], r[P0 + 2],
+                                                       fx, fy, fz, nx, ny, nz)
+        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
+        for r6 in range(6):
+            acc = 0.0
+            for c in range(13):
+                acc += Yr[i, r6, c] * st[TH + c]
+            for k in range(6):
+                acc -= row[KD0 + 6 * r6 + k] * st[S0 + k]
+            if r6 == 0:
+                fx += acc
+            elif r6 == 1:
+                fy += acc
+            elif r6 == 2:
+                fz += acc
+            elif r6 == 3:
+                nx += acc
+            elif r6 == 4:
+                ny += acc
+            else:
+                nz += acc
+        tau[i] = nz
+        # eq 24, step 1: r_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), u_i = P_i W_i^T
+        for a in range(13):
+            acc_r = 0.0
+            acc_u = 0.0
+            for c in range(13):
+                g_c = -gamma * Wm[i, c] * y
+                for r6 in range(6):
+                    g_c += Yr[i, r6, c] * st[S0 + r6]
+                acc_r += row[PG0 + 13 * a + c] * g_c
+                acc_u += row[PG0 + 13 * a + c] * Wm[i, c]
+            Rn[i, a] = st[TH + a] - h * acc_r
+            Un[i, a] = acc_u
+    # eq 24, step 2: the prediction-error term taken implicitly (Sherman-Morrison, O(n)):
+    # (I + h gamma u W) theta_hat+ = r  =>  theta_hat+ = r - h gamma u (W r) / (1 + h gamma W u)
+    Wr = 0.0
+    Wu = 0.0
+    for i in range(n):
+        for c in range(13):
+            Wr += Wm[i, c] * Rn[i, c]
+            Wu += Wm[i, c] * Un[i, c]
+    k = h * gamma * Wr / (1.0 + h * gamma * Wu)
+    for i in range(n):
+        for c in range(13):
+            state[i, TH + c] = Rn[i, c] - k * Un[i, c]
+    scal[I_Y] = y
+    scal[I_TAU1] = tau[0]
+    scal[I_K] += 1.0
+    scal[I_E] = E
+    return tau
+
+
+class RecursiveCompositeController:
+    """The recursive composite adaptive controller of eqs 18-24, O(n) per step.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Kinematics (``p``, ``R_fix``) and gravity; its inertial parameters are *not*
+        used: the controller knows only ``theta_hat``.
+    K_D : float, (6,), (6, 6) or (n, 6, 6)
+        Link feedback gains ``K_Di`` (eq 19), symmetric positive definite.
+    Lambda : float, (n,) or diagonal (n, n)
+        ``Lambda`` of eq 18, positive (per joint).
+    P : float, (13,), (13, 13) or (n, 13, 13)
+        Adaptation gains ``P_i`` (eq 24), symmetric positive definite.
+    gamma : float
+        Weight of the prediction error (eq 24); ``0`` gives the direct adaptive law.
+    lam : float
+        Bandwidth ``lambda`` of the filter ``lambda / (p + lambda)``, rad/s (the paper gives none).
+    h : float
+        Control period, s.
+    theta_hat0 : array_like (n, 13), optional
+        Initial estimates (default zero, as in the paper).
+
+    Raises
+    ------
+    GainError
+        On a gain of wrong shape, not finite, or not (symmetric) positive definite.
+    InputError
+        On a ``theta_hat0`` of wrong shape or not finite.
+    """
+
+    def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
+                 theta_hat0=None):
+        n = model.n
+        self.model = model
+        self.K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
+        self.P = per_link_matrix(P, n, 13, "P", GainError)
+        self.Lambda = positive_vector(Lambda, n, "Lambda", GainError)
+        self.gamma = _scalar(gamma, "gamma", minimum=0.0)
+        self.lam = _scalar(lam, "lam", minimum=0.0, strict=True)
+        self.h = _scalar(h, "h", minimum=0.0, strict=True)
+        const = np.zeros((n, CONST_COLS))
+        const[:, P0:P0 + 3] = model.p
+        const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
+        const[:, LAM] = self.Lambda
+        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
+        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
+        self._const = const
+        self._scal = np.zeros(SCAL_LEN)
+        self._scal[I_G:I_G + 3] = model.gravity
+        self._scal[I_LAM], self._scal[I_H], self._scal[I_GAMMA] = self.lam, self.h, self.gamma
+        self._scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
+        self._state = np.zeros((n, STATE_COLS))
+        self.reset(theta_hat0)
+
+    @property
+    def n(self):
+        """Number of joints."""
+        return self.model.n
+
+    def reset(self, theta_hat0=None):
+        """Restart: estimates to ``theta_hat0`` (default zero), filters and step count to zero."""
+        th = np.zeros((self.n, 13)) if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0")
+        self._state[:] = 0.0
+        self._state[:, TH:TH + 13] = th
+        self._scal[I_Y:I_ERR + 1] = 0.0
+
+    def step(self, q, qd, q_d, qd_d, qdd_d):
+        """One control period: returns the joint torques ``tau`` (eq 20) and adapts (eq 24).
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (n,)
+            Measured joint positions and velocities.
+        q_d, qd_d, qdd_d : array_like, shape (n,)
+            Desired position, velocity and acceleration.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+
+        Raises
+        ------
+        InputError
+            If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
+        """
+        try:
+            tau = rcac_step_kernel(self._const, self._scal, self._state, q, qd, q_d, qd_d, qdd_d)
+        except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
+            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, (q, qd, q_d, qd_d,
+                                                                           qdd_d))]
+            tau = rcac_step_kernel(self._const, self._scal, self._state, *args)
+        if tau.shape[0] == 0:
+            raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        return tau
+
+    @property
+    def theta_hat(self):
+        """Current estimates ``theta_hat``, shape (n, 13) (a copy)."""
+        return self._state[:, TH:TH + 13].copy()
+
+    @property
+    def E(self):
+        """Prediction error ``E = sum_j W_j theta_hat_j - y`` of the last step (eq 24)."""
+        return float(self._scal[I_E])
+
+    @property
+    def y(self):
+        """Filtered applied joint-1 torque ``y = tau_1^f`` at the last step."""
+        return float(self._scal[I_Y])
+
+    @property
+    def link_velocity_error(self):
+        """``s_i = V_i - V_ri`` of the last step, shape (n, 6) (a copy)."""
+        return self._state[:, S0:S0 + 6].copy()
+
+    @property
+    def W(self):
+        """The filtered regressor rows ``W_j`` (n, 13) of the last step."""
+        st = self._state
+        return self.lam * (st[:, PHP:PHP + 13] - st[:, PHF:PHF + 13]) + st[:, PSF:PSF + 13]
+
+    def lyapunov(self, theta):
+        """Eq 26 summed (eq 25): ``sum_i s_i^T M_i s_i / 2 + theta_tilde_i^T P_i^-1 theta_tilde_i / 2``.
+
+        Uses the link velocity errors of the last step and the true parameters ``theta`` (n, 13).
+        """
+        from .regressor import link_matrices
+        theta = as_array(theta, (self.n, 13), "theta")
+        s = self.link_velocity_error
+        tt = self.theta_hat - theta
+        total = 0.0
+        for i in range(self.n):
+            M = link_matrices(theta[i], np.zeros(3))[0]
+            total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(self.P[i], tt[i])
+        return float(total)
+
+
+def input_error(scal, n, values):
+    """The InputError for the code a kernel left in ``scal[I_ERR]``."""
+    code = int(scal[I_ERR])
+    scal[I_ERR] = 0.0
+    name = INPUT_NAMES[(code - 1) % 10]
+    if code < 10:
+        return InputError(f"{name}: expected length {n}, got {np.shape(values[code - 1])}")
+    return InputError(f"{name}: contains NaN or Inf")
+
+
+def _scalar(value, name, minimum, strict=False):
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise GainError(f"{name}: expected a number, got {value!r}") from None
+    if not math.isfinite(v) or v < minimum or (strict and v == minimum):
+        raise GainError(f"{name}: must be {'>' if strict else '>='} {minimum}, got {value!r}")
+    return v

@@ -1,0 +1,86 @@
+"""The plant: forward dynamics (articulated-body algorithm) integrated by RK4, torque held."""
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array
+from .aba import aba_kernel
+from .exceptions import InputError
+from .rnea import _kin
+
+
+@njit(cache=True)
+def rk4_kernel(kin, g, q, qd, tau, dt, substeps):
+    """Integrate ``qdd = ABA(q, qd, tau)`` over ``dt`` with ``substeps`` classical RK4 steps."""
+    hs = dt / substeps
+    for _ in range(substeps):
+        k1q = qd
+        k1v = aba_kernel(kin, g, q, qd, tau)
+        q2 = q + 0.5 * hs * k1q
+        v2 = qd + 0.5 * hs * k1v
+        k2v = aba_kernel(kin, g, q2, v2, tau)
+        q3 = q + 0.5 * hs * v2
+        v3 = qd + 0.5 * hs * k2v
+        k3v = aba_kernel(kin, g, q3, v3, tau)
+        q4 = q + hs * v3
+        v4 = qd + hs * k3v
+        k4v = aba_kernel(kin, g, q4, v4, tau)
+        q = q + hs / 6.0 * (k1q + 2.0 * v2 + 2.0 * v3 + v4)
+        qd = qd + hs / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    return q, qd
+
+
+class Simulator:
+    """A serial arm integrated by RK4, the torque held over each period (zero-order hold).
+
+    Parameters
+    ----------
+    model : RobotModel
+        The true plant.
+    dt : float
+        Period over which one torque is held, s (the control period; default 2 ms).
+    q0, qd0 : array_like (n,), optional
+        Initial state (default zero).
+    substeps : int
+        RK4 steps per period (default 1: RK4 at the control period, as the paper's 2 ms).
+    effort_limit : float or array_like (n,), optional
+        Torques are clipped to +-effort_limit (default: the model's ``effort_limit``).
+    """
+
+    def __init__(self, model, dt=0.002, q0=None, qd0=None, substeps=1, effort_limit=None):
+        self.model = model
+        self.dt = float(dt)
+        if not np.isfinite(self.dt) or self.dt <= 0.0:
+            raise InputError(f"dt: must be > 0, got {dt!r}")
+        if int(substeps) != substeps or substeps < 1:
+            raise InputError(f"substeps: must be an integer >= 1, got {substeps!r}")
+        self.substeps = int(substeps)
+        limit = model.effort_limit if effort_limit is None else effort_limit
+        limit = np.array(np.broadcast_to(np.asarray(limit, dtype=float), (model.n,)))
+        if np.any(np.isnan(limit)) or np.any(limit <= 0.0):
+            raise InputError("effort_limit: every entry must be > 0")
+        self.effort_limit = limit
+        self._kin = _kin(model)
+        self.reset(q0, qd0)
+
+    def reset(self, q0=None, qd0=None, t=0.0):
+        """Set the state (default zero) and the time."""
+        n = self.model.n
+        self.q = np.zeros(n) if q0 is None else as_array(q0, (n,), "q0")
+        self.qd = np.zeros(n) if qd0 is None else as_array(qd0, (n,), "qd0")
+        self.t = float(t)
+
+    def step(self, tau):
+        """Hold ``tau`` (clipped to the effort limit) for ``dt``; return the new ``(q, qd)``.
+
+        Raises
+        ------
+        InputError
+            If ``tau`` has the wrong length or holds NaN/Inf (the state is left untouched).
+        """
+        tau = as_array(tau, (self.model.n,), "tau")
+        tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.q, self.qd = rk4_kernel(self._kin, self.model.gravity, self.q, self.qd, tau,
+                                     self.dt, self.substeps)
+        self.t += self.dt
+        return self.q.copy(), self.qd.copy()
