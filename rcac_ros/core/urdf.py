@@ -141,20 +141,20 @@ def model_from_urdf(path_or_xml, base_link=None, tip_link=None, gravity=(0.0, 0.
         R_fix.append(A_prev.T @ T[:3, :3] @ A)
         p.append(A_prev.T @ T[:3, 3])
         stop = moving[k + 1].name if k + 1 < n else None
-        m, c, I = _rigid_body(source, joint.child, children, links, stop)
+        m, c, inert = _rigid_body(source, joint.child, children, links, stop)
         if m <= 0.0:
             raise ConfigError(f"{source}: link {joint.child!r} (moved by joint {joint.name!r}) "
                               "has no mass: give it an <inertial> with a mass > 0")
-        c, I = A.T @ c, A.T @ I @ A
-        I = 0.5 * (I + I.T)
+        c, inert = A.T @ c, A.T @ inert @ A
+        inert = 0.5 * (inert + inert.T)
         try:
-            check_inertia(I, f"link {joint.child!r}", check_triangle=False)
+            check_inertia(inert, f"link {joint.child!r}", check_triangle=False)
         except ModelError as err:
             raise ModelError(f"{source}: {err}") from None
-        _check_triangle(source, joint.child, I, triangle_tolerance)
+        _check_triangle(source, joint.child, inert, triangle_tolerance)
         mass.append(m)
         com.append(c)
-        inertia.append(I)
+        inertia.append(inert)
         A_prev, T, k = A, np.eye(4), k + 1
 
     effort, velocity, lower, upper = [], [], [], []
@@ -327,19 +327,19 @@ def _rigid_body(source, root, children, links, stop):
         return 0.0, np.zeros(3), np.zeros((3, 3))
     m = sum(b[0] for b in bodies)
     c = sum(b[0] * b[1] for b in bodies) / m
-    I = np.zeros((3, 3))
-    for mk, ck, Ik in bodies:
+    inert = np.zeros((3, 3))
+    for mk, ck, ik in bodies:
         d = ck - c
-        I += Ik + mk * (d @ d * np.eye(3) - np.outer(d, d))
-    return m, c, I
+        inert += ik + mk * (d @ d * np.eye(3) - np.outer(d, d))
+    return m, c, inert
 
 
-def _check_triangle(source, link, I, tol):
+def _check_triangle(source, link, inert, tol):
     """Principal moments must satisfy ``I1 + I2 >= (1 - tol) I3`` (``tol=None``: no check)."""
     if tol is None:
         return
-    eig = np.linalg.eigvalsh(I)
+    eig = np.linalg.eigvalsh(inert)
     if eig[0] + eig[1] < (1.0 - float(tol)) * eig[2]:
         raise ModelError(f"{source}: link {link!r}: principal moments {eig.tolist()} violate the "
-                          f"triangle inequality I1 + I2 >= I3 by more than {tol:g} relative "
-                          "(pass triangle_tolerance=None to accept it)")
+                         f"triangle inequality I1 + I2 >= I3 by more than {tol:g} relative "
+                         "(pass triangle_tolerance=None to accept it)")
