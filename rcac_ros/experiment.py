@@ -1,0 +1,133 @@
+"""``rcac experiment``: the paper's Section 4 for the direct and the composite laws.
+
+Both laws run on the CSS arm (Table 1, g = 0, frames of NOTES.md 5) from
+``theta_hat(0) = 0``, with the paper's gains, the plant integrated by RK4 at the
+control period with the torque held. Writes ``metrics.json``,
+``tracking_errors.png`` (Figure 3) and ``parameter_estimates.png`` (Figure 4).
+"""
+
+import json
+import math
+import os
+import time
+
+import numpy as np
+
+from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
+from rcac_ros.progress import Progress
+
+#: The paper's initial position (Section 4), rad.
+PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
+#: The paper's gains (Section 4) and the filter bandwidth it leaves open.
+PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
+
+
+def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=None):
+    """Close the loop for ``duration`` s; return the time series of one run.
+
+    Returns
+    -------
+    dict
+        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T,).
+    """
+    h = controller.h
+    steps = int(round(duration / h)) + 1
+    n = model.n
+    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
+               tau=np.empty((steps, n)), theta_hat=np.empty((steps, n, 13)),
+               E=np.empty(steps))
+    sim = Simulator(model, dt=h, q0=q0, substeps=substeps)
+    with Progress(steps, progress or "", enabled=progress is not None) as bar:
+        for k in range(steps):
+            q_d, qd_d, qdd_d = trajectory(k * h)
+            out["theta_hat"][k] = controller.theta_hat
+            tau = controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
+            out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
+            out["E"][k] = controller.E
+            sim.step(tau)
+            if k % 200 == 0:
+                bar.update(k)
+    return out
+
+
+def metrics(run, theta_true, last_seconds=5.0):
+    """The figures of ``metrics.json`` for one run (see the README for their definitions)."""
+    e = run["q"] - run["q_d"]
+    last = run["t"] >= run["t"][-1] - last_seconds
+    err = run["theta_hat"] - theta_true
+    return {
+        "rms_tracking_error": float(np.sqrt(np.mean(e ** 2))),
+        "max_tracking_error": float(np.max(np.abs(e))),
+        "rms_tracking_error_last_5s": float(np.sqrt(np.mean(e[last] ** 2))),
+        "parameter_error_norm_start": float(np.linalg.norm(err[0])),
+        "parameter_error_norm_end": float(np.linalg.norm(err[-1])),
+        f"link{theta_true.shape[0]}_parameter_error_norm_end": float(np.linalg.norm(err[-1, -1])),
+        "final_abs_prediction_error": float(abs(run["E"][-1])),
+        "max_abs_torque": float(np.max(np.abs(run["tau"]))),
+    }
+
+
+def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True):
+    """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics."""
+    model = css_arm()
+    g = dict(PAPER_GAINS, **(gains or {}))
+    q0 = np.array(PAPER_Q0)
+    trajectory = PaperTrajectory(q0, reading=reading)
+    runs, report = {}, {}
+    for law, gamma in (("direct", 0.0), ("composite", g["gamma"])):
+        ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma))
+        t0 = time.perf_counter()
+        runs[law] = simulate(model, ctrl, trajectory, q0, duration, substeps,
+                             progress=f"{law:>9s}" if progress else None)
+        report[law] = metrics(runs[law], model.theta())
+        report[law]["wall_time_s"] = time.perf_counter() - t0
+    return model, runs, report
+
+
+def write_outputs(model, runs, report, out_dir, settings):
+    """metrics.json, tracking_errors.png and parameter_estimates.png into ``out_dir``."""
+    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
+        json.dump(dict(report, settings=settings), f, indent=2)
+    t = runs["direct"]["t"]
+    plot_tracking_errors(t, {f"{law} adaptive": r["q"] - r["q_d"] for law, r in runs.items()},
+                         os.path.join(out_dir, "tracking_errors.png"), list(model.joint_names),
+                         title="Joint tracking errors (Figure 3)")
+    plot_parameter_estimates(t, {law: r["theta_hat"][:, -1] for law, r in runs.items()},
+                             model.theta()[-1], os.path.join(out_dir, "parameter_estimates.png"),
+                             link=model.n)
+
+
+def add_arguments(parser):
+    parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
+    parser.add_argument("--out", default="results/experiment", help="output directory")
+    parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
+                        help="reading of the paper's desired motion (NOTES.md 5)")
+    for name, default, text in (("K_D", 1e4, "link gain K_Di = K_D I6"),
+                                ("Lambda", 1.0, "Lambda = value * I"),
+                                ("P", 100.0, "adaptation gain P_i = P I13"),
+                                ("gamma", 0.1, "prediction-error weight of the composite law"),
+                                ("lam", 10.0, "filter bandwidth lambda, rad/s"),
+                                ("h", 0.002, "control period, s")):
+        parser.add_argument(f"--{name}", type=float, default=default,
+                            help=f"{text} (default {default:g})")
+    parser.add_argument("--substeps", type=int, default=1,
+                        help="RK4 steps of the plant per control period (default 1)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args):
+    gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
+                 h=args.h)
+    model, runs, report = run_experiment(args.duration, args.trajectory, gains, args.substeps,
+                                         progress=not args.quiet)
+    settings = dict(gains, duration=args.duration, trajectory=args.trajectory,
+                    substeps=args.substeps, model="css_arm", q0=list(PAPER_Q0))
+    write_outputs(model, runs, report, args.out, settings)
+    keys = [k for k in report["direct"] if k != "wall_time_s"]
+    print(f"{'metric':34s} {'direct':>14s} {'composite':>14s}")
+    for k in keys:
+        print(f"{k:34s} {report['direct'][k]:14.6g} {report['composite'][k]:14.6g}")
+    print(f"wrote {args.out}/metrics.json, tracking_errors.png, parameter_estimates.png")
+    return 0
