@@ -57,8 +57,16 @@ def pin_reference(pm, joint_names):
     if lock:
         pm = pin.buildReducedModel(pm, lock, pin.neutral(pm))
     assert list(pm.names)[1:] == list(joint_names)
-    assert pm.nq == pm.nv == len(joint_names)
+    assert pm.nv == len(joint_names)
     return pm
+
+
+def pin_q(pm, q):
+    """Pinocchio's configuration of joint angles ``q`` (continuous joints are (cos, sin))."""
+    out = []
+    for jm, qi in zip(list(pm.joints)[1:], q):
+        out += [np.cos(qi), np.sin(qi)] if jm.nq == 2 else [qi]
+    return np.array(out)
 
 
 def rel(a, b):
@@ -78,13 +86,14 @@ def compare(model, pm, rng, states=20, gravity=True):
         qd = rng.uniform(-2.0, 2.0, model.n)
         qdd = rng.uniform(-5.0, 5.0, model.n)
         tau = rng.uniform(-10.0, 10.0, model.n)
+        pq = pin_q(pm, q)
         err["inverse_dynamics"] = max(err["inverse_dynamics"], rel(
-            inverse_dynamics(model, q, qd, qdd), pin.rnea(pm, data, q, qd, qdd)))
-        M = pin.crba(pm, data, q)
+            inverse_dynamics(model, q, qd, qdd), pin.rnea(pm, data, pq, qd, qdd)))
+        M = pin.crba(pm, data, pq)
         M = np.triu(M) + np.triu(M, 1).T
         err["mass_matrix"] = max(err["mass_matrix"], rel(mass_matrix(model, q), M))
         err["forward_dynamics"] = max(err["forward_dynamics"], rel(
-            forward_dynamics(model, q, qd, tau), pin.aba(pm, data, q, qd, tau)))
+            forward_dynamics(model, q, qd, tau), pin.aba(pm, data, pq, qd, tau)))
     return err
 
 
@@ -123,6 +132,21 @@ def test_ur5_from_an_inner_base_link_is_the_arm_with_joint1_locked():
     assert model.joint_names[0] == "shoulder_lift_joint" and model.n == 5
     pm = pin_reference(pin.buildModelFromUrdf(UR5), model.joint_names)
     err = compare(model, pm, np.random.default_rng(3), states=5)
+    assert max(err.values()) < TOL, err
+
+
+@needs_robots
+@pytest.mark.parametrize("path", [
+    "xarm_description/urdf/xarm7.urdf", "z1_description/urdf/z1.urdf",
+    "so_arm_description/urdf/so101.urdf", "kinova_description/robots/kinova.urdf",
+    "double_pendulum_description/urdf/double_pendulum_continuous.urdf"])
+def test_more_arms_match_pinocchio(path):
+    path = os.path.join(ROBOTS, path)
+    if not os.path.isfile(path):
+        pytest.skip(f"{path} not in this example-robot-data")
+    model = model_from_urdf(path)
+    pm = pin_reference(pin.buildModelFromUrdf(path), model.joint_names)
+    err = compare(model, pm, np.random.default_rng(7), states=5)
     assert max(err.values()) < TOL, err
 
 
