@@ -1,0 +1,1 @@
+"""ROS 2 nodes: ``controller`` and ``simulator`` (they never import each other)."""

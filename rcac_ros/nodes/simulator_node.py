@@ -1,0 +1,286 @@
+"""The simulator node: efforts in, joint states and /clock out (``ros2 run rcac_ros simulator``).
+
+Thin: message -> arrays -> :class:`rcac_ros.core.simulator.Simulator` -> message.
+Two modes:
+
+* ``lockstep`` (default): state k is published (stamp = /clock = k dt); the node
+  steps when the effort answering state k arrives, or after ``lockstep_timeout``
+  (the previous effort held, a miss counted). Deterministic on a loaded machine.
+* ``realtime``: free-running on a steady-clock timer of period ``dt``, the latest
+  effort held (never paced on ROS time: see ROS_NOTES).
+
+Parameters are documented in ``config/simulator.yaml``.
+"""
+
+import math
+import sys
+import time
+
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from rcac_ros import topics
+from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros.core.simulator import Simulator
+from rcac_ros.nodes.common import (declare, declare_joints, declare_model, effort_tag, per_joint,
+                                   positive, QOS, run, Throttle)
+
+#: the paper's initial configuration (Section 4), the default q0 of the css_arm preset
+PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
+NS = 1_000_000_000
+BIG_NOISE = 1e6
+
+
+class SimulatorNode(Node):
+    """The arm simulator as a ROS 2 node.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
+
+    Raises
+    ------
+    ConfigError
+        At construction, on an invalid parameter (the message names it).
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(topics.SIMULATOR_NODE, **kwargs)
+        self.finished = False
+        self.exit_code = 0
+        self._read_parameters()
+        self._throttle = Throttle(self.get_logger())
+        n = self.model.n
+        self._tau = np.zeros(n)            # model order, the effort held
+        self._applied = np.zeros(n)
+        self.k = 0
+        self.misses = 0
+        self.late = 0
+        self.ignored_watchdog = 0
+        self.started = False
+        self._waiting_since = None
+        self._wall_start = None
+        self._wall_end = None
+        self._rng = np.random.default_rng(self.noise_seed)
+        self.sim.step(np.zeros(n))         # compile/load the integrator before starting
+        self.sim.reset(self.q0, self.qd0)
+        self._pub_state = self.create_publisher(JointState, topics.JOINT_STATES, QOS)
+        self._pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, QOS)
+        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
+        self._sub = self.create_subscription(Float64MultiArray, topics.EFFORT_COMMANDS,
+                                             self._on_effort, QOS)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._start_timer = self.create_timer(0.01, self._try_start, clock=steady)
+        if self.mode == "lockstep":
+            self.create_timer(min(self.lockstep_timeout / 5.0, 0.01), self._check_timeout,
+                              clock=steady)
+        self.create_timer(self.diagnostics_period, self._publish_diagnostics, clock=steady)
+        self.get_logger().info(
+            f"{self.mode} mode, model {self.model.name} (n={n}), dt={self.dt * 1e3:g} ms, "
+            f"duration {'unlimited' if self.duration == 0 else f'{self.duration:g} s'}")
+
+    # ------------------------------------------------------------------ parameters
+    def _read_parameters(self):
+        self.model = declare_model(self)
+        n = self.model.n
+        self.joints = declare_joints(self, self.model)
+        self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
+        self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
+        self.mode = declare(self, "mode", "lockstep",
+                            "'lockstep' (step when the effort for the last state arrives) or "
+                            "'realtime' (steady-clock timer)", constraints="lockstep | realtime")
+        if self.mode not in ("lockstep", "realtime"):
+            raise ConfigError(f"mode: must be 'lockstep' or 'realtime', got {self.mode!r}")
+        self.dt = positive("dt", declare(self, "dt", 0.002, "integration (and control) period, "
+                                         "s", lo=0.0, hi=10.0))
+        self.dt_ns = round(self.dt * NS)
+        substeps = declare(self, "substeps", 1, "RK4 steps per dt", lo=1, hi=1000)
+        self.duration = declare(self, "duration", 0.0, "stop (exit 0) after this much sim "
+                                "time, s; 0 = run forever", lo=0.0, hi=1e9)
+        if self.duration < 0.0:
+            raise ConfigError(f"duration: must be >= 0, got {self.duration}")
+        self.lockstep_timeout = positive("lockstep_timeout", declare(
+            self, "lockstep_timeout", 0.5, "lockstep: wait this long (wall time) for the "
+            "effort, then hold the previous one and count a miss, s", lo=0.0, hi=3600.0))
+        self.wait_for_controller = declare(
+            self, "wait_for_controller", True, "start only once a node subscribes to "
+            "joint_states and publishes efforts")
+        default_q0 = PAPER_Q0 if self.model.name == "css_arm" else 0.0
+        q0 = declare(self, "q0", Parameter.Type.DOUBLE_ARRAY,
+                     "initial positions, rad, in joints order (unset: the paper's q0 for "
+                     "css_arm, else zero)")
+        qd0 = declare(self, "qd0", Parameter.Type.DOUBLE_ARRAY,
+                      "initial velocities, rad/s, in joints order (unset: zero)")
+        if q0 is None and self.model.name == "css_arm" and n == len(PAPER_Q0):
+            self.q0 = np.array(default_q0)[self._order]
+        else:
+            self.q0 = per_joint("q0", q0, n, 0.0)[self._order]
+        self.qd0 = per_joint("qd0", qd0, n, 0.0)[self._order]
+        self.position_noise = declare(self, "position_noise", 0.0, "std dev of the noise "
+                                      "added to published positions, rad", lo=0.0, hi=BIG_NOISE)
+        self.velocity_noise = declare(self, "velocity_noise", 0.0, "std dev of the noise "
+                                      "added to published velocities, rad/s", lo=0.0,
+                                      hi=BIG_NOISE)
+        for name in ("position_noise", "velocity_noise"):
+            positive(name, getattr(self, name), strict=False)
+        self.noise_seed = declare(self, "noise_seed", 0, "seed of the measurement noise",
+                                  lo=0, hi=2 ** 31 - 1)
+        self.publish_velocity = declare(self, "publish_velocity", True,
+                                        "fill JointState.velocity (false: positions only)")
+        limit = declare(self, "effort_limit", Parameter.Type.DOUBLE_ARRAY,
+                        "efforts are clipped to +-effort_limit, N m, in joints order "
+                        "(unset: the model's)")
+        limit = per_joint("effort_limit", limit, n, None, strict_positive=True)
+        self.diagnostics_period = positive("diagnostics_period", declare(
+            self, "diagnostics_period", 1.0, "diagnostics period, s (steady clock)", lo=0.0,
+            hi=3600.0))
+        try:
+            self.sim = Simulator(self.model, dt=self.dt, q0=self.q0, qd0=self.qd0,
+                                 substeps=substeps,
+                                 effort_limit=None if limit is None else limit[self._order])
+        except RcacError as err:
+            raise ConfigError(f"simulator: {err}") from None
+
+    # ------------------------------------------------------------------ loop
+    def _try_start(self):
+        if self.started or self.finished:
+            return
+        if self.wait_for_controller and (self._pub_state.get_subscription_count() == 0
+                                         or self._sub.get_publisher_count() == 0):
+            return
+        self.started = True
+        self._start_timer.cancel()
+        self._wall_start = time.monotonic()
+        self.get_logger().info("controller found: starting" if self.wait_for_controller
+                               else "starting")
+        self._publish_state()
+        if self.mode == "realtime":
+            self.create_timer(self.dt, self._on_tick,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _publish_state(self):
+        stamp_ns = self.k * self.dt_ns
+        stamp = TimeMsg(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
+        self._pub_clock.publish(ClockMsg(clock=stamp))
+        q = self.sim.q
+        qd = self.sim.qd
+        if self.position_noise > 0.0:
+            q = q + self._rng.normal(0.0, self.position_noise, q.shape)
+        if self.velocity_noise > 0.0:
+            qd = qd + self._rng.normal(0.0, self.velocity_noise, qd.shape)
+        msg = JointState(name=list(self.joints), position=q[self._out].tolist(),
+                         velocity=qd[self._out].tolist() if self.publish_velocity else [],
+                         effort=self._applied[self._out].tolist())
+        msg.header.stamp = stamp
+        self._pub_state.publish(msg)
+        self._pending_ns = stamp_ns
+        self._waiting_since = time.monotonic()
+
+    def _advance(self):
+        """Step once with the held effort, then publish the new state (or finish)."""
+        self._applied = np.clip(self._tau, -self.sim.effort_limit, self.sim.effort_limit)
+        self.sim.step(self._tau)
+        self.k += 1
+        if self.duration > 0.0 and self.k * self.dt_ns >= round(self.duration * NS):
+            self._publish_state()
+            self._finish()
+            return
+        self._publish_state()
+
+    def _finish(self):
+        self._waiting_since = None
+        self.finished = True
+        self._wall_end = time.monotonic()
+        wall = self._wall_end - self._wall_start
+        self._pub_state.wait_for_all_acked(Duration(seconds=1.0))
+        self.get_logger().info(
+            f"finished: {self.k} steps, sim time {self.k * self.dt:.3f} s, wall {wall:.2f} s "
+            f"({self.k / max(wall, 1e-9):.0f} steps/s), lockstep misses {self.misses}, "
+            f"late efforts {self.late}, rejected {self._throttle.total}")
+
+    def _on_effort(self, msg):
+        n = self.model.n
+        data = np.asarray(msg.data, dtype=float)
+        if data.size == 0:
+            return self._throttle.warn("empty", "effort message without data")
+        if data.size != n:
+            return self._throttle.warn("length", f"effort: expected {n} values, "
+                                       f"got {data.size}")
+        if not np.all(np.isfinite(data)):
+            return self._throttle.warn("nan", "effort: NaN or Inf")
+        tau = data[self._order]
+        if self.mode == "realtime":
+            self._tau = tau
+            return
+        if not self.started or self.finished or self._waiting_since is None:
+            return
+        tag = effort_tag(msg)
+        if tag is not None and tag[0] == "watchdog":
+            self.ignored_watchdog += 1
+            return
+        if tag is not None and tag[1] != self._pending_ns:
+            self.late += 1                 # an answer to an earlier state (after a timeout)
+            return
+        self._tau = tau
+        self._advance()
+
+    def _check_timeout(self):
+        if self._waiting_since is None or self.finished:
+            return
+        if time.monotonic() - self._waiting_since > self.lockstep_timeout:
+            self.misses += 1
+            self._throttle.warn("lockstep miss", f"no effort for state {self.k} within "
+                                f"{self.lockstep_timeout:g} s: holding the previous effort")
+            self._advance()
+
+    def _on_tick(self):
+        if not self.finished:
+            self._advance()
+
+    # ------------------------------------------------------------------ diagnostics
+    def diagnostics(self):
+        """The current diagnostics as a DiagnosticStatus."""
+        wall = 0.0 if self._wall_start is None else \
+            (self._wall_end or time.monotonic()) - self._wall_start
+        level = DiagnosticStatus.OK if self.misses == 0 else DiagnosticStatus.WARN
+        values = {
+            "mode": self.mode, "started": self.started, "steps": self.k,
+            "sim_time": f"{self.k * self.dt:.6f}", "wall_time": f"{wall:.3f}",
+            "steps_per_second": f"{self.k / wall:.1f}" if wall > 0 else "nan",
+            "real_time_factor": f"{self.k * self.dt / wall:.3f}" if wall > 0 else "nan",
+            "lockstep_misses": self.misses, "late_efforts": self.late,
+            "ignored_watchdog_efforts": self.ignored_watchdog,
+            "rejected_messages": self._throttle.total,
+        }
+        return DiagnosticStatus(
+            level=level, name=f"{self.get_name()}: simulation",
+            message="waiting for a controller" if not self.started else "running",
+            hardware_id=self.model.name,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+    def _publish_diagnostics(self):
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._pub_diag.publish(msg)
+
+    def on_shutdown(self):
+        """Nothing to send on an interrupt: just report."""
+        self.get_logger().info(f"interrupted after {self.k} steps")
+
+
+def main(args=None):
+    """Entry point of ``simulator``."""
+    sys.exit(run(SimulatorNode, "simulator", args))
+
+
+if __name__ == "__main__":
+    main()
