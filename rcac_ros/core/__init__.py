@@ -10,6 +10,7 @@ from .aba import forward_dynamics
 from .crba import mass_matrix
 from .kinematics import energy, forward_kinematics
 from .rcac import RecursiveCompositeController
+from .slotine_li import SlotineLiCompositeController
 from .regressor import (coriolis_gravity_regressor, link_matrices, link_regressor,
                         mass_regressor)
 from .rnea import inverse_dynamics
@@ -21,6 +22,6 @@ __all__ = [
     "RobotModel", "css_arm", "theta_from_inertia", "PARAMETER_NAMES",
     "link_regressor", "mass_regressor", "coriolis_gravity_regressor", "link_matrices",
     "inverse_dynamics", "mass_matrix", "forward_dynamics", "forward_kinematics", "energy",
-    "RecursiveCompositeController", "Simulator",
+    "RecursiveCompositeController", "SlotineLiCompositeController", "Simulator",
     "PaperTrajectory", "SinusoidTrajectory", "PolynomialTrajectory",
 ]

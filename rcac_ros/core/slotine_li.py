@@ -1,0 +1,306 @@
+"""The non-recursive Slotine-Li composite adaptive controller (eqs 2, 7): the baseline.
+
+It builds the joint-space quantities explicitly, as the original scheme does:
+
+    Y   = [J_1^T Y_r1, ..., J_n^T Y_rn]                           (n x 13n, eq 4)
+    Phi = [J_j^T Ym_j(V_j)],  Psi = [-Jdot_j^T Ym_j(V_j) + J_j^T Yc_j(V_j)]   (n x 13n)
+    W   = lambda (Phi - Phi^f) + Psi^f,  y = tau^f,  e = W theta_hat - y     (eqs 5, 6)
+    tau = Y theta_hat - K_D s,  K_D = sum_i J_i^T K_Di J_i                    (eq 2)
+    theta_hat_dot = -P (Y^T s + gamma W^T e)                                  (eq 7)
+
+``J_i`` (6 x n) maps joint rates to link i's spatial velocity in frame i, so the
+joint-space gain is the one the recursive law applies through its link gains
+``K_Di``; the tracking term ``Y^T s`` equals the recursive ``Y_ri^T s_i``. With
+``gamma = 0`` both controllers are therefore the same law, computed two ways.
+For ``gamma > 0`` this one uses the prediction errors of all n filtered joint
+torques (eq 6), the recursive one that of joint 1 only (eqs 21-24).
+
+Discretisation matches :mod:`rcac_ros.core.rcac`: exact filters (zero-order hold
+for the applied torque, first-order hold for Phi and Psi), explicit Euler in the
+tracking term and implicit Euler in the prediction-error term, here solved by
+the Woodbury identity with an n x n Cholesky factorisation.
+Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
+"""
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array, per_link_matrix, positive_vector
+from .exceptions import GainError
+from .rcac import (INPUT_NAMES, LAM, KD0, PG0, CONST_COLS, I_E, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
+                   I_H, I_K, I_LAM, I_Y, SCAL_LEN, _scalar, check_vectors, filter_coefficients,
+                   input_error, I_ERR)
+from .regressor import fill_regressor
+from .spatial import P0, RF0, joint_rotation, transform_motion, z_cross_rate
+
+
+@njit(cache=True)
+def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
+    """One period of eqs 2 and 7 with explicit joint-space matrices.
+
+    ``filt`` is (4, n, 13n + 1): Phi^f, Psi^f, previous Phi, previous Psi, with the
+    filtered applied torque y in column 13n of filt[0] and the applied torque in filt[1].
+    """
+    n = const.shape[0]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    m = 13 * n
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    C = np.empty((n, 9), q.dtype)
+    J = np.zeros((n, 6, n), q.dtype)          # J_i, columns k <= i
+    Jd = np.zeros((n, 6, n), q.dtype)         # Jdot_i
+    Yr = np.empty((n, 6, 13), q.dtype)
+    Ys = np.empty((2, 6, 13), q.dtype)
+    Yj = np.zeros((n, m), q.dtype)            # joint-space regressor Y (eq 4)
+    W = np.empty((n, m), q.dtype)
+    s = np.empty(n, q.dtype)
+    y = np.empty(n, q.dtype)
+    vx = vy = vz = wx = wy = wz = 0.0
+    rvx = rvy = rvz = rwx = rwy = rwz = 0.0
+    dvx = dvy = dvz = dwx = dwy = dwz = 0.0
+    gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
+    for i in range(n):
+        s[i] = qd[i] - (qd_d[i] - const[i, LAM] * (q[i] - q_d[i]))
+        y[i] = 0.0 if first else fe * filt[0, i, m] + fb0 * filt[1, i, m]
+    for i in range(n):
+        row = const[i]
+        joint_rotation(row, RF0, q[i], C, i)
+        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+        qdi = qd[i]
+        qdr = qd_d[i] - row[LAM] * (q[i] - q_d[i])
+        qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
+        vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
+        wz += qdi
+        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
+                                                        rvx, rvy, rvz, rwx, rwy, rwz)
+        cvx, cvy = z_cross_rate(qdi, tvx, tvy)
+        cwx, cwy = z_cross_rate(qdi, twx, twy)
+        rvx, rvy, rvz, rwx, rwy, rwz = tvx, tvy, tvz, twx, twy, twz + qdr
+        dvx, dvy, dvz, dwx, dwy, dwz = transform_motion(C, i, px, py, pz,
+                                                        dvx, dvy, dvz, dwx, dwy, dwz)
+        dvx += cvx
+        dvy += cvy
+        dwx += cwx
+        dwy += cwy
+        dwz += qddr
+        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
+                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
+                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
+        # link Jacobian J_i = T_i J_{i-1} + z6 e_i^T and its derivative (explicit, O(n) a link)
+        for k in range(i):
+            a = transform_motion(C, i, px, py, pz, J[i - 1, 0, k], J[i - 1, 1, k],
+                                 J[i - 1, 2, k], J[i - 1, 3, k], J[i - 1, 4, k], J[i - 1, 5, k])
+            b = transform_motion(C, i, px, py, pz, Jd[i - 1, 0, k], Jd[i - 1, 1, k],
+                                 Jd[i - 1, 2, k], Jd[i - 1, 3, k], Jd[i - 1, 4, k],
+                                 Jd[i - 1, 5, k])
+            c0, c1 = z_cross_rate(qdi, a[0], a[1])
+            c3, c4 = z_cross_rate(qdi, a[3], a[4])
+            for r in range(6):
+                J[i, r, k] = a[r]
+            Jd[i, 0, k] = b[0] + c0
+            Jd[i, 1, k] = b[1] + c1
+            Jd[i, 2, k] = b[2]
+            Jd[i, 3, k] = b[3] + c3
+            Jd[i, 4, k] = b[4] + c4
+            Jd[i, 5, k] = b[5]
+        J[i, 5, i] = 1.0
+        fill_regressor(Yr, i, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                       wx, wy, wz, gx, gy, gz)
+        fill_regressor(Ys, 0, vx, vy, vz, wx, wy, wz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                       wx, wy, wz, 0.0, 0.0, 0.0)
+        fill_regressor(Ys, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, vx, vy, vz, wx, wy, wz,
+                       wx, wy, wz, gx, gy, gz)
+        # block column i of Y, Phi, Psi, all n rows (dense, as the explicit scheme stores them)
+        for k in range(n):
+            for c in range(13):
+                yv = 0.0
+                phi = 0.0
+                psi = 0.0
+                for r in range(6):
+                    yv += J[i, r, k] * Yr[i, r, c]
+                    phi += J[i, r, k] * Ys[0, r, c]
+                    psi += J[i, r, k] * Ys[1, r, c] - Jd[i, r, k] * Ys[0, r, c]
+                col = 13 * i + c
+                Yj[k, col] = yv
+                if first:
+                    filt[0, k, col] = phi
+                    filt[1, k, col] = 0.0
+                else:
+                    filt[0, k, col] = (fe * filt[0, k, col] + fb0 * filt[2, k, col]
+                                       + fb1 * (phi - filt[2, k, col]))
+                    filt[1, k, col] = (fe * filt[1, k, col] + fb0 * filt[3, k, col]
+                                       + fb1 * (psi - filt[3, k, col]))
+                filt[2, k, col] = phi
+                filt[3, k, col] = psi
+                W[k, col] = lam * (phi - filt[0, k, col]) + filt[1, k, col]
+    # joint-space feedback gain K = sum_i J_i^T K_Di J_i, then tau = Y theta_hat - K s (eq 2)
+    K = np.zeros((n, n), q.dtype)
+    for i in range(n):
+        for a in range(n):
+            for r in range(6):
+                kj = 0.0
+                for c in range(6):
+                    kj += const[i, KD0 + 6 * r + c] * J[i, c, a]
+                for b in range(n):
+                    K[b, a] += J[i, r, b] * kj
+    tau = np.empty(n, q.dtype)
+    e = np.empty(n, q.dtype)
+    for k in range(n):
+        acc = 0.0
+        pe = 0.0
+        for col in range(m):
+            acc += Yj[k, col] * theta_hat[col]
+            pe += W[k, col] * theta_hat[col]
+        for b in range(n):
+            acc -= K[k, b] * s[b]
+        tau[k] = acc
+        e[k] = pe - y[k]
+    # eq 7: r = theta_hat - h P (Y^T s - gamma W^T y); (I + h gamma P W^T W) theta+ = r
+    # Woodbury: theta+ = r - h gamma P W^T (I + h gamma W P W^T)^-1 W r
+    g = np.empty(m, q.dtype)
+    for col in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += Yj[k, col] * s[k] - gamma * W[k, col] * y[k]
+        g[col] = acc
+    PWt = np.empty((m, n), q.dtype)          # P W^T, P block diagonal (13 x 13 per link)
+    r = np.empty(m, q.dtype)
+    for i in range(n):
+        for a in range(13):
+            acc = 0.0
+            for c in range(13):
+                acc += const[i, PG0 + 13 * a + c] * g[13 * i + c]
+            r[13 * i + a] = theta_hat[13 * i + a] - h * acc
+            for k in range(n):
+                acc = 0.0
+                for c in range(13):
+                    acc += const[i, PG0 + 13 * a + c] * W[k, 13 * i + c]
+                PWt[13 * i + a, k] = acc
+    A = np.empty((n, n), q.dtype)
+    for k in range(n):
+        for b in range(n):
+            acc = 0.0
+            for col in range(m):
+                acc += W[k, col] * PWt[col, b]
+            A[k, b] = h * gamma * acc
+        A[k, k] += 1.0
+    z = np.empty(n, q.dtype)
+    for k in range(n):
+        acc = 0.0
+        for col in range(m):
+            acc += W[k, col] * r[col]
+        z[k] = acc
+    cholesky_solve(A, z)
+    for col in range(m):
+        acc = 0.0
+        for k in range(n):
+            acc += PWt[col, k] * z[k]
+        theta_hat[col] = r[col] - h * gamma * acc
+    for k in range(n):
+        filt[0, k, m] = y[k]
+        filt[1, k, m] = tau[k]
+    scal[I_K] += 1.0
+    scal[I_E] = e[0]
+    scal[I_Y] = y[0]
+    return tau
+
+
+@njit(cache=True)
+def cholesky_solve(A, b):
+    """Solve ``A x = b`` in place (``b`` becomes x) for symmetric positive definite A."""
+    n = A.shape[0]
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        d = np.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= A[i, k] * A[j, k]
+            A[i, j] = v / d
+    for i in range(n):
+        v = b[i]
+        for k in range(i):
+            v -= A[i, k] * b[k]
+        b[i] = v / A[i, i]
+    for i in range(n - 1, -1, -1):
+        v = b[i]
+        for k in range(i + 1, n):
+            v -= A[k, i] * b[k]
+        b[i] = v / A[i, i]
+
+
+class SlotineLiCompositeController:
+    """The composite adaptive controller of Slotine and Li (eqs 2, 7), non-recursive.
+
+    Same parameters, defaults and exceptions as
+    :class:`~rcac_ros.core.rcac.RecursiveCompositeController`; ``K_D`` are the link
+    gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``.
+    """
+
+    def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
+                 theta_hat0=None):
+        n = model.n
+        self.model = model
+        self.K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
+        self.P = per_link_matrix(P, n, 13, "P", GainError)
+        self.Lambda = positive_vector(Lambda, n, "Lambda", GainError)
+        self.gamma = _scalar(gamma, "gamma", minimum=0.0)
+        self.lam = _scalar(lam, "lam", minimum=0.0, strict=True)
+        self.h = _scalar(h, "h", minimum=0.0, strict=True)
+        const = np.zeros((n, CONST_COLS))
+        const[:, P0:P0 + 3] = model.p
+        const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
+        const[:, LAM] = self.Lambda
+        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
+        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
+        self._const = const
+        self._scal = np.zeros(SCAL_LEN)
+        self._scal[I_G:I_G + 3] = model.gravity
+        self._scal[I_LAM], self._scal[I_H], self._scal[I_GAMMA] = self.lam, self.h, self.gamma
+        self._scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
+        self._theta = np.zeros(13 * n)
+        self._filt = np.zeros((4, n, 13 * n + 1))
+        self.reset(theta_hat0)
+
+    @property
+    def n(self):
+        """Number of joints."""
+        return self.model.n
+
+    def reset(self, theta_hat0=None):
+        """Restart: estimates to ``theta_hat0`` (default zero), filters and step count to zero."""
+        self._theta[:] = 0.0 if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0").ravel()
+        self._filt[:] = 0.0
+        self._scal[I_Y:I_ERR + 1] = 0.0
+
+    def step(self, q, qd, q_d, qd_d, qdd_d):
+        """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
+        try:
+            tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
+                                         q, qd, q_d, qd_d, qdd_d)
+        except TypeError:
+            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, (q, qd, q_d, qd_d,
+                                                                           qdd_d))]
+            tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
+                                         *args)
+        if tau.shape[0] == 0:
+            raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        return tau
+
+    @property
+    def theta_hat(self):
+        """Current estimates, shape (n, 13) (a copy)."""
+        return self._theta.reshape(self.n, 13).copy()
+
+    @property
+    def E(self):
+        """Prediction error of joint 1's filtered torque at the last step (``e[0]``)."""
+        return float(self._scal[I_E])
