@@ -86,6 +86,7 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
     Wm = np.empty((n, 13), q.dtype)
     Rn = np.empty((n, 13), q.dtype)
     Un = np.empty((n, 13), q.dtype)
+    grad = np.empty(13, q.dtype)
     tau = np.empty(n, q.dtype)
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
@@ -200,14 +201,16 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
                 nz += acc
         tau[i] = nz
         # eq 24, step 1: r_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), u_i = P_i W_i^T
+        for c in range(13):
+            g_c = -gamma * Wm[i, c] * y
+            for r6 in range(6):
+                g_c += Yr[i, r6, c] * st[S0 + r6]
+            grad[c] = g_c
         for a in range(13):
             acc_r = 0.0
             acc_u = 0.0
             for c in range(13):
-                g_c = -gamma * Wm[i, c] * y
-                for r6 in range(6):
-                    g_c += Yr[i, r6, c] * st[S0 + r6]
-                acc_r += row[PG0 + 13 * a + c] * g_c
+                acc_r += row[PG0 + 13 * a + c] * grad[c]
                 acc_u += row[PG0 + 13 * a + c] * Wm[i, c]
             Rn[i, a] = st[TH + a] - h * acc_r
             Un[i, a] = acc_u
