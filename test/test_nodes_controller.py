@@ -1,0 +1,253 @@
+"""The controller node in-process: bad input, watchdog, parameters, trajectories, velocities."""
+
+import math
+
+import numpy as np
+import pytest
+
+from test_nodes_support import JOINTS, NS, PAPER_Q0, Probe, ros_context, spin_until
+
+from rclpy.parameter import Parameter  # noqa: E402  (after the importorskip in support)
+from sensor_msgs.msg import JointState  # noqa: E402
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
+
+from rcac_ros.core.exceptions import ConfigError  # noqa: E402
+from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+
+H_NS = 2_000_000
+
+
+def make(ctx, executor, **params):
+    node = ControllerNode(context=ctx, parameter_overrides=[
+        Parameter(k, value=v) for k, v in params.items()])
+    probe = Probe(ctx)
+    executor.add_node(node)
+    executor.add_node(probe)
+    assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+    return node, probe
+
+
+def answered(probe, t_ns):
+    label = f"stamp={t_ns // NS}.{t_ns % NS:09d}"
+    return any(label in lab for lab, _ in probe.efforts)
+
+
+def feed(executor, probe, k0, count, q=PAPER_Q0, qd=None):
+    """Publish states k0..k0+count-1 one at a time, each answered before the next."""
+    for k in range(k0, k0 + count):
+        probe.state(k * H_NS, q, np.zeros(7) if qd is None else qd)
+        assert spin_until(executor, lambda: answered(probe, k * H_NS)), f"no effort for {k}"
+    return k0 + count
+
+
+def bad_messages():
+    """One malformed JointState per kind (and the text the warning must contain)."""
+    good = dict(name=list(JOINTS), position=list(PAPER_Q0), velocity=[0.0] * 7)
+
+    def js(**changes):
+        fields = dict(good)
+        fields.update(changes)
+        return JointState(**fields)
+    nan = list(PAPER_Q0)
+    nan[2] = math.nan
+    inf = [0.0] * 7
+    inf[4] = math.inf
+    return [
+        ("nan", js(position=nan)),
+        ("nan", js(velocity=inf)),
+        ("length", js(position=list(PAPER_Q0[:5]))),
+        ("length", js(velocity=[0.0] * 3)),
+        ("names", js(name=["a", "b", "c", "d", "e", "f", "g"])),      # unknown only
+        ("names", js(name=JOINTS[:6], position=list(PAPER_Q0[:6]), velocity=[0.0] * 6)),
+        ("names", js(name=["joint1"] * 7)),
+        ("empty", JointState()),
+    ]
+
+
+def test_malformed_states_are_rejected_and_control_recovers():
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex)
+        k = feed(ex, probe, 0, 20)
+        for kind, msg in bad_messages():
+            probe.state(k * H_NS, PAPER_Q0, np.zeros(7))
+            assert spin_until(ex, lambda: answered(probe, k * H_NS))
+            k += 1
+            n_before = len(probe.efforts)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * H_NS, NS)
+            probe.pub_state.publish(msg)
+            assert spin_until(ex, lambda: node._throttle.counts.get(kind, 0) > 0), kind
+            # the bad message produced no effort (the watchdog has 20 ms: allow its tags only)
+            assert all("stamp=" not in lab for lab, _ in probe.efforts[n_before:]), kind
+        # a stamp going backwards
+        probe.state((k - 5) * H_NS, PAPER_Q0, np.zeros(7))
+        assert spin_until(ex, lambda: node._throttle.counts.get("stamp", 0) > 0)
+        # control recovers
+        k = feed(ex, probe, k, 10)
+        for kind in ("nan", "length", "names", "empty", "stamp"):
+            assert spin_until(ex, lambda: probe.warned(f"rejected ({kind})")), kind
+        assert all(np.all(np.isfinite(d)) for _, d in probe.efforts)
+        assert node.diagnostics().values  # diagnostics still build
+
+
+def test_unknown_extra_joints_and_order_are_handled():
+    """Extra joints are ignored and the order is by name: same effort as the plain message."""
+    q = PAPER_Q0 + 0.01
+    with ros_context() as (ctx, ex):
+        _, probe = make(ctx, ex)
+        probe.state(0, q, np.zeros(7))
+        assert spin_until(ex, lambda: answered(probe, 0))
+        ref = probe.efforts[-1][1]
+    with ros_context() as (ctx, ex):
+        _, probe = make(ctx, ex)
+        perm = [3, 0, 6, 1, 5, 2, 4]
+        names = ["gripper"] + [JOINTS[i] for i in perm]
+        msg = JointState(name=names, position=[0.5] + [q[i] for i in perm],
+                         velocity=[math.nan] + [0.0] * 7)
+        probe.pub_state.publish(msg)
+        assert spin_until(ex, lambda: answered(probe, 0))
+        np.testing.assert_allclose(probe.efforts[-1][1], ref, rtol=1e-12, atol=1e-9)
+
+
+def test_watchdog_publishes_safe_effort_and_recovers():
+    safe = [1.0, -2.0, 3.0, 0.0, 0.5, 0.0, -1.0]
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, state_timeout=0.05, safe_effort=safe)
+        k = feed(ex, probe, 0, 10)
+        n_before = len(probe.efforts)
+        # no more states: the safe effort follows, tagged "watchdog"
+        assert spin_until(ex, lambda: any(lab.endswith("watchdog")
+                                          for lab, _ in probe.efforts[n_before:]))
+        wd = [d for lab, d in probe.efforts[n_before:] if lab.endswith("watchdog")]
+        np.testing.assert_array_equal(wd[0], safe)
+        status = {kv.key: kv.value for kv in node.diagnostics().values}
+        assert status["watchdog"] == "tripped" and int(status["watchdog_trips"]) == 1
+        assert spin_until(ex, lambda: probe.warned("watchdog"))
+        # the state returns: control resumes
+        feed(ex, probe, k, 5)
+        status = {kv.key: kv.value for kv in node.diagnostics().values}
+        assert status["watchdog"] == "ok"
+        assert not np.allclose(probe.efforts[-1][1], safe)
+
+
+def test_watchdog_default_is_zero_in_timer_mode():
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, mode="timer", state_timeout=0.05)
+        probe.state(0, PAPER_Q0, np.zeros(7))
+        # timer mode: efforts (untagged) follow the state at the rate
+        assert spin_until(ex, lambda: any(lab == "joint" for lab, _ in probe.efforts))
+        assert spin_until(ex, lambda: node._watchdog and node._watchdog_trips == 1)
+        n_before = len(probe.efforts)
+        assert spin_until(ex, lambda: len(probe.efforts) > n_before + 3)
+        for lab, d in probe.efforts[n_before:]:
+            assert lab.endswith("watchdog")
+            np.testing.assert_array_equal(d, np.zeros(7))
+
+
+@pytest.mark.parametrize("name, value", [
+    ("K_D", -1.0), ("P", 0.0), ("Lambda", -0.5), ("gamma", -0.1), ("lambda", 0.0),
+    ("rate", 0.0), ("state_timeout", -1.0), ("safe_effort", [0.0, 1.0, 2.0]),
+    ("effort_limit", [1.0] * 6), ("effort_limit", [-1.0]), ("model", "no_such_arm"),
+    ("model", "/nonexistent/arm.yaml"), ("joints", ["joint1", "joint2"]),
+    ("joints", JOINTS[:6] + ["elbow"]), ("mode", "fast"), ("trajectory", "spline"),
+    ("paper.q0", [0.0] * 3), ("gravity", [0.0, 9.81]), ("K_D", 10000),
+])
+def test_invalid_parameter_is_refused_naming_it(name, value):
+    with ros_context() as (ctx, _):
+        with pytest.raises(ConfigError) as err:
+            ControllerNode(context=ctx, parameter_overrides=[Parameter(name, value=value)])
+        assert str(err.value).startswith(name + ":"), str(err.value)
+        assert "\n" not in str(err.value)
+
+
+def test_joints_parameter_orders_the_efforts():
+    order = [JOINTS[i] for i in (6, 5, 4, 3, 2, 1, 0)]
+    with ros_context() as (ctx, ex):
+        _, probe = make(ctx, ex)
+        probe.state(0, PAPER_Q0 + 0.02, np.zeros(7))
+        assert spin_until(ex, lambda: answered(probe, 0))
+        ref = probe.efforts[-1][1]
+    with ros_context() as (ctx, ex):
+        _, probe = make(ctx, ex, joints=order)
+        probe.state(0, PAPER_Q0 + 0.02, np.zeros(7))
+        assert spin_until(ex, lambda: answered(probe, 0))
+        np.testing.assert_allclose(probe.efforts[-1][1], ref[::-1], rtol=1e-12)
+
+
+def test_velocity_estimate_without_velocities():
+    """Positions only: the filtered estimate follows the true velocity of a known motion."""
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex)
+        worst = 0.0
+        for k in range(400):
+            t = k * 0.002
+            probe.state(k * H_NS, PAPER_Q0 + 0.1 * np.sin(2.0 * t))
+            assert spin_until(ex, lambda: answered(probe, k * H_NS))
+            if t > 0.2:
+                worst = max(worst, np.max(np.abs(node._qd - 0.2 * np.cos(2.0 * t))))
+        # first-order lag at 50 Hz and the half-step delay of the difference: ~1e-3 rad/s
+        assert worst < 5e-3
+
+
+def _trajectory(names, times, pos, vel=None, acc=None, stamp_ns=0):
+    msg = JointTrajectory(joint_names=list(names))
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, NS)
+    for i, t in enumerate(times):
+        pt = JointTrajectoryPoint(positions=list(pos[i]))
+        if vel is not None:
+            pt.velocities = list(vel[i])
+        if acc is not None:
+            pt.accelerations = list(acc[i])
+        pt.time_from_start.sec, pt.time_from_start.nanosec = divmod(round(t * NS), NS)
+        msg.points.append(pt)
+    return msg
+
+
+def test_topic_trajectory_is_followed_like_jtc():
+    """Cubic segments from the held state through the points, against scipy's Hermite spline."""
+    interpolate = pytest.importorskip("scipy.interpolate")
+    from test_nodes_support import DEEP
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, trajectory="topic")
+        desired = []
+        probe.create_subscription(JointState, "/rcac_controller/desired_state", desired.append,
+                                  DEEP)
+        pub = probe.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory", 10)
+        assert spin_until(ex, lambda: pub.get_subscription_count() > 0)
+        k = feed(ex, probe, 0, 5)
+        hold = PAPER_Q0.copy()
+        p = np.array([hold + 0.1, hold - 0.05])
+        v = np.array([np.full(7, 0.2), np.zeros(7)])
+        perm = [2, 0, 1, 6, 5, 4, 3]
+        pub.publish(_trajectory([JOINTS[i] for i in perm], [0.1, 0.3], p[:, perm], v[:, perm]))
+        assert spin_until(ex, lambda: node._active is not None)
+        start = (k - 1) * H_NS              # "start now" = the latest state's stamp
+        k = feed(ex, probe, k, 200)
+        ref = interpolate.CubicHermiteSpline([0.0, 0.1, 0.3], np.vstack([hold, p]),
+                                             np.vstack([np.zeros(7), v]))
+        checked = 0
+        for msg in desired:
+            t = ((msg.header.stamp.sec * NS + msg.header.stamp.nanosec) - start) * 1e-9
+            if t < 0:
+                continue
+            want = ref(min(t, 0.3))
+            want_v = ref(min(t, 0.3), 1) if t < 0.3 else np.zeros(7)
+            np.testing.assert_allclose(msg.position, want, atol=1e-9)
+            np.testing.assert_allclose(msg.velocity, want_v, atol=1e-9)
+            checked += 1
+        assert checked > 150
+        # malformed trajectories: rejected, the current one kept
+        bad = [
+            _trajectory(["x"] + JOINTS[1:], [0.1], [hold]),
+            _trajectory(JOINTS[:6], [0.1], [hold[:6]]),
+            _trajectory(JOINTS, [0.1], [np.full(7, math.nan)]),
+            _trajectory(JOINTS, [0.1], [hold[:5]]),
+            _trajectory(JOINTS, [0.2, 0.1], [hold, hold]),
+            JointTrajectory(),
+        ]
+        active = node._active
+        for msg in bad:
+            pub.publish(msg)
+        assert spin_until(ex, lambda: sum(c for kind, c in node._throttle.counts.items()
+                                          if kind.startswith("trajectory")) == len(bad))
+        assert node._active is active
+        assert spin_until(ex, lambda: probe.warned("rejected (trajectory"))

@@ -1,0 +1,109 @@
+"""Shared helpers for the node tests (no tests here): isolated ROS contexts, probes, waits."""
+
+import contextlib
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from builtin_interfaces.msg import Time as TimeMsg  # noqa: E402
+from rcl_interfaces.msg import Log  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+PAPER_Q0 = np.array([0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3,
+                     math.pi / 2, 0.3])
+JOINTS = [f"joint{i}" for i in range(1, 8)]
+NS = 1_000_000_000
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                 reliability=ReliabilityPolicy.RELIABLE)
+#: the test side keeps more, so that a slow test process loses nothing
+DEEP = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
+                  reliability=ReliabilityPolicy.RELIABLE)
+
+
+@contextlib.contextmanager
+def ros_domain():
+    """Set a unique ROS_DOMAIN_ID and localhost-only discovery for the block (and children)."""
+    dc = pytest.importorskip("domain_coordinator")
+    saved = {k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
+    with dc.domain_id() as did:
+        os.environ["ROS_DOMAIN_ID"] = str(did)
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        try:
+            yield did
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+
+
+@contextlib.contextmanager
+def ros_context():
+    """A fresh rclpy context on a unique domain; yields ``(context, executor)``."""
+    with ros_domain() as did:
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=did)
+        executor = SingleThreadedExecutor(context=ctx)
+        try:
+            yield ctx, executor
+        finally:
+            executor.shutdown()
+            rclpy.try_shutdown(context=ctx)
+
+
+def spin_until(executor, cond, timeout=20.0):
+    """Spin until ``cond()`` is true; return whether it became true within ``timeout`` s."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        executor.spin_once(timeout_sec=0.01)
+    return cond()
+
+
+def stamp(ns):
+    """Integer nanoseconds as a builtin_interfaces/Time."""
+    return TimeMsg(sec=ns // NS, nanosec=ns % NS)
+
+
+class Probe(Node):
+    """The test's side of the wires: publishes joint states, records efforts and logs."""
+
+    def __init__(self, context, effort_topic="effort_controller/commands",
+                 state_topic="joint_states"):
+        super().__init__("probe", context=context)
+        self.efforts = []                  # (label, data)
+        self.states = []
+        self.logs = []
+        self.pub_state = self.create_publisher(JointState, state_topic, QOS)
+        self.pub_effort = self.create_publisher(Float64MultiArray, effort_topic, QOS)
+        self.create_subscription(Float64MultiArray, effort_topic, self._on_effort, DEEP)
+        self.create_subscription(JointState, state_topic, self.states.append, DEEP)
+        self.create_subscription(Log, "/rosout", self.logs.append, DEEP)
+
+    def _on_effort(self, msg):
+        label = msg.layout.dim[0].label if msg.layout.dim else ""
+        self.efforts.append((label, np.array(msg.data)))
+
+    def state(self, t_ns, q, qd=None, names=None):
+        """Publish a JointState at stamp ``t_ns``."""
+        msg = JointState(name=list(names or JOINTS), position=[float(x) for x in q],
+                         velocity=[] if qd is None else [float(x) for x in qd])
+        msg.header.stamp = stamp(t_ns)
+        self.pub_state.publish(msg)
+        return msg
+
+    def warned(self, text, node="rcac_controller"):
+        """Whether a WARN (or worse) log line of ``node`` contains ``text``."""
+        return any(m.level >= Log.WARN and m.name.endswith(node) and text in m.msg
+                   for m in self.logs)
