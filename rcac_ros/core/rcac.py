@@ -32,17 +32,18 @@ from numba import njit
 
 from ._validate import as_array, per_link_matrix, positive_vector
 from .exceptions import GainError, InputError
-from .regressor import fill_regressor
+from .regressor import bias_row, fill_regressor, momentum_row
 from .spatial import P0, RF0, joint_rotation, transform_force_T, transform_motion, z_cross_rate
 
 # packed constants per link: p (3), R_fix (9), Lambda (1), K_D (36), P (169)
 LAM, KD0, PG0, CONST_COLS = 12, 13, 49, 218
 # state per link: theta_hat, phi^f, psi^f, previous phi, previous psi (13 each), s_i (6)
 TH, PHF, PSF, PHP, PSP, S0, STATE_COLS = 0, 13, 26, 39, 52, 65, 71
-# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied, k, E, error
+# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied, k, E, error,
+# and two flags: every K_Di diagonal, every P_i diagonal (then the kernel skips the zeros)
 I_G = 0
-(I_LAM, I_H, I_GAMMA, I_FE, I_FB0, I_FB1, I_Y, I_TAU1, I_K, I_E, I_ERR,
- SCAL_LEN) = range(3, 15)
+(I_LAM, I_H, I_GAMMA, I_FE, I_FB0, I_FB1, I_Y, I_TAU1, I_K, I_E, I_ERR, I_KD_DIAG, I_P_DIAG,
+ SCAL_LEN) = range(3, 17)
 
 INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
 
@@ -80,9 +81,10 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
     C = np.empty((n, 9), q.dtype)
-    Vr = np.empty((n, 6), q.dtype)
     Yr = np.empty((n, 6, 13), q.dtype)
-    Ys = np.empty((2, 6, 13), q.dtype)
+    phi_row = np.empty(13, q.dtype)
+    psi_row = np.empty(13, q.dtype)
+    tmp_row = np.empty(13, q.dtype)
     Wm = np.empty((n, 13), q.dtype)
     Rn = np.empty((n, 13), q.dtype)
     Un = np.empty((n, 13), q.dtype)
@@ -91,6 +93,8 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
+    kd_diag = scal[I_KD_DIAG] != 0.0
+    p_diag = scal[I_P_DIAG] != 0.0
     y = 0.0 if first else fe * scal[I_Y] + fb0 * scal[I_TAU1]
     vx = vy = vz = wx = wy = wz = 0.0                  # V_i
     rvx = rvy = rvz = rwx = rwy = rwz = 0.0            # V_ri
@@ -139,25 +143,18 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
             bwx += cwx
             bwy += cwy
             avx, avy, avz, awx, awy, awz = tvx, tvy, tvz, twx, twy, twz
-        Vr[i, 0], Vr[i, 1], Vr[i, 2] = rvx, rvy, rvz
-        Vr[i, 3], Vr[i, 4], Vr[i, 5] = rwx, rwy, rwz
         st = state[i]
         st[S0], st[S0 + 1], st[S0 + 2] = vx - rvx, vy - rvy, vz - rvz
         st[S0 + 3], st[S0 + 4], st[S0 + 5] = wx - rwx, wy - rwy, wz - rwz
         # eq 19b's regressor, and Ym(V), Yc(V) for the filtered joint-1 torque
         fill_regressor(Yr, i, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                        wx, wy, wz, gx, gy, gz)
-        fill_regressor(Ys, 0, vx, vy, vz, wx, wy, wz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                       wx, wy, wz, 0.0, 0.0, 0.0)
-        fill_regressor(Ys, 1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, vx, vy, vz, wx, wy, wz,
-                       wx, wy, wz, gx, gy, gz)
+        momentum_row(phi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz)
+        momentum_row(tmp_row, bvx, bvy, bvz, bwx, bwy, bwz, vx, vy, vz, wx, wy, wz)
+        bias_row(psi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
         for c in range(13):
-            phi = (avx * Ys[0, 0, c] + avy * Ys[0, 1, c] + avz * Ys[0, 2, c]
-                   + awx * Ys[0, 3, c] + awy * Ys[0, 4, c] + awz * Ys[0, 5, c])
-            psi = (avx * Ys[1, 0, c] + avy * Ys[1, 1, c] + avz * Ys[1, 2, c]
-                   + awx * Ys[1, 3, c] + awy * Ys[1, 4, c] + awz * Ys[1, 5, c]
-                   - bvx * Ys[0, 0, c] - bvy * Ys[0, 1, c] - bvz * Ys[0, 2, c]
-                   - bwx * Ys[0, 3, c] - bwy * Ys[0, 4, c] - bwz * Ys[0, 5, c])
+            phi = phi_row[c]
+            psi = psi_row[c] - tmp_row[c]
             if first:
                 st[PHF + c] = phi
                 st[PSF + c] = 0.0
@@ -185,8 +182,11 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
             acc = 0.0
             for c in range(13):
                 acc += Yr[i, r6, c] * st[TH + c]
-            for k in range(6):
-                acc -= row[KD0 + 6 * r6 + k] * st[S0 + k]
+            if kd_diag:
+                acc -= row[KD0 + 7 * r6] * st[S0 + r6]
+            else:
+                for k in range(6):
+                    acc -= row[KD0 + 6 * r6 + k] * st[S0 + k]
             if r6 == 0:
                 fx += acc
             elif r6 == 1:
@@ -206,14 +206,19 @@ def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
             for r6 in range(6):
                 g_c += Yr[i, r6, c] * st[S0 + r6]
             grad[c] = g_c
-        for a in range(13):
-            acc_r = 0.0
-            acc_u = 0.0
-            for c in range(13):
-                acc_r += row[PG0 + 13 * a + c] * grad[c]
-                acc_u += row[PG0 + 13 * a + c] * Wm[i, c]
-            Rn[i, a] = st[TH + a] - h * acc_r
-            Un[i, a] = acc_u
+        if p_diag:
+            for a in range(13):
+                Rn[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]
+                Un[i, a] = row[PG0 + 14 * a] * Wm[i, a]
+        else:
+            for a in range(13):
+                acc_r = 0.0
+                acc_u = 0.0
+                for c in range(13):
+                    acc_r += row[PG0 + 13 * a + c] * grad[c]
+                    acc_u += row[PG0 + 13 * a + c] * Wm[i, c]
+                Rn[i, a] = st[TH + a] - h * acc_r
+                Un[i, a] = acc_u
     # eq 24, step 2: the prediction-error term taken implicitly (Sherman-Morrison, O(n)):
     # (I + h gamma u W) theta_hat+ = r  =>  theta_hat+ = r - h gamma u (W r) / (1 + h gamma W u)
     Wr = 0.0
@@ -285,6 +290,8 @@ class RecursiveCompositeController:
         self._scal[I_G:I_G + 3] = model.gravity
         self._scal[I_LAM], self._scal[I_H], self._scal[I_GAMMA] = self.lam, self.h, self.gamma
         self._scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
+        self._scal[I_KD_DIAG] = float(is_diagonal(self.K_D))
+        self._scal[I_P_DIAG] = float(is_diagonal(self.P))
         self._state = np.zeros((n, STATE_COLS))
         self.reset(theta_hat0)
 
@@ -380,6 +387,12 @@ def input_error(scal, n, values):
     if code < 10:
         return InputError(f"{name}: expected length {n}, got {np.shape(values[code - 1])}")
     return InputError(f"{name}: contains NaN or Inf")
+
+
+def is_diagonal(stack):
+    """True if every matrix of the (n, k, k) ``stack`` is diagonal."""
+    k = stack.shape[-1]
+    return not np.any(stack * (1.0 - np.eye(k)))
 
 
 def _scalar(value, name, minimum, strict=False):

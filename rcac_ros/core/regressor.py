@@ -193,3 +193,55 @@ def link_matrices(theta, w, g=(0.0, 0.0, 0.0)):
 
 def _skew(v):
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@njit(cache=True)
+def inertia_terms(out, ax, ay, az, wx, wy, wz):
+    """``d(a^T I_o(theta) w) / d theta_5..13`` into ``out[4:13]`` (I_o of NOTES.md 2)."""
+    px = ax * wx
+    py = ay * wy
+    pz = az * wz
+    out[4] = py + pz
+    out[5] = px + pz
+    out[6] = px + py
+    out[7] = -(ax * wy + ay * wx)
+    out[8] = -(ax * wz + az * wx)
+    out[9] = -(ay * wz + az * wy)
+    out[10] = px
+    out[11] = py
+    out[12] = pz
+
+
+@njit(cache=True)
+def momentum_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz):
+    """``a^T Ym(V)`` (1 x 13) without forming Ym: the gradient of ``a^T M(theta) V``.
+
+    ``M V = [m v - h x w; h x v + I_o w]``.
+    """
+    out[0] = avx * vx + avy * vy + avz * vz
+    # h . (v x a_w - w x a_v)
+    out[1] = (vy * awz - vz * awy) - (wy * avz - wz * avy)
+    out[2] = (vz * awx - vx * awz) - (wz * avx - wx * avz)
+    out[3] = (vx * awy - vy * awx) - (wx * avy - wy * avx)
+    inertia_terms(out, awx, awy, awz, wx, wy, wz)
+
+
+@njit(cache=True)
+def bias_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
+    """``a^T Yc(V)`` (1 x 13) without forming Yc: the gradient of ``a^T (C(w) V + G)``.
+
+    With ``u = w x v - g``: ``C V + G = [m u - w x (h x w); h x u + w x (I_o w)]``.
+    """
+    ux = wy * vz - wz * vy - gx
+    uy = wz * vx - wx * vz - gy
+    uz = wx * vy - wy * vx - gz
+    ww = wx * wx + wy * wy + wz * wz
+    aw = avx * wx + avy * wy + avz * wz
+    out[0] = avx * ux + avy * uy + avz * uz
+    # h . (u x a_w - (w.w) a_v + (a_v.w) w)
+    out[1] = (uy * awz - uz * awy) - ww * avx + aw * wx
+    out[2] = (uz * awx - ux * awz) - ww * avy + aw * wy
+    out[3] = (ux * awy - uy * awx) - ww * avz + aw * wz
+    # a_w . (w x I_o w) = (a_w x w) . (I_o w)
+    inertia_terms(out, awy * wz - awz * wy, awz * wx - awx * wz, awx * wy - awy * wx,
+                  wx, wy, wz)

@@ -1,0 +1,169 @@
+"""``rcac bench``: the recursive controller against Pinocchio, the Slotine-Li baseline and itself.
+
+Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
+median over blocks of the mean time per call (µs), measured in one run on this
+machine; the ratios are what the targets are about. The operation count is
+exact (:mod:`rcac_ros.core.opcount`).
+"""
+
+import json
+import time
+
+import numpy as np
+
+from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
+                           css_arm)
+
+SIZES = (7, 14, 28, 56, 112, 224)
+
+
+def median_us(fn, budget_s=0.3, blocks=7):
+    """Median over ``blocks`` of the mean µs per call of ``fn()``, about ``budget_s`` in all."""
+    fn()
+    t0 = time.perf_counter()
+    fn()
+    once = max(time.perf_counter() - t0, 1e-7)
+    reps = max(1, int(budget_s / blocks / once))
+    samples = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        samples.append((time.perf_counter() - t0) / reps * 1e6)
+    return float(np.median(samples))
+
+
+def _pin_rnea(model):
+    try:
+        import pinocchio as pin
+    except ImportError:
+        return None
+    pm = pin.Model()
+    parent = 0
+    for i in range(model.n):
+        parent = pm.addJoint(parent, pin.JointModelRZ(),
+                             pin.SE3(np.array(model.R_fix[i]), np.array(model.p[i])), f"j{i}")
+        pm.appendBodyToJoint(parent, pin.Inertia(float(model.mass[i]), np.array(model.com[i]),
+                                                 np.array(model.inertia[i])), pin.SE3.Identity())
+    pm.gravity.linear = np.array(model.gravity)
+    data = pm.createData()
+    return lambda q, qd, qdd: pin.rnea(pm, data, q, qd, qdd)
+
+
+def bench_model(model, label, baseline=True, budget_s=0.3):
+    """One row: µs per controller step, pin.rnea, Slotine-Li step and simulator step."""
+    rng = np.random.default_rng(0)
+    q, qd, q_d, qd_d, qdd_d = rng.normal(size=(5, model.n)) * 0.1
+    ctrl = RecursiveCompositeController(model, theta_hat0=model.theta())
+    row = {"model": label, "n": model.n,
+           "controller_us": median_us(lambda: ctrl.step(q, qd, q_d, qd_d, qdd_d), budget_s)}
+    rnea = _pin_rnea(model)
+    row["pin_rnea_us"] = None if rnea is None else median_us(lambda: rnea(q, qd, qdd_d), budget_s)
+    if baseline:
+        sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
+        row["slotine_li_us"] = median_us(lambda: sl.step(q, qd, q_d, qd_d, qdd_d), budget_s,
+                                         blocks=3 if model.n > 100 else 7)
+    else:
+        row["slotine_li_us"] = None
+    sim = Simulator(model, q0=q)
+    tau = np.zeros(model.n)
+    row["simulator_us"] = median_us(lambda: sim.step(tau), budget_s)
+    return row
+
+
+def urdf_models():
+    """The panda (to panda_link8) and the ur5 from example-robot-data, if both are installed."""
+    try:
+        import example_robot_data  # noqa: F401
+        from rcac_ros.core.urdf import model_from_urdf, robot_urdf_path
+    except ImportError:
+        return []
+    out = []
+    for label, rel, tip in (("panda", "panda_description/urdf/panda.urdf", "panda_link8"),
+                            ("ur5", "ur_description/urdf/ur5_robot.urdf", None)):
+        try:
+            out.append((label, model_from_urdf(robot_urdf_path(rel), tip_link=tip)))
+        except Exception as err:  # a missing robot only drops its row
+            print(f"(skipping {label}: {err})")
+    return out
+
+
+def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
+    """All rows, the ratios and the operation counts, as a dict."""
+    rows = []
+    base = css_arm()
+    for n in sizes:
+        rows.append(bench_model(base.repeated(n // 7), f"css x{n // 7}", budget_s=budget_s))
+        print(_format_row(rows[-1]), flush=True)
+    if with_urdf:
+        for label, model in urdf_models():
+            rows.append(bench_model(model, label, budget_s=budget_s))
+            print(_format_row(rows[-1]), flush=True)
+    by_n = {r["n"]: r for r in rows if r["model"].startswith("css")}
+    ratios = {}
+    if 7 in by_n and by_n[7]["pin_rnea_us"]:
+        ratios["controller_n7_over_pin_rnea_n7"] = by_n[7]["controller_us"] / by_n[7]["pin_rnea_us"]
+    if 224 in by_n and 28 in by_n:
+        ratios["controller_n224_over_n28"] = by_n[224]["controller_us"] / by_n[28]["controller_us"]
+    if 56 in by_n and by_n[56]["slotine_li_us"]:
+        ratios["slotine_li_over_controller_n56"] = (by_n[56]["slotine_li_us"]
+                                                    / by_n[56]["controller_us"])
+    for r in rows:
+        if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
+            ratios[f"controller_over_pin_rnea_{r['model']}"] = r["controller_us"] / r["pin_rnea_us"]
+    result = {"rows": rows, "ratios": ratios}
+    if ops:
+        from rcac_ros.core.opcount import count_step
+        c7, c14 = count_step("rcac", 7), count_step("rcac", 14)
+        result["operations"] = {
+            "rcac_n7": c7, "rcac_n14": c14,
+            "rcac_per_link_mul": (c14["mul"] + c14["div"] - c7["mul"] - c7["div"]) / 7,
+            "rcac_per_link_add": (c14["add"] - c7["add"]) / 7,
+            "slotine_li_n7": count_step("slotine_li", 7),
+            "paper_per_link": {"mul": 606, "add": 501},
+        }
+    return result
+
+
+def _format_row(r):
+    def f(v):
+        return f"{v:12.2f}" if v is not None else f"{'-':>12s}"
+    return (f"{r['model']:>10s} {r['n']:5d} {f(r['controller_us'])} {f(r['pin_rnea_us'])} "
+            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}")
+
+
+def add_arguments(parser):
+    parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    parser.add_argument("--ros", action="store_true",
+                        help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
+    parser.add_argument("--duration", type=float, default=60.0,
+                        help="seconds of the --ros run (default 60)")
+    parser.add_argument("--budget", type=float, default=0.3,
+                        help="seconds of timing per cell (default 0.3)")
+
+
+def run(args):
+    if args.ros:
+        from rcac_ros.ros_bench import run_ros_bench
+        result = run_ros_bench(args.duration, json_path=args.json)
+        return 0 if result else 1
+    try:
+        import pinocchio  # noqa: F401
+    except ImportError:
+        print("pinocchio (pip package 'pin') is not installed: the pin.rnea column is skipped")
+    print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
+          f"{'SlotineLi us':>12s} {'sim step us':>12s}")
+    result = run_bench(budget_s=args.budget)
+    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20):")
+    for k, v in result["ratios"].items():
+        print(f"  {k:40s} {v:8.2f}")
+    ops = result.get("operations")
+    if ops:
+        print(f"\noperations per step (counted): n=7 {ops['rcac_n7']}; per link "
+              f"{ops['rcac_per_link_mul']:.0f} mul + {ops['rcac_per_link_add']:.0f} add "
+              f"(paper: 606 mul + 501 add); Slotine-Li n=7 {ops['slotine_li_n7']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(result, f, indent=2)
+        print(f"wrote {args.json}")
+    return 0
