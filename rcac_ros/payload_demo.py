@@ -1,0 +1,313 @@
+"""``rcac payload-demo``: a Panda arm picks up an unknown 2 kg payload.
+
+The Panda (7 joints, gravity on) is loaded from example-robot-data's URDF
+(``panda_link0`` -> ``panda_link8``; the hand and the locked fingers are part of
+link 7). Every controller starts from the URDF's nominal parameters. At
+``t = jump`` a payload (default 2 kg, centre of mass offset from the flange) is
+rigidly attached to link 7 in the simulator only: the plant is rebuilt with
+``model.replace(...)`` and its state carried over. Three laws with the same
+feedback are compared:
+
+- ``composite``: the recursive composite adaptive law (eq 24, ``gamma > 0``);
+- ``direct``: the same with ``gamma = 0``;
+- ``fixed``: computed torque with ``theta_hat`` fixed at nominal (``P = 1e-12 I``,
+  ``gamma = 0``: the same recursion, adaptation off).
+
+Gains at the Panda's scale: ``K_Di = kappa M_i`` (the link's nominal 6x6 spatial
+inertia, so the feedback is ``kappa`` rad/s on every link whatever its size;
+``K_D = 1e4 I`` suits the 600 kg CSS arm, not 1 kg wrist links at 2 ms), and
+``P_7 = rho diag(s)^2`` with ``s`` the expected size of each of the 13
+parameters (kg, kg m, kg m^2). Links 1-6 are known (``P = 1e-12 I``) unless
+``--adapt-all``. Writes ``metrics.json``, ``tracking_errors.png``,
+``payload_summary.png`` and ``link7_estimates.png``.
+"""
+
+import glob
+import json
+import os
+import site
+import sys
+import time
+
+import numpy as np
+
+from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
+                           SinusoidTrajectory)
+from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.progress import Progress
+
+#: The Panda's "ready" posture (rad), the centre of the desired motion.
+READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
+#: Per-joint amplitude (rad) and frequency (Hz) of the desired sinusoids.
+AMPLITUDE = (0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.5)
+FREQUENCY = (0.2, 0.25, 0.3, 0.22, 0.35, 0.28, 0.4)
+#: The flange (``panda_link8``) in link 7's frame: ``panda_joint8``'s origin, m.
+FLANGE = (0.0, 0.0, 0.107)
+#: Expected size of each of the 13 parameters of link 7 (kg, kg m, then kg m^2).
+PARAMETER_SCALE = (2.0,) + (0.4,) * 3 + (0.08,) * 9
+#: Default gains (see the module docstring).
+GAINS = dict(kappa=100.0, Lambda=10.0, rho=30.0, gamma=1.0, lam=10.0, h=0.002)
+#: The law with adaptation off.
+FIXED_P = 1e-12
+
+
+def find_panda_urdf():
+    """example-robot-data's ``panda.urdf`` (cmeel prefix in site-packages), or None."""
+    rel = os.path.join("panda_description", "urdf", "panda.urdf")
+    try:
+        import example_robot_data
+        path = os.path.join(example_robot_data.getModelPath(rel), rel)
+        if os.path.isfile(path):
+            return path
+    except (ImportError, AttributeError, OSError, ValueError):
+        pass
+    roots = list(site.getsitepackages()) + [site.getusersitepackages()] + sys.path
+    for root in roots:
+        hits = glob.glob(os.path.join(root, "cmeel.prefix", "share", "example-robot-data",
+                                      "robots", rel))
+        if hits:
+            return hits[0]
+    return None
+
+
+def load_panda(urdf=None):
+    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``."""
+    path = urdf or find_panda_urdf()
+    if path is None:
+        raise ConfigError("urdf: example-robot-data's panda.urdf not found; pass --urdf")
+    return model_from_urdf(path, tip_link="panda_link8")
+
+
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def spatial_inertia(mass, com, inertia):
+    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (NOTES.md 2)."""
+    P = _skew(com)
+    return np.block([[mass * np.eye(3), -mass * P], [mass * P, inertia - mass * P @ P]])
+
+
+def with_payload(model, mass=2.0, com_flange=(0.03, -0.02, 0.08), radius=0.05, link=None):
+    """``model`` with a solid-sphere payload rigidly attached to its last link.
+
+    Parameters
+    ----------
+    mass : float
+        Payload mass, kg.
+    com_flange : array_like (3,)
+        Payload centre of mass in the flange frame (:data:`FLANGE` in link 7's axes), m.
+    radius : float
+        Sphere radius (inertia ``2/5 m r^2``), m.
+    link : int, optional
+        Index of the link that carries it (default: the last).
+    """
+    i = model.n - 1 if link is None else int(link)
+    c_p = np.asarray(FLANGE, float) + np.asarray(com_flange, float)
+    m0, c0, i0 = model.mass[i], model.com[i], model.inertia[i]
+    m = m0 + mass
+    c = (m0 * c0 + mass * c_p) / m
+
+    def shift(mk, d):
+        return mk * (d @ d * np.eye(3) - np.outer(d, d))
+
+    inertia = i0 + shift(m0, c0 - c) + 0.4 * mass * radius ** 2 * np.eye(3) + shift(mass, c_p - c)
+    masses, coms, inertias = model.mass.copy(), model.com.copy(), model.inertia.copy()
+    masses[i], coms[i], inertias[i] = m, c, inertia
+    return model.replace(mass=masses, com=coms, inertia=inertias)
+
+
+def gains_for(model, kappa, Lambda, rho, gamma, lam, h, adapt_all=False, law="composite"):
+    """Controller keyword arguments of one law (see the module docstring)."""
+    K_D = np.array([kappa * spatial_inertia(model.mass[i], model.com[i], model.inertia[i])
+                    for i in range(model.n)])
+    P = np.array([np.eye(13) * FIXED_P] * model.n)
+    if law != "fixed":
+        scaled = rho * np.diag(np.square(PARAMETER_SCALE))
+        P[-1] = scaled
+        if adapt_all:
+            P[:] = scaled
+    return dict(K_D=K_D, Lambda=Lambda, P=P, gamma=gamma if law == "composite" else 0.0,
+                lam=lam, h=h, theta_hat0=model.theta())
+
+
+def simulate(model, loaded, controller, trajectory, duration, jump, progress=None):
+    """Close the loop; at ``t >= jump`` the plant becomes ``loaded`` (state carried over).
+
+    Returns
+    -------
+    dict
+        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_last`` (T, 13) (last link's
+        estimates), ``E`` (T,).
+    """
+    h = controller.h
+    steps = int(round(duration / h)) + 1
+    n = model.n
+    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
+               tau=np.empty((steps, n)), theta_last=np.empty((steps, 13)), E=np.empty(steps))
+    q_d0, qd_d0, _ = trajectory(0.0)
+    sim = Simulator(model, dt=h, q0=q_d0, qd0=qd_d0)
+    attached = False
+    with Progress(steps, progress or "", enabled=progress is not None) as bar:
+        for k in range(steps):
+            t = k * h
+            if not attached and t >= jump - 1e-12:
+                plant = Simulator(loaded, dt=h)
+                plant.reset(sim.q, sim.qd, t=sim.t)
+                sim, attached = plant, True
+            q_d, qd_d, qdd_d = trajectory(t)
+            out["theta_last"][k] = controller.theta_hat[-1]
+            tau = controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
+            out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
+            out["E"][k] = controller.E
+            sim.step(tau)
+            if k % 250 == 0:
+                bar.update(k)
+    return out
+
+
+def window_rms(run, start, stop):
+    """RMS of ``q - q_d`` over all joints for ``start <= t < stop``."""
+    sel = (run["t"] >= start) & (run["t"] < stop)
+    e = run["q"][sel] - run["q_d"][sel]
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def metrics(run, jump, theta_before, theta_after, window=1.0):
+    """The figures of ``metrics.json`` for one law (README: payload demo)."""
+    t_end = run["t"][-1]
+    e = np.linalg.norm(run["q"] - run["q_d"], axis=1)
+    after = run["t"] >= jump
+    est = run["theta_last"][-1]
+    first = theta_after[1:4]
+    out = {
+        "rms_error_before_jump": window_rms(run, max(0.0, jump - window), jump),
+        "rms_error_first_window_after_jump": window_rms(run, jump, jump + window),
+        "rms_error_last_window": window_rms(run, t_end - window, t_end + 1.0),
+        "peak_error_norm_after_jump": float(e[after].max()),
+        "link7_mass_true": float(theta_after[0]),
+        "link7_mass_nominal": float(theta_before[0]),
+        "link7_mass_estimate_end": float(est[0]),
+        "link7_mass_relative_error_end": float(abs(est[0] - theta_after[0]) / theta_after[0]),
+        "link7_first_moments_true": theta_after[1:4].tolist(),
+        "link7_first_moments_estimate_end": est[1:4].tolist(),
+        "link7_first_moments_relative_error_end": float(np.linalg.norm(est[1:4] - first)
+                                                        / np.linalg.norm(first)),
+    }
+    out["recovery_ratio"] = (out["rms_error_last_window"]
+                             / out["rms_error_first_window_after_jump"])
+    within = np.abs(run["theta_last"][:, 0] - theta_after[0]) <= 0.05 * theta_after[0]
+    outside = np.nonzero(after & ~within)[0]
+    settled = outside[-1] + 1 if outside.size else np.nonzero(after)[0][0]
+    out["link7_mass_settling_time_5pct"] = (float(run["t"][settled] - jump)
+                                            if settled < len(run["t"]) else None)
+    return out
+
+
+def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02, 0.08),
+             gains=None, adapt_all=False, urdf=None, progress=True, laws=None):
+    """The three laws on the Panda with a payload attached at ``jump``.
+
+    Returns ``(model, loaded, runs, report)``.
+    """
+    g = dict(GAINS, **(gains or {}))
+    model = load_panda(urdf)
+    loaded = with_payload(model, payload_mass, payload_com)
+    trajectory = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    runs, report = {}, {}
+    for law in laws or ("composite", "direct", "fixed"):
+        ctrl = RecursiveCompositeController(model, **gains_for(model, adapt_all=adapt_all,
+                                                               law=law, **g))
+        t0 = time.perf_counter()
+        runs[law] = simulate(model, loaded, ctrl, trajectory, duration, jump,
+                             progress=f"{law:>9s}" if progress else None)
+        report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1])
+        report[law]["wall_time_s"] = time.perf_counter() - t0
+    return model, loaded, runs, report
+
+
+def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
+    """metrics.json and the three figures into ``out_dir``."""
+    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
+    import matplotlib.pyplot as plt     # rcac_ros.plots selected the Agg backend
+
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
+        json.dump(dict(report, settings=settings), f, indent=2)
+    t = next(iter(runs.values()))["t"]
+    plot_tracking_errors(t, {law: r["q"] - r["q_d"] for law, r in runs.items()},
+                         os.path.join(out_dir, "tracking_errors.png"), list(model.joint_names),
+                         title=f"Panda tracking errors, payload attached at t = {jump:g} s")
+    plot_parameter_estimates(t, {law: r["theta_last"] for law, r in runs.items()},
+                             loaded.theta()[-1], os.path.join(out_dir, "link7_estimates.png"),
+                             link=model.n)
+    truth = np.where(t[:, None] >= jump, loaded.theta()[-1], model.theta()[-1])
+    fig, axes = plt.subplots(1, 5, figsize=(22, 4))
+    for law, r in runs.items():
+        axes[0].semilogy(t, np.linalg.norm(r["q"] - r["q_d"], axis=1) + 1e-12, lw=0.8,
+                         label=law)
+        for k in range(4):
+            axes[k + 1].plot(t, r["theta_last"][:, k], lw=1.0, label=law)
+    for k, label in enumerate(("mass m (kg)", "m px (kg m)", "m py (kg m)", "m pz (kg m)")):
+        axes[k + 1].plot(t, truth[:, k], "k--", lw=0.9, label="true")
+        axes[k + 1].set_title(f"link 7 {label}")
+    axes[0].set_title("|q - q_d| (rad)")
+    axes[0].set_ylim(bottom=1e-7)
+    for ax in axes:
+        ax.axvline(jump, color="grey", lw=0.6)
+        ax.set_xlabel("time (s)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "payload_summary.png"), dpi=110)
+    plt.close(fig)
+
+
+def add_arguments(parser):
+    parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
+    parser.add_argument("--jump", type=float, default=5.0,
+                        help="time the payload is attached, s (default 5)")
+    parser.add_argument("--payload-mass", type=float, default=2.0, help="kg (default 2)")
+    parser.add_argument("--payload-com", type=float, nargs=3, default=(0.03, -0.02, 0.08),
+                        metavar=("X", "Y", "Z"),
+                        help="payload centre of mass in the flange frame, m "
+                             "(default 0.03 -0.02 0.08)")
+    parser.add_argument("--out", default="results/payload_demo", help="output directory")
+    parser.add_argument("--urdf", default=None,
+                        help="panda.urdf (default: example-robot-data's)")
+    for name, text in (("kappa", "link gain K_Di = kappa * M_i (rad/s)"),
+                       ("Lambda", "Lambda = value * I"),
+                       ("rho", "adaptation gain P_7 = rho * diag(parameter scale)^2"),
+                       ("gamma", "prediction-error weight of the composite law"),
+                       ("lam", "filter bandwidth lambda, rad/s"),
+                       ("h", "control period, s")):
+        parser.add_argument(f"--{name}", type=float, default=GAINS[name],
+                            help=f"{text} (default {GAINS[name]:g})")
+    parser.add_argument("--adapt-all", action="store_true",
+                        help="adapt links 1-6 too (default: only link 7)")
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def run(args):
+    gains = {k: getattr(args, k) for k in GAINS}
+    if not 0.0 <= args.jump < args.duration:
+        raise ConfigError(f"jump: must be in [0, duration), got {args.jump}")
+    model, loaded, runs, report = run_demo(args.duration, args.jump, args.payload_mass,
+                                           args.payload_com, gains, args.adapt_all, args.urdf,
+                                           progress=not args.quiet)
+    settings = dict(gains, duration=args.duration, jump=args.jump,
+                    payload_mass=args.payload_mass, payload_com_flange=list(args.payload_com),
+                    adapt_all=args.adapt_all, model=model.name, tip_link="panda_link8",
+                    q_center=list(READY), amplitude=list(AMPLITUDE), frequency=list(FREQUENCY))
+    write_outputs(model, loaded, runs, report, args.out, settings, args.jump)
+    laws = list(report)
+    keys = [k for k in report[laws[0]] if not isinstance(report[laws[0]][k], list)
+            and k != "wall_time_s"]
+    print(f"{'metric':36s}" + "".join(f"{law:>14s}" for law in laws))
+    for k in keys:
+        cells = "".join(f"{'-':>14s}" if report[law][k] is None else f"{report[law][k]:14.6g}"
+                        for law in laws)
+        print(f"{k:36s}{cells}")
+    print(f"wrote {args.out}/metrics.json, tracking_errors.png, payload_summary.png, "
+          "link7_estimates.png")
+    return 0
