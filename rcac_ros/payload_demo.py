@@ -173,7 +173,7 @@ def window_rms(run, start, stop):
     return float(np.sqrt(np.mean(e ** 2)))
 
 
-def metrics(run, jump, theta_before, theta_after, window=1.0):
+def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None):
     """The figures of ``metrics.json`` for one law (README: payload demo)."""
     t_end = run["t"][-1]
     e = np.linalg.norm(run["q"] - run["q_d"], axis=1)
@@ -194,6 +194,8 @@ def metrics(run, jump, theta_before, theta_after, window=1.0):
         "link7_first_moments_relative_error_end": float(np.linalg.norm(est[1:4] - first)
                                                         / np.linalg.norm(first)),
     }
+    if effort_limit is not None:
+        out["max_torque_over_effort_limit"] = float(np.max(np.abs(run["tau"]) / effort_limit))
     out["recovery_ratio"] = (out["rms_error_last_window"]
                              / out["rms_error_first_window_after_jump"])
     within = np.abs(run["theta_last"][:, 0] - theta_after[0]) <= 0.05 * theta_after[0]
@@ -221,7 +223,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
         t0 = time.perf_counter()
         runs[law] = simulate(model, loaded, ctrl, trajectory, duration, jump,
                              progress=f"{law:>9s}" if progress else None)
-        report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1])
+        report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1],
+                              effort_limit=model.effort_limit)
         report[law]["wall_time_s"] = time.perf_counter() - t0
     return model, loaded, runs, report
 
