@@ -80,16 +80,22 @@ class Probe(Node):
     """The test's side of the wires: publishes joint states, records efforts and logs."""
 
     def __init__(self, context, effort_topic="effort_controller/commands",
-                 state_topic="joint_states"):
+                 state_topic="joint_states", record=("efforts", "states", "logs")):
         super().__init__("probe", context=context)
         self.efforts = []                  # (label, data)
         self.states = []
         self.logs = []
         self.pub_state = self.create_publisher(JointState, state_topic, QOS)
         self.pub_effort = self.create_publisher(Float64MultiArray, effort_topic, QOS)
-        self.create_subscription(Float64MultiArray, effort_topic, self._on_effort, DEEP)
-        self.create_subscription(JointState, state_topic, self.states.append, DEEP)
-        self.create_subscription(Log, "/rosout", self.logs.append, DEEP)
+        self.subs = {}
+        if "efforts" in record:
+            self.subs["efforts"] = self.create_subscription(
+                Float64MultiArray, effort_topic, self._on_effort, DEEP)
+        if "states" in record:
+            self.subs["states"] = self.create_subscription(
+                JointState, state_topic, self.states.append, DEEP)
+        if "logs" in record:
+            self.subs["logs"] = self.create_subscription(Log, "/rosout", self.logs.append, DEEP)
 
     def _on_effort(self, msg):
         label = msg.layout.dim[0].label if msg.layout.dim else ""

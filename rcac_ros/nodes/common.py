@@ -264,6 +264,9 @@ class Percentiles:
 
 # ------------------------------------------------------------------ main
 def _raise_interrupt(signum, frame):
+    # one interrupt starts the clean shutdown; later ones must not cut it short
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise KeyboardInterrupt
 
 

@@ -114,6 +114,9 @@ class SimulatorNode(Node):
         self.wait_for_controller = declare(
             self, "wait_for_controller", True, "start only once a node subscribes to "
             "joint_states and publishes efforts")
+        self.min_subscribers = declare(
+            self, "min_subscribers", 1, "with wait_for_controller: also wait for this many "
+            "joint_states subscribers (e.g. 2 = the controller and a recorder)", lo=1, hi=1000)
         default_q0 = PAPER_Q0 if self.model.name == "css_arm" else 0.0
         q0 = declare(self, "q0", Parameter.Type.DOUBLE_ARRAY,
                      "initial positions, rad, in joints order (unset: the paper's q0 for "
@@ -154,8 +157,9 @@ class SimulatorNode(Node):
     def _try_start(self):
         if self.started or self.finished:
             return
-        if self.wait_for_controller and (self._pub_state.get_subscription_count() == 0
-                                         or self._sub.get_publisher_count() == 0):
+        if self.wait_for_controller and (
+                self._pub_state.get_subscription_count() < self.min_subscribers
+                or self._sub.get_publisher_count() == 0):
             return
         self.started = True
         self._start_timer.cancel()

@@ -1,0 +1,216 @@
+"""Both nodes as subprocesses (isolated domain, localhost discovery), against the offline run."""
+
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from test_nodes_support import (DEEP, JOINTS, NS, PAPER_Q0, Probe, ros_context, ros_domain,
+                                spin_until)
+
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+from rcac_ros.core.model import css_arm  # noqa: E402
+from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.simulator import Simulator  # noqa: E402
+from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(ROOT, "config")
+DURATION = 3.0
+H = 0.002
+
+
+def node_cmd(module, params_file, *overrides):
+    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args",
+           "--params-file", params_file]
+    for o in overrides:
+        cmd += ["-p", o]
+    return cmd
+
+
+def start(cmd):
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            cwd=ROOT)
+
+
+def stop(proc, timeout=10.0):
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return proc.returncode, out
+
+
+def matched(executor, subs):
+    """Wait until every subscription of the probe is matched to the controller's publisher."""
+    assert spin_until(executor, lambda: all(s.get_publisher_count() > 0 for s in subs),
+                      timeout=60.0)
+
+
+def offline(steps, reading="velocity"):
+    """The experiment without ROS: core Simulator + controller, same settings, same loop."""
+    model = css_arm()
+    sim = Simulator(model, dt=H, q0=PAPER_Q0)
+    ctrl = RecursiveCompositeController(model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1,
+                                        lam=10.0, h=H)
+    traj = PaperTrajectory(PAPER_Q0, reading=reading)
+    qs, errs = [], []
+    for k in range(steps + 1):
+        q_d, qd_d, qdd_d = traj(k * H)
+        qs.append(sim.q.copy())
+        errs.append(sim.q - q_d)
+        tau = ctrl.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
+        if k < steps:
+            sim.step(tau)
+    return np.array(qs), np.array(errs), ctrl.theta_hat
+
+
+def test_lockstep_matches_the_offline_experiment():
+    steps = round(DURATION / H)
+    ref_q, ref_err, ref_theta = offline(steps)
+    with ros_context() as (ctx, ex):
+        probe = Probe(ctx, record=("states",))
+        track, theta = [], []
+        subs = [
+            probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+                                      lambda m: track.append(np.array(m.data)), DEEP),
+            probe.create_subscription(Float64MultiArray,
+                                      "/rcac_controller/parameter_estimates", theta.append,
+                                      DEEP)]
+        ex.add_node(probe)
+        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml")))
+        matched(ex, subs)
+        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
+                             f"duration:={DURATION}", "min_subscribers:=2"))
+        try:
+            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
+            # the controller answers the last state too: wait for its messages to drain
+            assert spin_until(ex, lambda: len(theta) >= steps + 1, timeout=10.0)
+        finally:
+            sim_code, sim_out = stop(sim)
+            ctrl_code, ctrl_out = stop(ctrl)
+    assert sim_code == 0, sim_out
+    assert ctrl_code == 0, ctrl_out
+    # an effort for every state: no lockstep miss, none late
+    line = [ln for ln in sim_out.splitlines() if "finished:" in ln]
+    assert line and f"finished: {steps} steps" in line[0], sim_out
+    assert "lockstep misses 0, late efforts 0" in line[0], line[0]
+    # every state received here is the offline state at the same step (bit-for-bit
+    # up to the float rounding of the time stamps)
+    seen = 0
+    for msg in probe.states:
+        k = round((msg.header.stamp.sec * NS + msg.header.stamp.nanosec) / (H * NS))
+        assert list(msg.name) == JOINTS
+        np.testing.assert_allclose(msg.position, ref_q[k], rtol=0, atol=1e-9)
+        seen += 1
+    assert seen >= steps * 0.9
+    # the tracking error stays what the offline run gives over the same seconds
+    track = np.array(track)
+    assert track.shape[1] == 7 and len(track) >= steps
+    np.testing.assert_allclose(np.sqrt(np.mean(track[:steps + 1] ** 2, axis=0)),
+                               np.sqrt(np.mean(ref_err ** 2, axis=0)), rtol=1e-6)
+    # the estimates: documented layout, and the offline values at the end
+    last = theta[-1]
+    dims = [(d.label, d.size, d.stride) for d in last.layout.dim]
+    assert dims == [("link", 7, 91), ("parameter", 13, 13)]
+    assert len(last.data) == 91
+    np.testing.assert_allclose(np.reshape(last.data, (7, 13)), ref_theta, rtol=1e-6,
+                               atol=1e-9)
+
+
+def test_positions_only_states_still_track():
+    """The simulator publishes no velocities: the controller estimates them and still tracks."""
+    steps = round(1.0 / H)
+    _, ref_err, _ = offline(steps)
+    with ros_context() as (ctx, ex):
+        probe = Probe(ctx, record=("states",))
+        track = []
+        sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+                                        lambda m: track.append(np.array(m.data)), DEEP)
+        ex.add_node(probe)
+        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml")))
+        matched(ex, [sub])
+        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
+                             "duration:=1.0", "publish_velocity:=false",
+                             "min_subscribers:=2"))
+        try:
+            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
+            assert spin_until(ex, lambda: len(track) >= steps + 1, timeout=10.0)
+        finally:
+            sim_code, sim_out = stop(sim)
+            stop(ctrl)
+    assert sim_code == 0, sim_out
+    assert all(len(m.velocity) == 0 for m in probe.states)
+    worst = np.max(np.abs(np.array(track)))
+    # the offline error is ~1e-6 rad; a missing velocity would give errors of ~1e-2
+    assert worst < 10.0 * np.max(np.abs(ref_err)) + 1e-5, worst
+
+
+def test_sigint_publishes_one_zero_effort_and_exits_zero():
+    with ros_context() as (ctx, ex):
+        probe = Probe(ctx)
+        ex.add_node(probe)
+        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml"),
+                              "state_timeout:=1000.0"))
+        try:
+            assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
+                              timeout=60.0)
+            for k in range(5):
+                probe.state(k * 2_000_000, PAPER_Q0 + 0.01, np.zeros(7))
+                assert spin_until(ex, lambda: len(probe.efforts) > k, timeout=20.0)
+            assert not np.allclose(probe.efforts[-1][1], 0.0)
+            n = len(probe.efforts)
+            ctrl.send_signal(signal.SIGINT)
+            assert spin_until(ex, lambda: len(probe.efforts) > n, timeout=20.0)
+            ctrl.wait(timeout=20.0)
+        finally:
+            code, out = stop(ctrl)
+    assert code == 0, out
+    assert len(probe.efforts) == n + 1
+    np.testing.assert_array_equal(probe.efforts[-1][1], np.zeros(7))
+    assert "Traceback" not in out
+
+
+@pytest.mark.parametrize("module, text, name", [
+    ("controller_node", "    K_D: -5.0\n", "K_D"),
+    ("controller_node", "    model: nonsense_arm\n", "model"),
+    ("controller_node", "    joints: [joint1, joint2]\n", "joints"),
+    ("simulator_node", "    q0: [0.0, 1.0]\n", "q0"),
+    ("simulator_node", "    dt: -0.002\n", "dt"),
+])
+def test_bad_parameter_file_is_refused_cleanly(tmp_path, module, text, name):
+    node = "rcac_controller" if module == "controller_node" else "rcac_simulator"
+    path = tmp_path / "bad.yaml"
+    path.write_text(f"{node}:\n  ros__parameters:\n{text}")
+    with ros_domain():
+        proc = subprocess.run(node_cmd(module, str(path)), capture_output=True, text=True,
+                              timeout=120, cwd=ROOT)
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr + proc.stdout
+    errors = [ln for ln in proc.stderr.splitlines() if "error" in ln]
+    assert len(errors) == 1 and f"error: {name}:" in errors[0], proc.stderr
+
+
+def test_simulator_realtime_mode_paces_on_the_steady_clock():
+    """Realtime: free-running at about 1/dt, with no controller (and use_sim_time set)."""
+    with ros_context() as (ctx, ex):
+        probe = Probe(ctx)
+        ex.add_node(probe)
+        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
+                             "mode:=realtime", "wait_for_controller:=false",
+                             "duration:=1.0", "use_sim_time:=true"))
+        try:
+            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
+        finally:
+            code, out = stop(sim)
+    assert code == 0, out
+    assert "finished: 500 steps" in out
+    # no effort: the arm stays at q0 (g = 0, zero velocity)
+    np.testing.assert_allclose(probe.states[-1].position, PAPER_Q0, atol=1e-12)
