@@ -209,13 +209,14 @@ class RobotModel:
         return cls.from_dict(doc, source=os.fspath(path))
 
     @classmethod
-    def from_urdf(cls, path_or_xml, base_link=None, tip_link=None):
+    def from_urdf(cls, path_or_xml, base_link=None, tip_link=None, **kwargs):
         """Load the serial chain from ``base_link`` to ``tip_link`` of a URDF (file or XML string).
 
-        See :func:`rcac_ros.core.urdf.model_from_urdf`.
+        See :func:`rcac_ros.core.urdf.model_from_urdf` (``gravity``, ``name``,
+        ``triangle_tolerance`` pass through).
         """
         from .urdf import model_from_urdf
-        return model_from_urdf(path_or_xml, base_link=base_link, tip_link=tip_link)
+        return model_from_urdf(path_or_xml, base_link=base_link, tip_link=tip_link, **kwargs)
 
     @classmethod
     def from_dict(cls, doc, source="model"):

@@ -72,7 +72,13 @@ def filter_coefficients(lam, h):
     return e, 1.0 - e, 1.0 - (1.0 - e) / (lam * h)
 
 
-@njit(cache=True)
+#: The only signature the step kernels are compiled for: anything else is a TypeError at
+#: dispatch (never a silent recompilation), which the Python entry point converts once.
+VEC = "float64[::1]"
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], {VEC}, float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
+
+
+@njit(RCAC_SIGNATURE, cache=True)
 def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR])."""
     n = const.shape[0]

@@ -27,7 +27,7 @@ from numba import njit
 
 from ._validate import as_array, per_link_matrix, positive_vector
 from .exceptions import GainError
-from .rcac import (INPUT_NAMES, LAM, KD0, PG0, CONST_COLS, I_E, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
+from .rcac import (VEC, INPUT_NAMES, LAM, KD0, PG0, CONST_COLS, I_E, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
                    I_H, I_K, I_LAM, I_Y, SCAL_LEN, _scalar, check_vectors, filter_coefficients,
                    input_error, I_ERR)
 from .regressor import fill_regressor
@@ -35,6 +35,34 @@ from .spatial import P0, RF0, joint_rotation, transform_motion, z_cross_rate
 
 
 @njit(cache=True)
+def cholesky_solve(A, b):
+    """Solve ``A x = b`` in place (``b`` becomes x) for symmetric positive definite A."""
+    n = A.shape[0]
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        d = np.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= A[i, k] * A[j, k]
+            A[i, j] = v / d
+    for i in range(n):
+        v = b[i]
+        for k in range(i):
+            v -= A[i, k] * b[k]
+        b[i] = v / A[i, i]
+    for i in range(n - 1, -1, -1):
+        v = b[i]
+        for k in range(i + 1, n):
+            v -= A[k, i] * b[k]
+        b[i] = v / A[i, i]
+
+
+@njit(f"{VEC}(float64[:, ::1], {VEC}, {VEC}, float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, "
+      f"{VEC})", cache=True)
 def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
     """One period of eqs 2 and 7 with explicit joint-space matrices.
 
@@ -207,33 +235,6 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
     scal[I_E] = e[0]
     scal[I_Y] = y[0]
     return tau
-
-
-@njit(cache=True)
-def cholesky_solve(A, b):
-    """Solve ``A x = b`` in place (``b`` becomes x) for symmetric positive definite A."""
-    n = A.shape[0]
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= A[j, k] * A[j, k]
-        d = np.sqrt(d)
-        A[j, j] = d
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= A[i, k] * A[j, k]
-            A[i, j] = v / d
-    for i in range(n):
-        v = b[i]
-        for k in range(i):
-            v -= A[i, k] * b[k]
-        b[i] = v / A[i, i]
-    for i in range(n - 1, -1, -1):
-        v = b[i]
-        for k in range(i + 1, n):
-            v -= A[k, i] * b[k]
-        b[i] = v / A[i, i]
 
 
 class SlotineLiCompositeController:
