@@ -1,0 +1,46 @@
+# Two commands on a fresh machine:
+#   make demo   set up, then the paper's experiment over ROS 2 (two nodes, a bag, summary, plots)
+#   make test   set up, then the whole test suite (what .ci/run runs)
+# Everything goes into a virtual environment of its own ($(VENV)), from the package registries.
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN     = $(VENV)/bin
+OUT    ?= results
+
+.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros clean
+
+demo: $(VENV)/.runtime
+	$(BIN)/rcac demo --out $(OUT)/demo
+
+test: $(VENV)/.test
+	$(BIN)/python -m pytest -q
+
+setup: $(VENV)/.runtime
+setup-test: $(VENV)/.test
+
+experiment: $(VENV)/.runtime
+	$(BIN)/rcac experiment --out $(OUT)/experiment
+
+payload-demo: $(VENV)/.runtime
+	$(BIN)/rcac payload-demo --out $(OUT)/payload_demo
+
+bench: $(VENV)/.test
+	$(BIN)/rcac bench --json $(OUT)/bench.json
+
+bench-ros: $(VENV)/.runtime
+	$(BIN)/rcac bench --ros --json $(OUT)/bench_ros.json
+
+$(VENV)/.runtime: requirements.txt setup.py
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -r requirements.txt
+	$(BIN)/python -m pip install --quiet --no-deps -e .
+	touch $@
+
+$(VENV)/.test: $(VENV)/.runtime requirements-test.txt
+	$(BIN)/python -m pip install --quiet -r requirements-test.txt
+	touch $@
+
+clean:
+	rm -rf $(VENV) build install log $(OUT)
