@@ -33,6 +33,7 @@ bench-ros: $(VENV)/.runtime
 
 $(VENV)/.runtime: requirements.txt setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	touch $(VENV)/COLCON_IGNORE  # the ROS wheels ship package.xml files colcon must not build
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -r requirements.txt
 	$(BIN)/python -m pip install --quiet --no-deps -e .
