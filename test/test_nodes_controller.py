@@ -251,3 +251,38 @@ def test_topic_trajectory_is_followed_like_jtc():
                                           if kind.startswith("trajectory")) == len(bad))
         assert node._active is active
         assert spin_until(ex, lambda: probe.warned("rejected (trajectory"))
+
+
+URDF = """<robot name="two_link">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
+    <inertia ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="fore"><inertial><origin xyz="0.15 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="50" velocity="2"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/>
+    <origin xyz="0.4 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="30" velocity="2"/></joint>
+</robot>"""
+
+
+@pytest.mark.parametrize("as_file", [False, True])
+def test_robot_description_gives_model_and_joint_names(tmp_path, as_file):
+    """A URDF (string or path) replaces the preset; joint names and effort limits come with it."""
+    description = URDF
+    if as_file:
+        description = str(tmp_path / "arm.urdf")
+        (tmp_path / "arm.urdf").write_text(URDF)
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, robot_description=description, K_D=1e6)
+        assert node.joints == ("shoulder", "elbow")
+        # names in another order, plus a joint the model does not have; a fast motion
+        probe.pub_state.publish(JointState(name=["elbow", "shoulder", "gripper"],
+                                           position=[0.2, 0.1, 9.0],
+                                           velocity=[5.0, 5.0, 0.0]))
+        assert spin_until(ex, lambda: answered(probe, 0))
+        tau = probe.efforts[-1][1]
+        assert tau.shape == (2,) and np.all(np.isfinite(tau))
+        # K_D 1e6 against 5 rad/s: both efforts saturate at the URDF's limits, in joint order
+        np.testing.assert_allclose(np.abs(tau), [50.0, 30.0])
