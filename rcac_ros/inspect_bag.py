@@ -37,6 +37,7 @@ class TopicData:
         self.names = None    # joint names (JointState)
         self.velocity = []
         self.dims = None     # MultiArray layout dims [(label, size), ...]
+        self.labels = []     # MultiArray: label of the first dimension, per message
 
     @property
     def count(self):
@@ -46,6 +47,7 @@ class TopicData:
         """Convert the lists to arrays (ragged values stay a list)."""
         self.recv = np.asarray(self.recv, dtype=np.int64)
         self.stamp = np.asarray(self.stamp, dtype=float)
+        self.labels = np.asarray(self.labels, dtype=object)
         try:
             self.values = np.asarray(self.values, dtype=float)
         except ValueError:
@@ -105,6 +107,7 @@ def read_bag(path):
                     td.names = list(msg.name)
             elif conn.msgtype == "std_msgs/msg/Float64MultiArray":
                 td.values.append(np.array(msg.data, dtype=float))
+                td.labels.append(msg.layout.dim[0].label if msg.layout.dim else "")
                 if td.dims is None:
                     td.dims = [(d.label, int(d.size)) for d in msg.layout.dim]
             elif conn.msgtype == "std_msgs/msg/Float64":
@@ -174,7 +177,11 @@ def _nearest(ref_recv, ref_t, recv):
 
 
 class Timeline:
-    """Maps receive stamps to simulated time (see the module docstring)."""
+    """Maps receive stamps to simulated time (see the module docstring).
+
+    Stamps that look like wall-clock time (a timer-mode controller on a real arm) are
+    shifted to start at 0 at the first joint state.
+    """
 
     def __init__(self, data, controller_node=topics.CONTROLLER_NODE):
         self.t0_recv = min((td.recv[0] for td in data.values() if td.count), default=0)
@@ -189,30 +196,80 @@ class Timeline:
         self.controller = None
         if ds is not None and ds.count and np.any(ds.stamp != 0.0):
             self.controller = (ds.recv, ds.stamp)
+        self.offset = 0.0
+        if self.state is not None and self.state[1][0] > 1e6:
+            self.offset = float(self.state[1][0])
+
+    def _shift(self, t):
+        return np.asarray(t, dtype=float) - self.offset
 
     def state_time(self, td):
         """Time of simulator-side messages (joint states, clock)."""
         if td.msgtype in ("sensor_msgs/msg/JointState", "rosgraph_msgs/msg/Clock") \
                 and td.count and np.any(td.stamp != 0.0):
-            return td.stamp
+            return self._shift(td.stamp)
         if self.state is not None:
-            return _latest_before(*self.state, td.recv)
+            return self._shift(_latest_before(*self.state, td.recv))
         return 1e-9 * (td.recv - self.t0_recv)
 
-    def controller_time(self, td):
-        """Time of controller outputs (the state they answer)."""
+    def controller_time(self, td, tagged=None):
+        """Time of controller outputs (the state they answer).
+
+        ``tagged`` (s, NaN where absent) are stamps carried by the messages themselves
+        (the lockstep tag of an effort); they win where present.
+        """
         if self.controller is not None:
-            return _nearest(*self.controller, td.recv)
-        if self.state is not None:
-            return _latest_before(*self.state, td.recv)
-        return 1e-9 * (td.recv - self.t0_recv)
+            t = _nearest(*self.controller, td.recv)
+        elif self.state is not None:
+            t = _latest_before(*self.state, td.recv)
+        else:
+            return 1e-9 * (td.recv - self.t0_recv)
+        if tagged is not None:
+            t = np.where(np.isnan(tagged), t, tagged)
+        return self._shift(t)
 
 
-def loop_timing(data):
+def effort_tags(td):
+    """Lockstep tags of effort commands (see ``rcac_ros.nodes.common.effort_layout``).
+
+    Returns
+    -------
+    watchdog : ndarray of bool
+        Safe efforts the controller's watchdog sent (not answers to a state).
+    stamp : ndarray of float
+        The stamp (s) of the state an effort answers, NaN when untagged.
+    """
+    watchdog = np.zeros(td.count, dtype=bool)
+    stamp = np.full(td.count, np.nan)
+    for k, label in enumerate(td.labels):
+        if label.endswith(" watchdog"):
+            watchdog[k] = True
+        elif " stamp=" in label:
+            sec, _, nsec = label.split(" stamp=", 1)[1].partition(".")
+            try:
+                stamp[k] = int(sec) + 1e-9 * int(nsec)
+            except ValueError:
+                pass
+    return watchdog, stamp
+
+
+def _subset(td, mask):
+    out = TopicData(td.name, td.msgtype)
+    out.recv = td.recv[mask]
+    out.values = td.values[mask] if isinstance(td.values, np.ndarray) else \
+        [v for v, m in zip(td.values, mask) if m]
+    out.labels = td.labels[mask]
+    out.stamp = td.stamp[mask] if len(td.stamp) == len(mask) else td.stamp
+    out.dims = td.dims
+    return out
+
+
+def loop_timing(data, eff=None):
     """Period between joint states and state -> effort latency, from receive stamps.
 
     Each joint state is paired with the first effort command received after it and
-    before the next joint state; unanswered states are counted.
+    before the next joint state; unanswered states are counted. ``eff`` (default the
+    bag's effort topic) should hold only the controller's answers, not watchdog efforts.
 
     Returns
     -------
@@ -220,7 +277,7 @@ def loop_timing(data):
         ``{"period_ms": array, "latency_ms": array, "unanswered": int}``.
     """
     js = data.get("/" + topics.JOINT_STATES)
-    eff = data.get("/" + topics.EFFORT_COMMANDS)
+    eff = data.get("/" + topics.EFFORT_COMMANDS) if eff is None else eff
     if js is None or js.count < 2:
         return None
     period = 1e-6 * np.diff(js.recv).astype(float)
@@ -298,8 +355,14 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         last = t >= t[-1] - LAST_WINDOW
         metrics["rms_tracking_error_last_5s"] = float(np.sqrt(np.mean(e[last] ** 2)))
     eff = data.get("/" + topics.EFFORT_COMMANDS)
+    watchdog_efforts = 0
+    if eff is not None and eff.count:
+        watchdog, tagged = effort_tags(eff)
+        watchdog_efforts = int(np.count_nonzero(watchdog))
+        eff = _subset(eff, ~watchdog)
+        tagged = tagged[~watchdog]
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
-        series["effort"] = (tl.controller_time(eff), eff.values)
+        series["effort"] = (tl.controller_time(eff, tagged), eff.values)
         metrics["max_abs_torque"] = float(np.max(np.abs(eff.values)))
     pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
     if pe is not None and pe.count:
@@ -323,7 +386,8 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         metrics["joint_states"] = js.count
     if eff is not None:
         metrics["effort_commands"] = eff.count
-    timing = loop_timing(data)
+        metrics["watchdog_efforts"] = watchdog_efforts
+    timing = loop_timing(data, eff)
     if timing is not None:
         series["timing"] = timing
         metrics.update(_percentiles(timing["period_ms"], "state_period"))
