@@ -1,0 +1,282 @@
+"""The ROS 2 loop benchmark behind ``rcac bench --ros``.
+
+The simulator (``mode: realtime``, a steady-clock timer at 1/dt) and the controller
+(``mode: timer`` at ``rate``) run free as two processes over DDS, as they would on a
+real arm. An in-process probe subscribes (raw) to the joint states, the effort
+commands and ``/diagnostics`` and measures, after a warm-up:
+
+* the achieved controller and simulator rates;
+* the period between efforts (source stamps: the controller's own timing) p50/p99/max;
+* the state -> effort latency: for each effort, the age of the newest joint state the
+  probe had received when the effort arrived (receive stamps; it includes the phase
+  between the two timers, 0 to one period) and the one-way DDS transport latency
+  (receive minus source stamp);
+* deadline misses: effort periods longer than 1.5 periods, and ticks missing against
+  the nominal rate; the controller's own counters from its diagnostics.
+"""
+
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from rcac_ros import topics
+from rcac_ros.bag import init_context, StopFlag
+from rcac_ros.core.exceptions import ConfigError
+
+#: controller gains of the benchmark: the paper's K_D = 1e4 is tuned for lockstep (no delay);
+#: free-running, the effort lands up to one period late and that loop diverges within a
+#: second on the CSS arm. The benchmark measures timing, so it uses a gain that stays stable.
+BENCH_CONTROLLER = {"K_D": 1000.0}
+
+#: goals on the 2-core machine (issue 3, section 7)
+GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0}
+
+
+class Probe:
+    """Raw subscriptions that keep (source, receive) stamps of states and efforts."""
+
+    def __init__(self, context, depth=1000):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.node import Node
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                         reliability=ReliabilityPolicy.RELIABLE)
+        self.node = Node("rcac_bench_probe", context=context)
+        self.recording = False
+        self.states = []     # (source, receive) ns
+        self.efforts = []    # (source, receive, watchdog)
+        self.latest_state_recv = None
+        self.state_age = []  # ns, per effort: receive(effort) - receive(newest state)
+        self.diagnostics = {}
+        self._subs = [
+            self.node.create_subscription(JointState, "/" + topics.JOINT_STATES,
+                                          self._on_state, qos, raw=True),
+            self.node.create_subscription(Float64MultiArray, "/" + topics.EFFORT_COMMANDS,
+                                          self._on_effort, qos, raw=True),
+            self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
+                                          self._on_diag, qos),
+        ]
+
+    def _on_state(self, data, info):
+        recv = info["received_timestamp"]
+        self.latest_state_recv = recv
+        if self.recording:
+            self.states.append((info["source_timestamp"], recv))
+
+    def _on_effort(self, data, info):
+        if not self.recording:
+            return
+        watchdog = b"watchdog" in bytes(data[:96])
+        recv = info["received_timestamp"]
+        self.efforts.append((info["source_timestamp"], recv, watchdog))
+        if not watchdog and self.latest_state_recv is not None:
+            self.state_age.append(recv - self.latest_state_recv)
+
+    def _on_diag(self, msg):
+        for status in msg.status:
+            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def matched(self):
+        return all(s.get_publisher_count() > 0 for s in self._subs[:2])
+
+
+def _stats(x, prefix):
+    x = np.asarray(x, dtype=float)
+    if x.size == 0:
+        return {f"{prefix}_p50_ms": None, f"{prefix}_p99_ms": None, f"{prefix}_max_ms": None}
+    return {f"{prefix}_p50_ms": float(np.percentile(x, 50)),
+            f"{prefix}_p99_ms": float(np.percentile(x, 99)),
+            f"{prefix}_max_ms": float(np.max(x))}
+
+
+def analyse(probe, window_s, rate):
+    """The benchmark figures from the probe's stamps (see the module docstring)."""
+    h_ms = 1e3 / rate
+    eff = np.array([(s, r) for s, r, w in probe.efforts if not w], dtype=np.int64).reshape(-1, 2)
+    st = np.array(probe.states, dtype=np.int64).reshape(-1, 2)
+    out = {"window_s": window_s, "nominal_rate_hz": rate,
+           "efforts": int(len(eff)),
+           "watchdog_efforts": int(sum(1 for e in probe.efforts if e[2])),
+           "states": int(len(st))}
+    out["controller_rate_hz"] = len(eff) / window_s
+    out["simulator_rate_hz"] = len(st) / window_s
+    period = 1e-6 * np.diff(eff[:, 0]).astype(float) if len(eff) > 1 else np.empty(0)
+    out.update(_stats(period, "period"))
+    state_period = 1e-6 * np.diff(st[:, 0]).astype(float) if len(st) > 1 else np.empty(0)
+    out.update(_stats(state_period, "state_period"))
+    out.update(_stats(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
+    out.update(_stats(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
+    out.update(_stats(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
+    out["late_periods"] = int(np.count_nonzero(period > 1.5 * h_ms))
+    out["missing_ticks"] = max(0, int(round(window_s * rate)) - len(eff))
+    ctrl = probe.diagnostics.get(f"{topics.CONTROLLER_NODE}: control loop", {})
+    for key in ("deadline_misses", "late_ticks", "compute_time_p50_us", "compute_time_p99_us",
+                "watchdog_trips"):
+        if key in ctrl:
+            try:
+                out[f"controller_{key}"] = float(ctrl[key])
+            except ValueError:
+                pass
+    out["meets_goal"] = bool(
+        out["controller_rate_hz"] >= GOALS["rate_hz"]
+        and out["period_p99_ms"] is not None and out["period_p99_ms"] <= GOALS["period_p99_ms"]
+        and out["state_to_effort_latency_p50_ms"] is not None
+        and out["state_to_effort_latency_p50_ms"] <= GOALS["latency_p50_ms"])
+    return out
+
+
+def format_table(r):
+    """The benchmark as a table, with the goals."""
+    def ms(key):
+        v = r.get(key)
+        return "-" if v is None else f"{v:.3f}"
+
+    rows = [
+        ("controller rate (Hz)", f"{r['controller_rate_hz']:.1f}", f">= {GOALS['rate_hz']:g}"),
+        ("simulator rate (Hz)", f"{r['simulator_rate_hz']:.1f}", ""),
+        ("effort period p50 (ms)", ms("period_p50_ms"), ""),
+        ("effort period p99 (ms)", ms("period_p99_ms"), f"<= {GOALS['period_p99_ms']:g}"),
+        ("effort period max (ms)", ms("period_max_ms"), ""),
+        ("state period p99 / max (ms)", f"{ms('state_period_p99_ms')} / "
+         f"{ms('state_period_max_ms')}", ""),
+        ("state -> effort latency p50 (ms)", ms("state_to_effort_latency_p50_ms"),
+         f"<= {GOALS['latency_p50_ms']:g}"),
+        ("state -> effort latency p99 (ms)", ms("state_to_effort_latency_p99_ms"), ""),
+        ("one-way DDS latency p50, state / effort (ms)",
+         f"{ms('state_transport_p50_ms')} / {ms('effort_transport_p50_ms')}", ""),
+        ("periods > 1.5 h", str(r["late_periods"]), ""),
+        ("missing ticks (vs nominal)", str(r["missing_ticks"]), ""),
+    ]
+    if "controller_deadline_misses" in r:
+        rows.append(("controller compute > h (its diagnostics)",
+                     f"{r['controller_deadline_misses']:.0f}", ""))
+    if "controller_compute_time_p99_us" in r:
+        rows.append(("controller compute p50 / p99 (us)",
+                     f"{r['controller_compute_time_p50_us']:.0f} / "
+                     f"{r['controller_compute_time_p99_us']:.0f}", ""))
+    w = max(len(a) for a, _, _ in rows)
+    lines = [f"ROS 2 loop: controller (timer, {r['nominal_rate_hz']:g} Hz) + simulator "
+             f"(realtime), {r['window_s']:.0f} s measured",
+             f"  {'':<{w}}  {'measured':>15}  goal"]
+    lines += [f"  {a:<{w}}  {b:>15}  {c}" for a, b, c in rows]
+    lines.append(f"  goal met: {'yes' if r['meets_goal'] else 'no'}")
+    return "\n".join(lines)
+
+
+def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_timeout=60.0,
+                  log_dir=None, verbose=True, controller_overrides=None):
+    """Run the two nodes free-running and measure the loop; print a table.
+
+    Parameters
+    ----------
+    duration : float
+        Seconds measured (after ``warmup``).
+    json_path : str, optional
+        Write the figures there as JSON.
+    rate : float
+        Controller rate and simulator step rate, Hz.
+    warmup : float
+        Seconds discarded after the first effort.
+    start_timeout : float
+        Seconds allowed for the nodes to start and connect.
+    log_dir : str, optional
+        Where the nodes' logs go (default: a temporary directory).
+    controller_overrides : dict, optional
+        Controller parameters on top of :data:`BENCH_CONTROLLER`.
+
+    Returns
+    -------
+    dict
+        The figures (see :func:`analyse`).
+    """
+    import domain_coordinator
+    from rclpy.executors import SingleThreadedExecutor
+
+    from rcac_ros.demo import Child, child_env, NodeFailed, node_command
+
+    if not duration > 0.0:
+        raise ConfigError(f"duration: must be > 0 s, got {duration}")
+    if not rate > 0.0:
+        raise ConfigError(f"rate: must be > 0 Hz, got {rate}")
+    log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_ros_bench_")
+    os.makedirs(log_dir, exist_ok=True)
+    stop = StopFlag()
+    children, ctx, executor = [], None, None
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    with domain_coordinator.domain_id() as domain:
+        env = child_env(domain)
+        try:
+            ctx = init_context(domain)
+            executor = SingleThreadedExecutor(context=ctx)
+            probe = Probe(ctx)
+            executor.add_node(probe.node)
+            over = dict(BENCH_CONTROLLER, mode="timer", rate=float(rate))
+            over.update(controller_overrides or {})
+            ctrl = node_command("controller", overrides=over)
+            sim = node_command("simulator", overrides={"mode": "realtime",
+                                                       "dt": 1.0 / rate, "duration": 0.0})
+            children.append(Child("controller", ctrl, env,
+                                  os.path.join(log_dir, "controller.log")))
+            children.append(Child("simulator", sim, env, os.path.join(log_dir, "simulator.log")))
+
+            def spin_until(cond, timeout, what):
+                end = time.monotonic() + timeout
+                while not cond():
+                    if stop:
+                        raise KeyboardInterrupt
+                    for c in children:
+                        if not c.alive():
+                            raise NodeFailed(f"the {c.name} exited with code {c.returncode} "
+                                             f"{what}; last lines of {c.log_path}:\n{c.tail()}")
+                    if time.monotonic() > end:
+                        raise NodeFailed(f"timed out {what} (logs in {log_dir})")
+                    executor.spin_once(timeout_sec=0.01)
+
+            if verbose:
+                print(f"rcac bench --ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
+                      f"logs {log_dir})", flush=True)
+            spin_until(lambda: probe.matched() and probe.latest_state_recv is not None,
+                       start_timeout, "while starting")
+            t_warm = time.monotonic() + warmup
+            spin_until(lambda: time.monotonic() >= t_warm, warmup + 10.0, "during warm-up")
+            if verbose:
+                print(f"rcac bench --ros: measuring for {duration:g} s", flush=True)
+            probe.recording = True
+            t0 = time.monotonic()
+            spin_until(lambda: time.monotonic() - t0 >= duration, duration + 10.0,
+                       "while measuring")
+            probe.recording = False
+            window = time.monotonic() - t0
+            # one more diagnostics message (1 Hz) with the final counters
+            t_diag = time.monotonic()
+            spin_until(lambda: time.monotonic() - t_diag > 1.2, 5.0, "at the end")
+        finally:
+            for c in reversed(children):
+                c.stop()
+            if executor is not None:
+                executor.shutdown()
+            if ctx is not None:
+                ctx.try_shutdown()
+            stop.restore()
+    result = analyse(probe, window, rate)
+    if verbose:
+        print(format_table(result), flush=True)
+    if json_path:
+        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
+        with open(json_path, "w") as f:
+            json.dump(result, f, indent=2)
+    return result
+
+
+if __name__ == "__main__":
+    secs = float(sys.argv[1]) if len(sys.argv) > 1 else 60.0
+    extra = dict(a.split("=") for a in sys.argv[3:])
+    run_ros_bench(secs, sys.argv[2] if len(sys.argv) > 2 and sys.argv[2] else None,
+                  controller_overrides={k: float(v) for k, v in extra.items()})
