@@ -147,6 +147,7 @@ class BagRecorder:
         self.sim_time = None
         self._last_seq = {}
         self._adapted = set()
+        self._seen = set()
         self._subs = {}
         self._types = dict(self.topics)
         self._writer = Writer(self.path, version=9, storage_plugin=plugin)
@@ -204,6 +205,13 @@ class BagRecorder:
             if all(i.qos_profile.reliability == self._best_effort for i in infos):
                 self._subscribe(name, self._best_effort)
         return all_seen
+
+    def newly_matched(self):
+        """Topics whose subscription got its first matched publisher since the last call."""
+        now = set(self.matched())
+        new = [n for n, _ in self.topics if n in now and n not in self._seen]
+        self._seen |= now
+        return new
 
     def matched(self, names=None):
         """Topics (of ``names``, default all) whose subscription has a matched publisher."""
@@ -347,7 +355,9 @@ def run(args):
                 break
             if now >= next_adapt:
                 recorder.adapt_qos()
-                next_adapt = now + 0.5
+                for name in recorder.newly_matched():
+                    print(f"rcac record: subscribed to {name}", flush=True)
+                next_adapt = now + 0.1
             if now >= next_report:
                 sim = "" if recorder.sim_time is None else f", sim time {recorder.sim_time:.2f} s"
                 print(f"  {now - start:6.1f} s: {recorder.total} messages{sim}", flush=True)

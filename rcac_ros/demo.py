@@ -165,7 +165,10 @@ def _prepare_out(out):
 
 def demo_overrides(duration, dt):
     """Parameter overrides of the two nodes for the lockstep experiment."""
-    controller = {"mode": "lockstep", "rate": 1.0 / dt}
+    # state_timeout: the controller's watchdog is for a real arm; in lockstep a 20 ms one
+    # floods the effort topic while a descheduled simulator is not reading, and its
+    # keep-last queue can then lose the real answer (a lockstep miss).
+    controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 2.0}
     simulator = {"mode": "lockstep", "dt": float(dt), "duration": float(duration)}
     return controller, simulator
 
