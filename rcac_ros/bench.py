@@ -102,7 +102,8 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
     by_n = {r["n"]: r for r in rows if r["model"].startswith("css")}
     ratios = {}
     if 7 in by_n and by_n[7]["pin_rnea_us"]:
-        ratios["controller_n7_over_pin_rnea_n7"] = by_n[7]["controller_us"] / by_n[7]["pin_rnea_us"]
+        ratios["controller_n7_over_pin_rnea_n7"] = (by_n[7]["controller_us"]
+                                                    / by_n[7]["pin_rnea_us"])
     if 224 in by_n and 28 in by_n:
         ratios["controller_n224_over_n28"] = by_n[224]["controller_us"] / by_n[28]["controller_us"]
     if 56 in by_n and by_n[56]["slotine_li_us"]:
@@ -110,7 +111,8 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
                                                     / by_n[56]["controller_us"])
     for r in rows:
         if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
-            ratios[f"controller_over_pin_rnea_{r['model']}"] = r["controller_us"] / r["pin_rnea_us"]
+            ratio = r["controller_us"] / r["pin_rnea_us"]
+            ratios[f"controller_over_pin_rnea_{r['model']}"] = ratio
     result = {"rows": rows, "ratios": ratios}
     if ops:
         from rcac_ros.core.opcount import count_step

@@ -5,7 +5,7 @@ import time
 
 
 class Progress:
-    """``with Progress(total, label) as p: p.update(done)`` prints ``label [####   ] 42% 1.3 s``."""
+    """``with Progress(total, label) as p: p.update(done)``: ``label [####  ] 42% 1.3 s``."""
 
     def __init__(self, total, label, stream=None, enabled=True, width=30):
         self.total, self.label, self.width = max(total, 1), label, width
@@ -23,7 +23,8 @@ class Progress:
         self._last = pct
         fill = int(self.width * done / self.total)
         elapsed = time.perf_counter() - self._t0
-        self.stream.write(f"{chr(13) if self.tty else ''}{self.label} [{'#' * fill}{' ' * (self.width - fill)}] "
+        bar = "#" * fill + " " * (self.width - fill)
+        self.stream.write(f"{chr(13) if self.tty else ''}{self.label} [{bar}] "
                           f"{pct:3d}% {elapsed:6.1f} s")
         self.stream.flush()
 

@@ -1,4 +1,4 @@
-"""The recursive composite controller: exactness, equivalences, stability, and the paper's claims."""
+"""The recursive composite controller: exactness, equivalences, stability, the paper's claims."""
 
 import numpy as np
 import pytest

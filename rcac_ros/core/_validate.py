@@ -61,3 +61,8 @@ def positive_vector(value, n, name, exc):
     if np.any(arr <= 0.0):
         raise exc(f"{name}: every entry must be > 0, got {arr.tolist()}")
     return arr
+
+
+def joint_vectors(n, **vectors):
+    """Validate named joint-space vectors of length ``n`` (entry-point checks)."""
+    return [as_array(v, (n,), k) for k, v in vectors.items()]

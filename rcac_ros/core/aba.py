@@ -11,11 +11,11 @@ Per link (``[v; w]`` order, eq 14's ``M_i``):
 import numpy as np
 from numba import njit
 
+from ._validate import joint_vectors
 from .crba import congruence_to_parent, spatial_inertia
 from .regressor import link_wrench
-from .rnea import _kin, state_vectors
-from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T, transform_motion, \
-    z_cross_rate
+from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T, \
+    transform_motion, z_cross_rate
 
 
 @njit(cache=True)
@@ -94,5 +94,5 @@ def forward_dynamics(model, q, qd, tau):
     InputError
         If a vector has the wrong length or holds NaN/Inf.
     """
-    q, qd, tau = state_vectors(model, q=q, qd=qd, tau=tau)
-    return aba_kernel(_kin(model), model.gravity, q, qd, tau)
+    q, qd, tau = joint_vectors(model.n, q=q, qd=qd, tau=tau)
+    return aba_kernel(model_rows(model), model.gravity, q, qd, tau)

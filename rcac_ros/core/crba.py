@@ -3,8 +3,8 @@
 import numpy as np
 from numba import njit
 
-from .rnea import _kin, state_vectors
-from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T
+from ._validate import joint_vectors
+from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T
 
 
 @njit(cache=True)
@@ -60,7 +60,10 @@ def congruence_to_parent(C, i, px, py, pz, A, k, B, j):
 
 @njit(cache=True)
 def crba_kernel(kin, q):
-    """``M(q)``: composite inertias ``Ic_{i-1} += T_i^T Ic_i T_i``, then ``M_ij = z6^T jT_i^T Ic_i z6``."""
+    """``M(q)``: composite inertias ``Ic_{i-1} += T_i^T Ic_i T_i``, then column i by ``jT_i^T``.
+
+    ``M_ij = z6^T (jT_i)^T Ic_i z6`` for j <= i.
+    """
     n = q.shape[0]
     C = np.empty((n, 9), q.dtype)
     Ic = np.empty((n, 6, 6), q.dtype)
@@ -91,5 +94,5 @@ def mass_matrix(model, q):
     InputError
         If ``q`` has the wrong length or holds NaN/Inf.
     """
-    (q,) = state_vectors(model, q=q)
-    return crba_kernel(_kin(model), q)
+    (q,) = joint_vectors(model.n, q=q)
+    return crba_kernel(model_rows(model), q)

@@ -2,8 +2,8 @@
 
 import numpy as np
 
+from ._validate import joint_vectors
 from .crba import mass_matrix
-from .rnea import state_vectors
 
 
 def forward_kinematics(model, q):
@@ -16,7 +16,7 @@ def forward_kinematics(model, q):
     o : ndarray, shape (n, 3)
         Origin of frame i in the base frame.
     """
-    (q,) = state_vectors(model, q=q)
+    (q,) = joint_vectors(model.n, q=q)
     R = np.empty((model.n, 3, 3))
     o = np.empty((model.n, 3))
     R_prev, o_prev = np.eye(3), np.zeros(3)
@@ -31,7 +31,7 @@ def forward_kinematics(model, q):
 
 def energy(model, q, qd):
     """Kinetic and potential energy ``(T, U)``: ``T = qd^T M qd / 2``, ``U = -sum m_i g . c_i``."""
-    (q, qd) = state_vectors(model, q=q, qd=qd)
+    (q, qd) = joint_vectors(model.n, q=q, qd=qd)
     kinetic = 0.5 * qd @ mass_matrix(model, q) @ qd
     R, o = forward_kinematics(model, q)
     com_world = o + np.einsum("nij,nj->ni", R, model.com)

@@ -64,7 +64,9 @@ def check_vectors(n, a, b, c, d, e):
 
 
 def filter_coefficients(lam, h):
-    """Exact discretisation of ``lambda/(p+lambda)``: ``x^f_k = e x^f_k-1 + b0 x_k-1 + b1 (x_k - x_k-1)``.
+    """Exact discretisation of ``lambda/(p+lambda)``.
+
+    ``x^f_k = e x^f_k-1 + b0 x_k-1 + b1 (x_k - x_k-1)``.
 
     ``b1 = 0`` is the zero-order hold; the first-order hold adds ``b1 = 1 - b0 / (lambda h)``.
     """
@@ -75,7 +77,8 @@ def filter_coefficients(lam, h):
 #: The only signature the step kernels are compiled for: anything else is a TypeError at
 #: dispatch (never a silent recompilation), which the Python entry point converts once.
 VEC = "float64[::1]"
-RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], {VEC}, float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
+RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], {VEC}, float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, "
+                  f"{VEC})")
 
 
 @njit(RCAC_SIGNATURE, cache=True)
@@ -277,28 +280,10 @@ class RecursiveCompositeController:
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None):
-        n = model.n
         self.model = model
-        self.K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
-        self.P = per_link_matrix(P, n, 13, "P", GainError)
-        self.Lambda = positive_vector(Lambda, n, "Lambda", GainError)
-        self.gamma = _scalar(gamma, "gamma", minimum=0.0)
-        self.lam = _scalar(lam, "lam", minimum=0.0, strict=True)
-        self.h = _scalar(h, "h", minimum=0.0, strict=True)
-        const = np.zeros((n, CONST_COLS))
-        const[:, P0:P0 + 3] = model.p
-        const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
-        const[:, LAM] = self.Lambda
-        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
-        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
-        self._const = const
-        self._scal = np.zeros(SCAL_LEN)
-        self._scal[I_G:I_G + 3] = model.gravity
-        self._scal[I_LAM], self._scal[I_H], self._scal[I_GAMMA] = self.lam, self.h, self.gamma
-        self._scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
-        self._scal[I_KD_DIAG] = float(is_diagonal(self.K_D))
-        self._scal[I_P_DIAG] = float(is_diagonal(self.P))
-        self._state = np.zeros((n, STATE_COLS))
+        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, self._const,
+         self._scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
+        self._state = np.zeros((model.n, STATE_COLS))
         self.reset(theta_hat0)
 
     @property
@@ -336,8 +321,8 @@ class RecursiveCompositeController:
         try:
             tau = rcac_step_kernel(self._const, self._scal, self._state, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
-            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, (q, qd, q_d, qd_d,
-                                                                           qdd_d))]
+            values = (q, qd, q_d, qd_d, qdd_d)
+            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
             tau = rcac_step_kernel(self._const, self._scal, self._state, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
@@ -370,7 +355,7 @@ class RecursiveCompositeController:
         return self.lam * (st[:, PHP:PHP + 13] - st[:, PHF:PHF + 13]) + st[:, PSF:PSF + 13]
 
     def lyapunov(self, theta):
-        """Eq 26 summed (eq 25): ``sum_i s_i^T M_i s_i / 2 + theta_tilde_i^T P_i^-1 theta_tilde_i / 2``.
+        """Eqs 25-26: ``sum_i (s_i^T M_i s_i + theta_tilde_i^T P_i^-1 theta_tilde_i) / 2``.
 
         Uses the link velocity errors of the last step and the true parameters ``theta`` (n, 13).
         """
@@ -383,6 +368,33 @@ class RecursiveCompositeController:
             M = link_matrices(theta[i], np.zeros(3))[0]
             total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(self.P[i], tt[i])
         return float(total)
+
+
+def pack_gains(model, K_D, Lambda, P, gamma, lam, h):
+    """Validate the gains (GainError naming the field) and pack them for the step kernels.
+
+    Returns ``K_D (n,6,6), P (n,13,13), Lambda (n,), gamma, lam, h, const, scal``.
+    """
+    n = model.n
+    K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
+    P = per_link_matrix(P, n, 13, "P", GainError)
+    Lambda = positive_vector(Lambda, n, "Lambda", GainError)
+    gamma = _scalar(gamma, "gamma", minimum=0.0)
+    lam = _scalar(lam, "lam", minimum=0.0, strict=True)
+    h = _scalar(h, "h", minimum=0.0, strict=True)
+    const = np.zeros((n, CONST_COLS))
+    const[:, P0:P0 + 3] = model.p
+    const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
+    const[:, LAM] = Lambda
+    const[:, KD0:KD0 + 36] = K_D.reshape(n, 36)
+    const[:, PG0:PG0 + 169] = P.reshape(n, 169)
+    scal = np.zeros(SCAL_LEN)
+    scal[I_G:I_G + 3] = model.gravity
+    scal[I_LAM], scal[I_H], scal[I_GAMMA] = lam, h, gamma
+    scal[I_FE:I_FB1 + 1] = filter_coefficients(lam, h)
+    scal[I_KD_DIAG] = float(is_diagonal(K_D))
+    scal[I_P_DIAG] = float(is_diagonal(P))
+    return K_D, P, Lambda, gamma, lam, h, const, scal
 
 
 def input_error(scal, n, values):

@@ -3,9 +3,9 @@
 import numpy as np
 from numba import njit
 
-from ._validate import as_array
+from ._validate import joint_vectors
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, pack_kinematics, transform_force_T, \
+from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T, \
     transform_motion, z_cross_rate
 
 
@@ -54,11 +54,6 @@ def rnea_kernel(kin, g, q, qd, qdd):
     return tau
 
 
-def state_vectors(model, **vectors):
-    """Validate named joint-space vectors of length ``model.n`` (entry-point checks)."""
-    return [as_array(v, (model.n,), k) for k, v in vectors.items()]
-
-
 def inverse_dynamics(model, q, qd, qdd):
     """Joint torques ``tau = M(q) qdd + C(q, qd) qd + G(q)`` by the paper's recursion.
 
@@ -76,15 +71,5 @@ def inverse_dynamics(model, q, qd, qdd):
     InputError
         If a vector has the wrong length or holds NaN/Inf.
     """
-    q, qd, qdd = state_vectors(model, q=q, qd=qd, qdd=qdd)
-    return rnea_kernel(_kin(model), model.gravity, q, qd, qdd)
-
-
-def _kin(model):
-    """The packed kinematic/inertial rows of ``model``, built once and cached on it."""
-    kin = model.__dict__.get("_kin_cache")
-    if kin is None:
-        kin = pack_kinematics(model)
-        kin.setflags(write=False)
-        model.__dict__["_kin_cache"] = kin
-    return kin
+    q, qd, qdd = joint_vectors(model.n, q=q, qd=qd, qdd=qdd)
+    return rnea_kernel(model_rows(model), model.gravity, q, qd, qdd)

@@ -6,7 +6,7 @@ from numba import njit
 from ._validate import as_array
 from .aba import aba_kernel
 from .exceptions import InputError
-from .rnea import _kin
+from .spatial import model_rows
 
 
 @njit(cache=True)
@@ -60,7 +60,7 @@ class Simulator:
         if np.any(np.isnan(limit)) or np.any(limit <= 0.0):
             raise InputError("effort_limit: every entry must be > 0")
         self.effort_limit = limit
-        self._kin = _kin(model)
+        self._kin = model_rows(model)
         self.reset(q0, qd0)
 
     def reset(self, q0=None, qd0=None, t=0.0):

@@ -25,11 +25,9 @@ Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
 import numpy as np
 from numba import njit
 
-from ._validate import as_array, per_link_matrix, positive_vector
-from .exceptions import GainError
-from .rcac import (VEC, INPUT_NAMES, LAM, KD0, PG0, CONST_COLS, I_E, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
-                   I_H, I_K, I_LAM, I_Y, SCAL_LEN, _scalar, check_vectors, filter_coefficients,
-                   input_error, I_ERR)
+from ._validate import as_array
+from .rcac import (I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H, I_K, I_LAM, I_Y, INPUT_NAMES,
+                   KD0, LAM, PG0, VEC, check_vectors, input_error, pack_gains)
 from .regressor import fill_regressor
 from .spatial import P0, RF0, joint_rotation, transform_motion, z_cross_rate
 
@@ -247,25 +245,10 @@ class SlotineLiCompositeController:
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None):
-        n = model.n
         self.model = model
-        self.K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
-        self.P = per_link_matrix(P, n, 13, "P", GainError)
-        self.Lambda = positive_vector(Lambda, n, "Lambda", GainError)
-        self.gamma = _scalar(gamma, "gamma", minimum=0.0)
-        self.lam = _scalar(lam, "lam", minimum=0.0, strict=True)
-        self.h = _scalar(h, "h", minimum=0.0, strict=True)
-        const = np.zeros((n, CONST_COLS))
-        const[:, P0:P0 + 3] = model.p
-        const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
-        const[:, LAM] = self.Lambda
-        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
-        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
-        self._const = const
-        self._scal = np.zeros(SCAL_LEN)
-        self._scal[I_G:I_G + 3] = model.gravity
-        self._scal[I_LAM], self._scal[I_H], self._scal[I_GAMMA] = self.lam, self.h, self.gamma
-        self._scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
+        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, self._const,
+         self._scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
+        n = model.n
         self._theta = np.zeros(13 * n)
         self._filt = np.zeros((4, n, 13 * n + 1))
         self.reset(theta_hat0)
@@ -288,8 +271,8 @@ class SlotineLiCompositeController:
             tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
                                          q, qd, q_d, qd_d, qdd_d)
         except TypeError:
-            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, (q, qd, q_d, qd_d,
-                                                                           qdd_d))]
+            values = (q, qd, q_d, qd_d, qdd_d)
+            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
             tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
                                          *args)
         if tau.shape[0] == 0:

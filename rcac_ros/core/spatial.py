@@ -31,6 +31,16 @@ def pack_kinematics(model):
     return buf
 
 
+def model_rows(model):
+    """The packed rows of ``model``, built once and kept on it (the model is immutable)."""
+    rows = model.__dict__.get("_packed_rows")
+    if rows is None:
+        rows = pack_kinematics(model)
+        rows.setflags(write=False)
+        model.__dict__["_packed_rows"] = rows
+    return rows
+
+
 @njit(cache=True)
 def joint_rotation(row, rf, q, C, i):
     """Eq 10's rotation: ``C[i] = (R_fix Rz(q))^T`` as 9 row-major entries.
