@@ -197,7 +197,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     recorder = None
     ctx = None
     executor = None
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    saved_range = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"   # for our own context
     with domain_coordinator.domain_id() as domain:
         env = child_env(domain)
         try:
@@ -279,6 +280,10 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             if ctx is not None:
                 ctx.try_shutdown()
             stop.restore()
+            if saved_range is None:
+                os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+            else:
+                os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved_range
     log(f"rcac demo: recorded {recorder.total} messages")
     log(format_counts(recorder))
     for name, code in codes.items():
