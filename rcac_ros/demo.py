@@ -12,6 +12,7 @@ Ctrl-C or when one of them fails.
 """
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -284,6 +285,12 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                 os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
             else:
                 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved_range
+    misses = re.search(r"lockstep misses (\d+)", children[1].tail(5)) if len(children) > 1 \
+        else None
+    if misses and int(misses.group(1)):
+        log(f"rcac demo: warning: the simulator held an effort {misses.group(1)} times (no "
+            "answer within lockstep_timeout: the machine is overloaded); the run is no longer "
+            "the exact discrete loop of rcac experiment")
     log(f"rcac demo: recorded {recorder.total} messages")
     log(format_counts(recorder))
     for name, code in codes.items():

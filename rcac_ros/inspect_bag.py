@@ -23,6 +23,10 @@ from rcac_ros.core.exceptions import ConfigError
 
 #: seconds at the end of the run for ``rms_tracking_error_last_5s``
 LAST_WINDOW = 5.0
+#: diagnostics values shown in the summary (all are kept in metrics.json)
+DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
+             "compute_time_p50_us", "compute_time_p99_us", "deadline_misses", "late_ticks",
+             "watchdog_trips", "rejected_messages")
 
 
 class TopicData:
@@ -92,7 +96,8 @@ def read_bag(path):
         for conn in reader.connections:
             data.setdefault(conn.topic, TopicData(conn.topic, conn.msgtype))
         decoded = {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",
-                   "std_msgs/msg/Float64", "rosgraph_msgs/msg/Clock"}
+                   "std_msgs/msg/Float64", "rosgraph_msgs/msg/Clock",
+                   "diagnostic_msgs/msg/DiagnosticArray"}
         for conn, stamp, raw in reader.messages():
             td = data[conn.topic]
             td.recv.append(stamp)
@@ -112,6 +117,10 @@ def read_bag(path):
                     td.dims = [(d.label, int(d.size)) for d in msg.layout.dim]
             elif conn.msgtype == "std_msgs/msg/Float64":
                 td.values.append(float(msg.data))
+            elif conn.msgtype == "diagnostic_msgs/msg/DiagnosticArray":
+                td.last_status = getattr(td, "last_status", {})
+                for status in msg.status:
+                    td.last_status[status.name] = {kv.key: kv.value for kv in status.values}
             else:  # Clock
                 td.stamp.append(msg.clock.sec + 1e-9 * msg.clock.nanosec)
     finally:
@@ -140,6 +149,8 @@ def summary(data):
             first = td.recv.min() if first is None else min(first, td.recv.min())
             last = td.recv.max() if last is None else max(last, td.recv.max())
     out["messages"] = total
+    diag = data.get(topics.DIAGNOSTICS)
+    out["diagnostics"] = dict(getattr(diag, "last_status", {})) if diag is not None else {}
     out["duration_s"] = 0.0 if first is None else 1e-9 * float(last - first)
     clock = data.get(topics.CLOCK)
     out["sim_duration_s"] = (float(clock.stamp[-1] - clock.stamp[0])
@@ -159,6 +170,11 @@ def format_summary(path, summ):
     for name, info in summ["topics"].items():
         rate = "-" if info["rate_hz"] is None else f"{info['rate_hz']:.1f}"
         lines.append(f"  {name:<{width}}  {info['type']:<36} {info['count']:>8} {rate:>10}")
+    if summ.get("diagnostics"):
+        lines.append("Diagnostics (last message per status):")
+        for name, values in summ["diagnostics"].items():
+            shown = ", ".join(f"{k}={v}" for k, v in values.items() if k in DIAG_KEYS)
+            lines.append(f"  {name}: {shown}")
     return "\n".join(lines)
 
 

@@ -18,6 +18,7 @@ N = 7
 DT_NS = 2_000_000      # 500 Hz
 LAT_NS = 300_000       # state -> effort, 0.3 ms
 T0_NS = 1_700_000_000_000_000_000
+WATCHDOG = 5           # watchdog efforts before the first state
 
 
 def _typestore():
@@ -78,6 +79,9 @@ def write_synthetic_bag(path, steps, storage="mcap"):
     def put(name, stamp, msg):
         writer.write(conns[name], stamp, ts.serialize_cdr(msg, spec[name]))
 
+    for k in range(WATCHDOG):   # the controller's safe efforts before the first state
+        put("/effort_controller/commands", T0_NS - (WATCHDOG - k) * 10_000_000,
+            _multiarray(ts, np.full(N, 1e6), [("joint watchdog", N)]))
     for k in range(steps):
         sim = k * DT_NS
         recv = T0_NS + k * DT_NS
@@ -91,7 +95,8 @@ def write_synthetic_bag(path, steps, storage="mcap"):
         put(ctrl + "parameter_estimates", r - 30_000,
             _multiarray(ts, estimates[k].ravel(), [("link", N), ("parameter", 13)]))
         put(ctrl + "prediction_error", r - 20_000, T["std_msgs/msg/Float64"](data=pred[k]))
-        put("/effort_controller/commands", r, _multiarray(ts, torques[k], [("joint", N)]))
+        tag = f"joint stamp={sim // 1_000_000_000}.{sim % 1_000_000_000:09d}"
+        put("/effort_controller/commands", r, _multiarray(ts, torques[k], [(tag, N)]))
         if k % 500 == 0:
             header = T["std_msgs/msg/Header"](stamp=_time(ts, sim), frame_id="")
             put("/diagnostics", recv + 100_000,
@@ -114,11 +119,12 @@ def test_inspect_synthetic_bag(tmp_path, storage, capsys):
     # the summary: every topic with its count and its rate from the receive stamps
     for name, msgtype in known["spec"].items():
         count = steps if name != "/diagnostics" else (steps + 499) // 500
+        count += WATCHDOG if name == "/effort_controller/commands" else 0
         line = next(ln for ln in out.splitlines() if ln.strip().startswith(name + " "))
         fields = line.split()
         assert fields[1] == msgtype
         assert int(fields[2]) == count
-        if name != "/diagnostics":
+        if name not in ("/diagnostics", "/effort_controller/commands"):
             assert float(fields[3]) == pytest.approx(500.0, abs=0.1)
     assert "Duration:" in out and "Sim time:" in out
 
@@ -140,6 +146,7 @@ def test_inspect_synthetic_bag(tmp_path, storage, capsys):
     assert m["state_to_effort_latency_p50_ms"] == pytest.approx(LAT_NS * 1e-6, abs=1e-6)
     assert m["state_period_p50_ms"] == pytest.approx(DT_NS * 1e-6, abs=1e-6)
     assert m["unanswered_states"] == 0
+    assert m["effort_commands"] == steps and m["watchdog_efforts"] == WATCHDOG
     assert m["sim_time_end_s"] == pytest.approx((steps - 1) * 0.002)
     assert doc["summary"]["topics"]["/joint_states"]["count"] == steps
 
