@@ -140,12 +140,14 @@ class BagRecorder:
         self.node = Node(node_name, context=context)
         self.topics = recorded_topics(controller_node)
         self.counts = {name: 0 for name, _ in self.topics}
+        #: messages a single publisher sent that never arrived (sequence-number gaps)
         self.gaps = {name: 0 for name, _ in self.topics}
         self.first_stamp = None
         self.last_stamp = None
         #: latest simulated time seen on /clock (s), None before the first message
         self.sim_time = None
         self._last_seq = {}
+        self._multi = set()   # topics seen with several publishers (no gap count)
         self._adapted = set()
         self._seen = set()
         self._subs = {}
@@ -177,9 +179,12 @@ class BagRecorder:
         if self.last_stamp is None or stamp > self.last_stamp:
             self.last_stamp = stamp
         seq = info.get("publication_sequence_number")
-        if seq:
+        if seq and name not in self._multi:
             last = self._last_seq.get(name)
-            if last is not None and seq > last + 1:
+            if last is not None and seq <= last:   # several publishers: numbers interleave
+                self._multi.add(name)
+                self.gaps[name] = 0
+            elif last is not None and seq > last + 1:
                 self.gaps[name] += seq - last - 1
             self._last_seq[name] = seq
         if name == topics.CLOCK:
