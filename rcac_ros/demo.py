@@ -317,7 +317,8 @@ def run(args):
     try:
         bag = run_demo(args.duration, out, args.storage)
     except KeyboardInterrupt:
-        print("rcac demo: interrupted; both nodes stopped", file=sys.stderr)
+        print(f"rcac demo: interrupted; both nodes stopped; the partial bag is in "
+              f"{os.path.join(out, 'bag')} (rcac inspect reads it)", file=sys.stderr)
         return 130
     except NodeFailed as err:
         print(f"rcac demo: error: {err}", file=sys.stderr)

@@ -27,22 +27,22 @@ def _typestore():
 
 
 def _time(ts, ns):
-    Time = ts.types["builtin_interfaces/msg/Time"]
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    time_type = ts.types["builtin_interfaces/msg/Time"]
+    return time_type(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def _multiarray(ts, data, dims):
-    T = ts.types
-    layout = T["std_msgs/msg/MultiArrayLayout"](
-        dim=[T["std_msgs/msg/MultiArrayDimension"](label=label, size=size, stride=size)
+    types = ts.types
+    layout = types["std_msgs/msg/MultiArrayLayout"](
+        dim=[types["std_msgs/msg/MultiArrayDimension"](label=label, size=size, stride=size)
              for label, size in dims], data_offset=0)
-    return T["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.asarray(data, float))
+    return types["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.asarray(data, float))
 
 
 def _joint_state(ts, sim_ns, q, qd, effort):
-    T = ts.types
-    header = T["std_msgs/msg/Header"](stamp=_time(ts, sim_ns), frame_id="")
-    return T["sensor_msgs/msg/JointState"](
+    types = ts.types
+    header = types["std_msgs/msg/Header"](stamp=_time(ts, sim_ns), frame_id="")
+    return types["sensor_msgs/msg/JointState"](
         header=header, name=[f"joint{i + 1}" for i in range(N)],
         position=np.asarray(q, float), velocity=np.asarray(qd, float),
         effort=np.asarray(effort, float))
@@ -52,7 +52,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
     """A lockstep-like bag with known contents; returns the data that went in."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     ts = _typestore()
-    T = ts.types
+    types = ts.types
     rng = np.random.default_rng(3)
     ctrl = f"/{topics.CONTROLLER_NODE}/"
     spec = {
@@ -86,7 +86,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
         sim = k * DT_NS
         recv = T0_NS + k * DT_NS
         q = np.full(N, 0.01 * k)
-        put("/clock", recv, T["rosgraph_msgs/msg/Clock"](clock=_time(ts, sim)))
+        put("/clock", recv, types["rosgraph_msgs/msg/Clock"](clock=_time(ts, sim)))
         put("/joint_states", recv + 10_000, _joint_state(ts, sim, q, np.zeros(N), np.zeros(N)))
         r = recv + 10_000 + LAT_NS
         put(ctrl + "desired_state", r - 50_000,
@@ -94,13 +94,13 @@ def write_synthetic_bag(path, steps, storage="mcap"):
         put(ctrl + "tracking_error", r - 40_000, _multiarray(ts, errors[k], [("joint", N)]))
         put(ctrl + "parameter_estimates", r - 30_000,
             _multiarray(ts, estimates[k].ravel(), [("link", N), ("parameter", 13)]))
-        put(ctrl + "prediction_error", r - 20_000, T["std_msgs/msg/Float64"](data=pred[k]))
+        put(ctrl + "prediction_error", r - 20_000, types["std_msgs/msg/Float64"](data=pred[k]))
         tag = f"joint stamp={sim // 1_000_000_000}.{sim % 1_000_000_000:09d}"
         put("/effort_controller/commands", r, _multiarray(ts, torques[k], [(tag, N)]))
         if k % 500 == 0:
-            header = T["std_msgs/msg/Header"](stamp=_time(ts, sim), frame_id="")
+            header = types["std_msgs/msg/Header"](stamp=_time(ts, sim), frame_id="")
             put("/diagnostics", recv + 100_000,
-                T["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[]))
+                types["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[]))
     writer.close()
     return {"errors": errors, "torques": torques, "estimates": estimates, "pred": pred,
             "truth": truth, "spec": spec}
