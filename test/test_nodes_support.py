@@ -14,7 +14,7 @@ from builtin_interfaces.msg import Time as TimeMsg  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -27,6 +27,10 @@ QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
 #: the test side keeps more, so that a slow test process loses nothing
 DEEP = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
                   reliability=ReliabilityPolicy.RELIABLE)
+#: /rosout keeps its history (transient local): a late-matched reader still gets every line
+ROSOUT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                    reliability=ReliabilityPolicy.RELIABLE,
+                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 @contextlib.contextmanager
@@ -57,6 +61,10 @@ def ros_context():
         try:
             yield ctx, executor
         finally:
+            # destroy the nodes: a node left alive keeps its name's /rosout publisher
+            for node in executor.get_nodes():
+                executor.remove_node(node)
+                node.destroy_node()
             executor.shutdown()
             rclpy.try_shutdown(context=ctx)
 
@@ -95,7 +103,8 @@ class Probe(Node):
             self.subs["states"] = self.create_subscription(
                 JointState, state_topic, self.states.append, DEEP)
         if "logs" in record:
-            self.subs["logs"] = self.create_subscription(Log, "/rosout", self.logs.append, DEEP)
+            self.subs["logs"] = self.create_subscription(Log, "/rosout", self.logs.append,
+                                                         ROSOUT)
 
     def _on_effort(self, msg):
         label = msg.layout.dim[0].label if msg.layout.dim else ""

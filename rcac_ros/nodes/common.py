@@ -27,6 +27,11 @@ from rcac_ros.core.exceptions import ConfigError, RcacError
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                  reliability=ReliabilityPolicy.RELIABLE)
 
+#: the same, keep-last 1000, for the topics a recorder or a test reads (2 s at 500 Hz): a slow
+#: subscriber catches up instead of losing samples. Depth does not affect QoS compatibility.
+QOS_MONITOR = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
 #: model presets accepted by the ``model`` parameter
 PRESETS = ("css_arm",)
 

@@ -31,7 +31,8 @@ from rcac_ros.core.exceptions import ConfigError, RcacError
 from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.core.trajectory import PaperTrajectory
 from rcac_ros.nodes.common import (declare, declare_joints, declare_model, effort_layout,
-                                   per_joint, Percentiles, positive, QOS, run, stamp_ns,
+                                   per_joint, Percentiles, positive, QOS,
+                                   QOS_MONITOR, run, stamp_ns,
                                    Throttle)
 from rcac_ros.nodes.trajectory import ActiveTrajectory, parse_trajectory, TrajectoryRejected
 
@@ -56,17 +57,22 @@ class ControllerNode(Node):
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
         self.finished = False
         self.exit_code = 0
-        self._read_parameters()
+        try:
+            self._read_parameters()
+        except Exception:
+            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
+            raise
         self._throttle = Throttle(self.get_logger())
         self._stats = Percentiles()
         n = self.model.n
         self._warm_up()
         self._pub_effort = self.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
         self._pub_theta = self.create_publisher(Float64MultiArray, topics.PARAMETER_ESTIMATES,
-                                                QOS)
-        self._pub_e = self.create_publisher(Float64, topics.PREDICTION_ERROR, QOS)
-        self._pub_track = self.create_publisher(Float64MultiArray, topics.TRACKING_ERROR, QOS)
-        self._pub_desired = self.create_publisher(JointState, topics.DESIRED_STATE, QOS)
+                                                QOS_MONITOR)
+        self._pub_e = self.create_publisher(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
+        self._pub_track = self.create_publisher(Float64MultiArray, topics.TRACKING_ERROR,
+                                                QOS_MONITOR)
+        self._pub_desired = self.create_publisher(JointState, topics.DESIRED_STATE, QOS_MONITOR)
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self._theta_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="link", size=n, stride=13 * n),
@@ -91,6 +97,8 @@ class ControllerNode(Node):
         self._late_ticks = 0
         self._last_tick = None
         self._nonfinite = 0
+        self._last_answer = None            # lockstep: the last effort message sent
+        self._q_msg = None
         self._rate_warned = False
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, QOS)
         if self.trajectory_source == "topic":
@@ -236,6 +244,13 @@ class ControllerNode(Node):
             return self._throttle.warn("nan", "JointState: NaN or Inf in position/velocity")
         stamp = stamp_ns(msg.header.stamp)
         now = self._now_ns()
+        if self.mode == "lockstep" and self._last_answer is not None \
+                and stamp == self._last_stamp and np.array_equal(q, self._q_msg):
+            # the same state again (a simulator re-sending after a lost message at start-up):
+            # answer it again, do not step twice
+            self._pub_effort.publish(self._last_answer)
+            self._last_rx = now
+            return
         if self._last_stamp is not None and stamp < self._last_stamp:
             return self._throttle.warn(
                 "stamp", f"JointState: stamp went backwards ({stamp * 1e-9:.6f} s < "
@@ -253,7 +268,7 @@ class ControllerNode(Node):
                 self.get_logger().warning(
                     f"state period {gap * 1e3:.3f} ms differs from h = {self.h * 1e3:.3f} ms "
                     "(set 'rate' to 1/dt of the simulator)")
-        self._q, self._qd = q, qd
+        self._q, self._qd, self._q_msg = q, qd, q
         self._last_stamp = stamp
         self._last_rx = now
         if self._watchdog:
@@ -347,6 +362,8 @@ class ControllerNode(Node):
             self.model.n, stamp if self.mode == "lockstep" else None, watchdog),
             data=values.tolist())
         self._pub_effort.publish(msg)
+        if not watchdog:
+            self._last_answer = msg
 
     def _publish_monitors(self, q_d, qd_d, qdd_d, stamp):
         theta = self.ctrl.theta_hat

@@ -31,7 +31,8 @@ from rcac_ros import topics
 from rcac_ros.core.exceptions import ConfigError, RcacError
 from rcac_ros.core.simulator import Simulator
 from rcac_ros.nodes.common import (declare, declare_joints, declare_model, effort_tag, per_joint,
-                                   positive, QOS, run, Throttle)
+                                   positive, QOS, QOS_MONITOR, run,
+                                   Throttle)
 
 #: the paper's initial configuration (Section 4), the default q0 of the css_arm preset
 PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
@@ -57,7 +58,11 @@ class SimulatorNode(Node):
         super().__init__(topics.SIMULATOR_NODE, **kwargs)
         self.finished = False
         self.exit_code = 0
-        self._read_parameters()
+        try:
+            self._read_parameters()
+        except Exception:
+            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
+            raise
         self._throttle = Throttle(self.get_logger())
         n = self.model.n
         self._tau = np.zeros(n)            # model order, the effort held
@@ -73,7 +78,7 @@ class SimulatorNode(Node):
         self._rng = np.random.default_rng(self.noise_seed)
         self.sim.step(np.zeros(n))         # compile/load the integrator before starting
         self.sim.reset(self.q0, self.qd0)
-        self._pub_state = self.create_publisher(JointState, topics.JOINT_STATES, QOS)
+        self._pub_state = self.create_publisher(JointState, topics.JOINT_STATES, QOS_MONITOR)
         self._pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self._sub = self.create_subscription(Float64MultiArray, topics.EFFORT_COMMANDS,
@@ -81,7 +86,7 @@ class SimulatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._start_timer = self.create_timer(0.01, self._try_start, clock=steady)
         if self.mode == "lockstep":
-            self.create_timer(min(self.lockstep_timeout / 5.0, 0.01), self._check_timeout,
+            self.create_timer(min(self.lockstep_timeout / 5.0, 0.005), self._check_timeout,
                               clock=steady)
         self.create_timer(self.diagnostics_period, self._publish_diagnostics, clock=steady)
         self.get_logger().info(
@@ -186,6 +191,8 @@ class SimulatorNode(Node):
                          effort=self._applied[self._out].tolist())
         msg.header.stamp = stamp
         self._pub_state.publish(msg)
+        self._last_state = msg
+        self._resent = 0
         self._pending_ns = stamp_ns
         self._waiting_since = time.monotonic()
 
@@ -240,7 +247,14 @@ class SimulatorNode(Node):
     def _check_timeout(self):
         if self._waiting_since is None or self.finished:
             return
-        if time.monotonic() - self._waiting_since > self.lockstep_timeout:
+        waited = time.monotonic() - self._waiting_since
+        if self.k == 0 and waited > 0.05 * (self._resent + 1) and waited <= self.lockstep_timeout:
+            # the first state can be lost while discovery is still settling on the controller's
+            # side: re-send it (the controller answers a repeated state without stepping again)
+            self._resent += 1
+            self._pub_state.publish(self._last_state)
+            return
+        if waited > self.lockstep_timeout:
             self.misses += 1
             self._throttle.warn("lockstep miss", f"no effort for state {self.k} within "
                                 f"{self.lockstep_timeout:g} s: holding the previous effort")
