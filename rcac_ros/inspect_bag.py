@@ -269,18 +269,35 @@ def effort_tags(td):
     return watchdog, stamp
 
 
+def _first_copies(keys):
+    """Mask of the first occurrence of every key (NaN keys are always kept)."""
+    keys = np.asarray(keys, dtype=float)
+    keep = np.ones(len(keys), dtype=bool)
+    seen = set()
+    for k, key in enumerate(keys):
+        if np.isnan(key):
+            continue
+        if key in seen:
+            keep[k] = False
+        seen.add(key)
+    return keep
+
+
 def _subset(td, mask):
     out = TopicData(td.name, td.msgtype)
     out.recv = td.recv[mask]
     out.values = td.values[mask] if isinstance(td.values, np.ndarray) else \
         [v for v, m in zip(td.values, mask) if m]
-    out.labels = td.labels[mask]
+    out.labels = td.labels[mask] if len(td.labels) == len(mask) else td.labels
     out.stamp = td.stamp[mask] if len(td.stamp) == len(mask) else td.stamp
+    if isinstance(td.velocity, np.ndarray) and len(td.velocity) == len(mask):
+        out.velocity = td.velocity[mask]
+    out.names = td.names
     out.dims = td.dims
     return out
 
 
-def loop_timing(data, eff=None):
+def loop_timing(data, eff=None, js=None):
     """Period between joint states and state -> effort latency, from receive stamps.
 
     Each joint state is paired with the first effort command received after it and
@@ -292,7 +309,7 @@ def loop_timing(data, eff=None):
     dict or None
         ``{"period_ms": array, "latency_ms": array, "unanswered": int}``.
     """
-    js = data.get("/" + topics.JOINT_STATES)
+    js = data.get("/" + topics.JOINT_STATES) if js is None else js
     eff = data.get("/" + topics.EFFORT_COMMANDS) if eff is None else eff
     if js is None or js.count < 2:
         return None
@@ -372,11 +389,16 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         metrics["rms_tracking_error_last_5s"] = float(np.sqrt(np.mean(e[last] ** 2)))
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     watchdog_efforts = 0
+    repeated_answers = 0
     if eff is not None and eff.count:
         watchdog, tagged = effort_tags(eff)
         watchdog_efforts = int(np.count_nonzero(watchdog))
         eff = _subset(eff, ~watchdog)
         tagged = tagged[~watchdog]
+        first = _first_copies(tagged)   # a re-sent state is answered again: keep one answer
+        repeated_answers = int(np.count_nonzero(~first))
+        eff = _subset(eff, first)
+        tagged = tagged[first]
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
         metrics["max_abs_torque"] = float(np.max(np.abs(eff.values)))
@@ -395,15 +417,22 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
         metrics["final_abs_prediction_error"] = float(abs(pr.values[-1]))
     js = data.get("/" + topics.JOINT_STATES)
+    resent_states = 0
+    if js is not None and js.count and np.any(js.stamp != 0.0):
+        first = _first_copies(js.stamp)     # a lockstep simulator may re-send its first state
+        resent_states = int(np.count_nonzero(~first))
+        js = _subset(js, first)
     if js is not None and js.count:
         ts = tl.state_time(js)
         metrics["sim_time_start_s"] = float(ts[0])
         metrics["sim_time_end_s"] = float(ts[-1])
         metrics["joint_states"] = js.count
+        metrics["resent_states"] = resent_states
     if eff is not None:
         metrics["effort_commands"] = eff.count
         metrics["watchdog_efforts"] = watchdog_efforts
-    timing = loop_timing(data, eff)
+        metrics["repeated_answers"] = repeated_answers
+    timing = loop_timing(data, eff, js)
     if timing is not None:
         series["timing"] = timing
         metrics.update(_percentiles(timing["period_ms"], "state_period"))

@@ -27,9 +27,14 @@ def test_short_demo(tmp_path):
     from rosbags.rosbag2 import Reader
     with Reader(out / "bag") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    steps = 2.0 / 0.002
-    assert counts["/joint_states"] >= 0.9 * steps
-    assert counts["/rcac_controller/parameter_estimates"] >= 0.9 * steps
+    steps = int(round(2.0 / 0.002))
+    # the demo waits until the recorder has matched the controller before starting the
+    # simulator, so the controller's topics hold every step; joint_states and /clock may
+    # start late on a loaded machine (the recorder discovers the simulator as it starts)
+    for name in ("parameter_estimates", "tracking_error", "prediction_error",
+                 "desired_state"):
+        assert counts[f"/rcac_controller/{name}"] == steps + 1, name
+    assert counts["/joint_states"] > 0
 
     doc = json.loads((out / "metrics.json").read_text())
     m = doc["metrics"]
