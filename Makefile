@@ -22,7 +22,7 @@ setup-test: $(VENV)/.test
 experiment: $(VENV)/.runtime
 	$(BIN)/rcac experiment --out $(OUT)/experiment
 
-payload-demo: $(VENV)/.runtime
+payload-demo: $(VENV)/.test
 	$(BIN)/rcac payload-demo --out $(OUT)/payload_demo
 
 bench: $(VENV)/.test

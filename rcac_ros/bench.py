@@ -73,18 +73,16 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
 
 def urdf_models():
     """The panda (to panda_link8) and the ur5 from example-robot-data, if both are installed."""
-    try:
-        import example_robot_data  # noqa: F401
-        from rcac_ros.core.urdf import model_from_urdf, robot_urdf_path
-    except ImportError:
-        return []
+    from rcac_ros.core.urdf import model_from_urdf
+    from rcac_ros.robots import example_robot_urdf
     out = []
     for label, rel, tip in (("panda", "panda_description/urdf/panda.urdf", "panda_link8"),
                             ("ur5", "ur_description/urdf/ur5_robot.urdf", None)):
-        try:
-            out.append((label, model_from_urdf(robot_urdf_path(rel), tip_link=tip)))
-        except Exception as err:  # a missing robot only drops its row
-            print(f"(skipping {label}: {err})")
+        path = example_robot_urdf(rel)
+        if path is None:
+            print(f"(example-robot-data not installed: no {label} row)")
+            continue
+        out.append((label, model_from_urdf(path, tip_link=tip)))
     return out
 
 

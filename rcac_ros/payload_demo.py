@@ -22,11 +22,8 @@ parameters (kg, kg m, kg m^2). Links 1-6 are known (``P = 1e-12 I``) unless
 ``payload_summary.png`` and ``link7_estimates.png``.
 """
 
-import glob
 import json
 import os
-import site
-import sys
 import time
 
 import numpy as np
@@ -35,6 +32,7 @@ from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory)
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.progress import Progress
+from rcac_ros.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
 READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
@@ -52,22 +50,8 @@ FIXED_P = 1e-12
 
 
 def find_panda_urdf():
-    """example-robot-data's ``panda.urdf`` (cmeel prefix in site-packages), or None."""
-    rel = os.path.join("panda_description", "urdf", "panda.urdf")
-    try:
-        import example_robot_data
-        path = os.path.join(example_robot_data.getModelPath(rel), rel)
-        if os.path.isfile(path):
-            return path
-    except (ImportError, AttributeError, OSError, ValueError):
-        pass
-    roots = list(site.getsitepackages()) + [site.getusersitepackages()] + sys.path
-    for root in roots:
-        hits = glob.glob(os.path.join(root, "cmeel.prefix", "share", "example-robot-data",
-                                      "robots", rel))
-        if hits:
-            return hits[0]
-    return None
+    """example-robot-data's ``panda.urdf``, or None."""
+    return example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
 
 
 def load_panda(urdf=None):

@@ -1,9 +1,6 @@
 """URDF loading checked against Pinocchio on real robots and on synthetic URDFs."""
 
-import glob
 import os
-import site
-import sys
 
 import numpy as np
 import pytest
@@ -12,31 +9,14 @@ from rcac_ros.core import ConfigError, ModelError, RobotModel
 from rcac_ros.core.model import rot_x
 from rcac_ros.core.rnea import inverse_dynamics
 from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.robots import example_robots_dir
 
 pin = pytest.importorskip("pinocchio")
 
 TOL = 1e-9
 
 
-def _robots_dir():
-    """example-robot-data's ``robots`` directory (the cmeel prefix in site-packages)."""
-    try:
-        import example_robot_data
-        path = example_robot_data.getModelPath("panda_description/urdf/panda.urdf")
-        if os.path.isdir(os.path.join(path, "panda_description")):
-            return path
-    except (ImportError, AttributeError, OSError, ValueError):
-        pass
-    roots = site.getsitepackages() + [site.getusersitepackages()] + sys.path
-    for root in roots:
-        hits = glob.glob(os.path.join(root, "cmeel.prefix", "share", "example-robot-data",
-                                      "robots"))
-        if hits:
-            return hits[0]
-    return None
-
-
-ROBOTS = _robots_dir()
+ROBOTS = example_robots_dir()
 PANDA = None if ROBOTS is None else os.path.join(ROBOTS, "panda_description/urdf/panda.urdf")
 UR5 = None if ROBOTS is None else os.path.join(ROBOTS, "ur_description/urdf/ur5_robot.urdf")
 needs_robots = pytest.mark.skipif(ROBOTS is None, reason="example-robot-data not installed")
