@@ -43,7 +43,8 @@ def config_file(name):
     except Exception:  # noqa: BLE001 - not installed with colcon: use the source tree
         pass
     here = os.path.dirname(os.path.abspath(__file__))
-    candidates.append(os.path.join(os.path.dirname(here), "config", name))
+    candidates.append(os.path.join(os.path.dirname(here), "config", name))   # source tree
+    candidates.append(os.path.join(sys.prefix, "share", "rcac_ros", "config", name))  # pip
     for path in candidates:
         if os.path.isfile(path):
             return path
