@@ -297,12 +297,14 @@ def _subset(td, mask):
     return out
 
 
-def loop_timing(data, eff=None, js=None):
+def loop_timing(data, eff=None, js=None, tagged=None):
     """Period between joint states and state -> effort latency, from receive stamps.
 
-    Each joint state is paired with the first effort command received after it and
-    before the next joint state; unanswered states are counted. ``eff`` (default the
-    bag's effort topic) should hold only the controller's answers, not watchdog efforts.
+    With ``tagged`` (the stamp, s, of the state each effort answers: the lockstep tag)
+    a state is paired with the effort that answers it; otherwise with the first effort
+    received after it and before the next joint state. Unanswered states are counted.
+    ``eff`` (default the bag's effort topic) should hold only the controller's answers,
+    not watchdog efforts.
 
     Returns
     -------
@@ -316,7 +318,15 @@ def loop_timing(data, eff=None, js=None):
     period = 1e-6 * np.diff(js.recv).astype(float)
     latency = np.empty(0)
     unanswered = js.count
-    if eff is not None and eff.count:
+    if eff is not None and eff.count and tagged is not None and len(js.stamp) == js.count \
+            and np.all(np.isfinite(tagged)):
+        answer = {int(round(t * 1e9)): r for t, r in zip(tagged, eff.recv)}
+        keys = [int(round(t * 1e9)) for t in js.stamp]
+        ok = np.array([k in answer for k in keys], dtype=bool)
+        latency = 1e-6 * np.array([answer[k] - r for k, r in zip(keys, js.recv) if k in answer],
+                                  dtype=float)
+        unanswered = int(np.count_nonzero(~ok))
+    elif eff is not None and eff.count:
         idx = np.searchsorted(eff.recv, js.recv, side="left")
         ok = idx < eff.count
         nxt = np.append(js.recv[1:], np.iinfo(np.int64).max)
@@ -390,6 +400,7 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     watchdog_efforts = 0
     repeated_answers = 0
+    tagged = None
     if eff is not None and eff.count:
         watchdog, tagged = effort_tags(eff)
         watchdog_efforts = int(np.count_nonzero(watchdog))
@@ -432,7 +443,7 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         metrics["effort_commands"] = eff.count
         metrics["watchdog_efforts"] = watchdog_efforts
         metrics["repeated_answers"] = repeated_answers
-    timing = loop_timing(data, eff, js)
+    timing = loop_timing(data, eff, js, tagged)
     if timing is not None:
         series["timing"] = timing
         metrics.update(_percentiles(timing["period_ms"], "state_period"))

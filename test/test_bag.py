@@ -275,7 +275,8 @@ def test_record_two_node_lockstep_run(tmp_path, procs):
     # a long watchdog timeout: no safe efforts interleaved with the answers
     ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=5.0))
     _wait_controller_matched(rec, ctrl)
-    sim = procs.start("simulator", _node("simulator", mode="lockstep", duration=duration))
+    sim = procs.start("simulator", _node("simulator", mode="lockstep", duration=duration,
+                                         min_subscribers=2))
     wait_for(lambda: sim.poll() is not None, 90, "simulator run", [rec, ctrl])
     assert sim.returncode == 0, _output(sim)
     ctrl.send_signal(signal.SIGINT)
