@@ -72,7 +72,7 @@ def _count_in_process(kind, n_links):
     vecs = [_counted(v) for v in rng.normal(size=(5, model.n)) * 0.1]
     if kind == "rcac":
         c = RecursiveCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))
-        args = [_counted(c._const), _counted(c._scal), _counted(c._state)]
+        args = [_counted(c._data)]
         kernel = rcac_step_kernel
     else:
         c = SlotineLiCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))

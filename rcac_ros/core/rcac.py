@@ -77,28 +77,35 @@ def filter_coefficients(lam, h):
 #: The only signature the step kernels are compiled for: anything else is a TypeError at
 #: dispatch (never a silent recompilation), which the Python entry point converts once.
 VEC = "float64[::1]"
-RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], {VEC}, float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, "
-                  f"{VEC})")
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
 
 
 @njit(RCAC_SIGNATURE, cache=True)
-def rcac_step_kernel(const, scal, state, q, qd, q_d, qd_d, qdd_d):
-    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR])."""
-    n = const.shape[0]
+def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
+    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
+
+    ``data`` (n + 1, CONST_COLS + STATE_COLS) holds, per link, the constants then the state,
+    and in its last row the scalars: one argument and one scratch allocation keep the call cheap.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    C = np.empty((n, 9), q.dtype)
-    Yr = np.empty((n, 6, 13), q.dtype)
-    phi_row = np.empty(13, q.dtype)
-    psi_row = np.empty(13, q.dtype)
-    tmp_row = np.empty(13, q.dtype)
-    Wm = np.empty((n, 13), q.dtype)
-    Rn = np.empty((n, 13), q.dtype)
-    Un = np.empty((n, 13), q.dtype)
-    grad = np.empty(13, q.dtype)
+    work = np.empty(n * 126 + 52, q.dtype)
+    C = work[:9 * n].reshape((n, 9))
+    Yr = work[9 * n:87 * n].reshape((n, 6, 13))
+    Wm = work[87 * n:100 * n].reshape((n, 13))
+    Rn = work[100 * n:113 * n].reshape((n, 13))
+    Un = work[113 * n:126 * n].reshape((n, 13))
     tau = np.empty(n, q.dtype)
+    phi_row = work[126 * n:126 * n + 13]
+    psi_row = work[126 * n + 13:126 * n + 26]
+    tmp_row = work[126 * n + 26:126 * n + 39]
+    grad = work[126 * n + 39:126 * n + 52]
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
@@ -281,9 +288,14 @@ class RecursiveCompositeController:
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None):
         self.model = model
-        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, self._const,
-         self._scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
-        self._state = np.zeros((model.n, STATE_COLS))
+        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, const,
+         scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
+        n = model.n
+        self._data = np.zeros((n + 1, CONST_COLS + STATE_COLS))
+        self._data[:n, :CONST_COLS] = const
+        self._data[n, :SCAL_LEN] = scal
+        self._state = self._data[:n, CONST_COLS:]       # views into the one kernel argument
+        self._scal = self._data[n]
         self.reset(theta_hat0)
 
     @property
@@ -319,11 +331,11 @@ class RecursiveCompositeController:
             If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         try:
-            tau = rcac_step_kernel(self._const, self._scal, self._state, q, qd, q_d, qd_d, qdd_d)
+            tau = rcac_step_kernel(self._data, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = rcac_step_kernel(self._const, self._scal, self._state, *args)
+            tau = rcac_step_kernel(self._data, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
