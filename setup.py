@@ -21,7 +21,7 @@ setup(
     maintainer_email="rcac@example.com",
     description="Recursive composite adaptive controller for serial manipulators (ROS 2).",
     license="Apache-2.0",
-    tests_require=["pytest"],
+    extras_require={"test": ["pytest"]},
     entry_points={
         "console_scripts": [
             "rcac = rcac_ros.cli:main",
