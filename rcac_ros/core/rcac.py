@@ -33,7 +33,8 @@ from numba import njit
 from ._validate import as_array, per_link_matrix, positive_vector
 from .exceptions import GainError, InputError
 from .regressor import bias_row, fill_regressor, momentum_row
-from .spatial import P0, RF0, joint_rotation, transform_force_T, transform_motion, z_cross_rate
+from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force_T, \
+    transform_motion
 
 # packed constants per link: p (3), R_fix (9), Lambda (1), K_D (36), P (169)
 LAM, KD0, PG0, CONST_COLS = 12, 13, 49, 218
@@ -112,12 +113,10 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
     kd_diag = scal[I_KD_DIAG] != 0.0
     p_diag = scal[I_P_DIAG] != 0.0
     y = 0.0 if first else fe * scal[I_Y] + fb0 * scal[I_TAU1]
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     vx = vy = vz = wx = wy = wz = 0.0                  # V_i
-    rvx = rvy = rvz = rwx = rwy = rwz = 0.0            # V_ri
-    dvx = dvy = dvz = dwx = dwy = dwz = 0.0            # Vdot_ri
-    avx = avy = avz = awx = awy = 0.0                  # a_j (joint 1's axis in frame j)
-    awz = 1.0
-    bvx = bvy = bvz = bwx = bwy = bwz = 0.0            # adot_j
+    Vr, Vdr = zero, zero                               # V_ri, Vdot_ri
+    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
     gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
     E = 0.0
     for i in range(n):
@@ -127,38 +126,20 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
         qdi = qd[i]
         qdr = qd_d[i] - row[LAM] * (q[i] - q_d[i])
         qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
-        # eq 9
+        # eq 9, then eq 18 (Tdot with the actual qd_i)
         vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
         wz += qdi
-        # eq 18: T V_r,i-1, then Tdot V_r,i-1 = -(z qd_i)^x (T V_r,i-1)
-        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
-                                                        rvx, rvy, rvz, rwx, rwy, rwz)
-        cvx, cvy = z_cross_rate(qdi, tvx, tvy)
-        cwx, cwy = z_cross_rate(qdi, twx, twy)
-        rvx, rvy, rvz, rwx, rwy, rwz = tvx, tvy, tvz, twx, twy, twz + qdr
-        dvx, dvy, dvz, dwx, dwy, dwz = transform_motion(C, i, px, py, pz,
-                                                        dvx, dvy, dvz, dwx, dwy, dwz)
-        dvx += cvx
-        dvy += cvy
-        dwx += cwx
-        dwy += cwy
-        dwz += qddr
-        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
-                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
-                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
-        if i > 0:
-            # adot_j = Tdot_j a_j-1 + T_j adot_j-1 ; a_j = T_j a_j-1
-            tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
-                                                            avx, avy, avz, awx, awy, awz)
-            cvx, cvy = z_cross_rate(qdi, tvx, tvy)
-            cwx, cwy = z_cross_rate(qdi, twx, twy)
-            bvx, bvy, bvz, bwx, bwy, bwz = transform_motion(C, i, px, py, pz,
-                                                            bvx, bvy, bvz, bwx, bwy, bwz)
-            bvx += cvx
-            bvy += cvy
-            bwx += cwx
-            bwy += cwy
-            avx, avy, avz, awx, awy, awz = tvx, tvy, tvz, twx, twy, twz
+        Vr, Vdr = propagate(C, i, px, py, pz, qdi, Vr, Vdr, qdr, qddr)
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = rotate(C, i, gx, gy, gz)
+        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
+        if i == 0:
+            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            A, Ad = propagate(C, i, px, py, pz, qdi, A, Ad, 0.0, 0.0)
+        avx, avy, avz, awx, awy, awz = A
+        bvx, bvy, bvz, bwx, bwy, bwz = Ad
         st = state[i]
         st[S0], st[S0 + 1], st[S0 + 2] = vx - rvx, vy - rvy, vz - rvz
         st[S0 + 3], st[S0 + 4], st[S0 + 5] = wx - rwx, wy - rwy, wz - rwz

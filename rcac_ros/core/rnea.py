@@ -5,8 +5,8 @@ from numba import njit
 
 from ._validate import joint_vectors
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T, \
-    transform_motion, z_cross_rate
+from .spatial import P0, RF0, TH0, joint_rotation, model_rows, propagate, rotate, \
+    transform_force_T
 
 
 @njit(cache=True)
@@ -22,23 +22,15 @@ def rnea_kernel(kin, g, q, qd, qdd):
     C = np.empty((n, 9), q.dtype)
     Fs = np.empty((n, 6), q.dtype)
     tau = np.empty(n, q.dtype)
-    vx = vy = vz = wx = wy = wz = 0.0
-    ax = ay = az = bx = by = bz = 0.0
+    V = Vd = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     gx, gy, gz = g[0], g[1], g[2]
     for i in range(n):
         row = kin[i]
         joint_rotation(row, RF0, q[i], C, i)
-        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
-        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
-        tax, tay, taz, tbx, tby, tbz = transform_motion(C, i, px, py, pz, ax, ay, az, bx, by, bz)
-        dvx, dvy = z_cross_rate(qd[i], tvx, tvy)
-        dwx, dwy = z_cross_rate(qd[i], twx, twy)
-        vx, vy, vz, wx, wy, wz = tvx, tvy, tvz, twx, twy, twz + qd[i]
-        ax, ay, az = tax + dvx, tay + dvy, taz
-        bx, by, bz = tbx + dwx, tby + dwy, tbz + qdd[i]
-        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
-                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
-                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
+        V, Vd = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qd[i], V, Vd, qd[i], qdd[i])
+        vx, vy, vz, wx, wy, wz = V
+        ax, ay, az, bx, by, bz = Vd
+        gx, gy, gz = rotate(C, i, gx, gy, gz)
         f = link_wrench(row, TH0, ax, ay, az, bx, by, bz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
         for k in range(6):
             Fs[i, k] = f[k]

@@ -29,7 +29,7 @@ from ._validate import as_array
 from .rcac import (I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H, I_K, I_LAM, I_Y, INPUT_NAMES,
                    KD0, LAM, PG0, VEC, check_vectors, input_error, pack_gains)
 from .regressor import fill_regressor
-from .spatial import P0, RF0, joint_rotation, transform_motion, z_cross_rate
+from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
 
 @njit(cache=True)
@@ -85,9 +85,9 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
     W = np.empty((n, m), q.dtype)
     s = np.empty(n, q.dtype)
     y = np.empty(n, q.dtype)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     vx = vy = vz = wx = wy = wz = 0.0
-    rvx = rvy = rvz = rwx = rwy = rwz = 0.0
-    dvx = dvy = dvz = dwx = dwy = dwz = 0.0
+    Vr, Vdr = zero, zero
     gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
     for i in range(n):
         s[i] = qd[i] - (qd_d[i] - const[i, LAM] * (q[i] - q_d[i]))
@@ -101,38 +101,20 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
         qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
         vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
         wz += qdi
-        tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
-                                                        rvx, rvy, rvz, rwx, rwy, rwz)
-        cvx, cvy = z_cross_rate(qdi, tvx, tvy)
-        cwx, cwy = z_cross_rate(qdi, twx, twy)
-        rvx, rvy, rvz, rwx, rwy, rwz = tvx, tvy, tvz, twx, twy, twz + qdr
-        dvx, dvy, dvz, dwx, dwy, dwz = transform_motion(C, i, px, py, pz,
-                                                        dvx, dvy, dvz, dwx, dwy, dwz)
-        dvx += cvx
-        dvy += cvy
-        dwx += cwx
-        dwy += cwy
-        dwz += qddr
-        gx, gy, gz = (C[i, 0] * gx + C[i, 1] * gy + C[i, 2] * gz,
-                      C[i, 3] * gx + C[i, 4] * gy + C[i, 5] * gz,
-                      C[i, 6] * gx + C[i, 7] * gy + C[i, 8] * gz)
+        Vr, Vdr = propagate(C, i, px, py, pz, qdi, Vr, Vdr, qdr, qddr)
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = rotate(C, i, gx, gy, gz)
         # link Jacobian J_i = T_i J_{i-1} + z6 e_i^T and its derivative (explicit, O(n) a link)
         for k in range(i):
-            a = transform_motion(C, i, px, py, pz, J[i - 1, 0, k], J[i - 1, 1, k],
-                                 J[i - 1, 2, k], J[i - 1, 3, k], J[i - 1, 4, k], J[i - 1, 5, k])
-            b = transform_motion(C, i, px, py, pz, Jd[i - 1, 0, k], Jd[i - 1, 1, k],
-                                 Jd[i - 1, 2, k], Jd[i - 1, 3, k], Jd[i - 1, 4, k],
-                                 Jd[i - 1, 5, k])
-            c0, c1 = z_cross_rate(qdi, a[0], a[1])
-            c3, c4 = z_cross_rate(qdi, a[3], a[4])
+            a, b = propagate(C, i, px, py, pz, qdi,
+                             (J[i - 1, 0, k], J[i - 1, 1, k], J[i - 1, 2, k], J[i - 1, 3, k],
+                              J[i - 1, 4, k], J[i - 1, 5, k]),
+                             (Jd[i - 1, 0, k], Jd[i - 1, 1, k], Jd[i - 1, 2, k],
+                              Jd[i - 1, 3, k], Jd[i - 1, 4, k], Jd[i - 1, 5, k]), 0.0, 0.0)
             for r in range(6):
                 J[i, r, k] = a[r]
-            Jd[i, 0, k] = b[0] + c0
-            Jd[i, 1, k] = b[1] + c1
-            Jd[i, 2, k] = b[2]
-            Jd[i, 3, k] = b[3] + c3
-            Jd[i, 4, k] = b[4] + c4
-            Jd[i, 5, k] = b[5]
+                Jd[i, r, k] = b[r]
         J[i, 5, i] = 1.0
         fill_regressor(Yr, i, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                        wx, wy, wz, gx, gy, gz)

@@ -103,3 +103,21 @@ def transform_force_T(C, i, px, py, pz, fx, fy, fz, nx, ny, nz):
 def z_cross_rate(qd, x, y):
     """Eq 12's action ``-(z qd)^x`` on the first two components (the third is zero)."""
     return qd * y, -qd * x
+
+
+@njit(cache=True)
+def propagate(C, i, px, py, pz, qd, x, xd, u, ud):
+    """Eqs 9 and 11 for any motion vector and its rate: ``(x_i, xdot_i)`` from link i-1's.
+
+    ``x_i = T x + z6 u``, ``xdot_i = T xdot + Tdot x + z6 ud``, with ``Tdot x = -(z qd)^x (T x)``
+    (eq 12). ``(u, ud) = (qd, qdd)`` gives V and Vdot; ``(qd_r, qdd_r)`` the reference motion
+    of eq 18; ``(0, 0)`` carries joint 1's axis ``a_j`` and ``adot_j`` (NOTES.md 4).
+    """
+    tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
+                                                    x[0], x[1], x[2], x[3], x[4], x[5])
+    dvx, dvy, dvz, dwx, dwy, dwz = transform_motion(C, i, px, py, pz,
+                                                    xd[0], xd[1], xd[2], xd[3], xd[4], xd[5])
+    cvx, cvy = z_cross_rate(qd, tvx, tvy)
+    cwx, cwy = z_cross_rate(qd, twx, twy)
+    return ((tvx, tvy, tvz, twx, twy, twz + u),
+            (dvx + cvx, dvy + cvy, dvz, dwx + cwx, dwy + cwy, dwz + ud))
