@@ -70,12 +70,21 @@ def ros_context():
 
 
 def spin_until(executor, cond, timeout=20.0):
-    """Spin until ``cond()`` is true; return whether it became true within ``timeout`` s."""
+    """Spin until ``cond()`` is true; return whether it became true within ``timeout`` s.
+
+    Nodes paced by a ``DeadlineLoop`` (their ``loop``: controller timer mode, simulator
+    realtime mode) are driven as ``run()`` drives them in a node process.
+    """
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if cond():
             return True
-        executor.spin_once(timeout_sec=0.01)
+        loops = [n.loop for n in executor.get_nodes() if getattr(n, "loop", None) is not None]
+        if not loops:
+            executor.spin_once(timeout_sec=0.01)
+            continue
+        waits = [w for w in (loop.due() for loop in loops) if w is not None]
+        executor.spin_once(timeout_sec=min([0.01] + [max(w, 0) * 1e-9 for w in waits]))
     return cond()
 
 

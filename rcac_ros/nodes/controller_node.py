@@ -5,8 +5,9 @@ message. Two timing modes:
 
 * ``lockstep`` (default): one step per valid JointState, the trajectory time taken
   from the state's stamp (deterministic with the simulator node);
-* ``timer``: a ``rate`` Hz timer on the node's clock (honours ``use_sim_time``),
-  using the latest valid state (real arms).
+* ``timer``: ``rate`` Hz on the latest valid state (real arms). On the steady clock the
+  ticks keep absolute deadlines (:class:`rcac_ros.nodes.common.DeadlineLoop`: a late tick
+  is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
 
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
 ``state_timeout`` seconds. Parameters are documented in ``config/controller.yaml``.
@@ -30,10 +31,9 @@ from rcac_ros import topics
 from rcac_ros.core.exceptions import ConfigError, RcacError
 from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.core.trajectory import PaperTrajectory
-from rcac_ros.nodes.common import (declare, declare_joints, declare_model, effort_layout,
-                                   per_joint, Percentiles, positive, QOS,
-                                   QOS_MONITOR, run, stamp_ns,
-                                   Throttle)
+from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
+                                   effort_layout, per_joint, Percentiles, positive, QOS,
+                                   QOS_MONITOR, run, stamp_ns, Throttle)
 from rcac_ros.nodes.trajectory import ActiveTrajectory, parse_trajectory, TrajectoryRejected
 
 BIG = 1e12
@@ -79,6 +79,13 @@ class ControllerNode(Node):
             MultiArrayDimension(label="parameter", size=13, stride=13)])
         self._joint_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="joint", size=n, stride=n)])
+        # timer mode reuses its messages (publish serialises at once)
+        self._effort_layout = effort_layout(n)
+        self._watchdog_layout = effort_layout(n, watchdog=True)
+        self._timer_msg = Float64MultiArray(layout=self._effort_layout)
+        self._desired_msg = JointState(name=list(self.joints))
+        self._names = None                  # the joint names of the last valid state ...
+        self._sel = None                    # ... and their indices in model order
         # state
         self._q = self._qd = None           # latest valid state (model order)
         self._last_stamp = None             # ns, of the latest valid state
@@ -100,12 +107,16 @@ class ControllerNode(Node):
         self._last_answer = None            # lockstep: the last effort message sent
         self._q_msg = None
         self._rate_warned = False
+        self.loop = None                    # the steady-clock pacing of timer mode
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, QOS)
         if self.trajectory_source == "topic":
             self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
                                      self._on_trajectory, QOS)
-        if self.mode == "timer":
-            self.create_timer(self.h, self._on_tick)
+        if self.mode == "timer" and self.get_parameter("use_sim_time").value:
+            self.create_timer(self.h, self._on_tick)        # ROS time: ticks on /clock
+        elif self.mode == "timer":
+            self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
+            self.loop.start()
         else:
             self.create_timer(min(self.state_timeout / 2.0, 0.01), self._on_watchdog)
         self.create_timer(self.diagnostics_period, self._publish_diagnostics,
@@ -223,7 +234,7 @@ class ControllerNode(Node):
         return self.get_clock().now().nanoseconds
 
     def _on_state(self, msg):
-        names = list(msg.name)
+        names = msg.name
         m = len(names)
         if m == 0 or len(msg.position) == 0:
             return self._throttle.warn("empty", "JointState without names or positions")
@@ -231,13 +242,17 @@ class ControllerNode(Node):
             return self._throttle.warn(
                 "length", f"JointState: {m} names, {len(msg.position)} positions, "
                 f"{len(msg.velocity)} velocities")
-        if len(set(names)) != m:
-            return self._throttle.warn("names", f"JointState: duplicate names {names}")
-        index = {name: k for k, name in enumerate(names)}
-        missing = [j for j in self.model.joint_names if j not in index]
-        if missing:
-            return self._throttle.warn("names", f"JointState: missing joints {missing}")
-        sel = [index[j] for j in self.model.joint_names]
+        if names == self._names:
+            sel = self._sel                 # the same names as the last valid state
+        else:
+            if len(set(names)) != m:
+                return self._throttle.warn("names", f"JointState: duplicate names {names}")
+            index = {name: k for k, name in enumerate(names)}
+            missing = [j for j in self.model.joint_names if j not in index]
+            if missing:
+                return self._throttle.warn("names", f"JointState: missing joints {missing}")
+            sel = [index[j] for j in self.model.joint_names]
+            self._names, self._sel = list(names), sel
         q = np.asarray(msg.position, dtype=float)[sel]
         qd = np.asarray(msg.velocity, dtype=float)[sel] if len(msg.velocity) else None
         if not np.all(np.isfinite(q)) or (qd is not None and not np.all(np.isfinite(qd))):
@@ -358,9 +373,14 @@ class ControllerNode(Node):
         values = np.asarray(values, dtype=float)
         if not np.all(np.isfinite(values)):      # never publish NaN/Inf
             values = np.zeros_like(values)
-        msg = Float64MultiArray(layout=effort_layout(
-            self.model.n, stamp if self.mode == "lockstep" else None, watchdog),
-            data=values.tolist())
+        if self.mode == "timer":                 # untagged: one message object, reused
+            msg = self._timer_msg
+            msg.layout = self._watchdog_layout if watchdog else self._effort_layout
+            msg.data = values.tolist()
+            self._pub_effort.publish(msg)
+            return
+        msg = Float64MultiArray(layout=effort_layout(self.model.n, stamp, watchdog),
+                                data=values.tolist())
         self._pub_effort.publish(msg)
         if not watchdog:
             self._last_answer = msg
@@ -373,8 +393,10 @@ class ControllerNode(Node):
         err = (self._q - q_d)[self._out]
         self._pub_track.publish(Float64MultiArray(layout=self._joint_layout,
                                                   data=err.tolist()))
-        ds = JointState(name=list(self.joints), position=q_d[self._out].tolist(),
-                        velocity=qd_d[self._out].tolist(), effort=qdd_d[self._out].tolist())
+        ds = self._desired_msg
+        ds.position = q_d[self._out].tolist()
+        ds.velocity = qd_d[self._out].tolist()
+        ds.effort = qdd_d[self._out].tolist()
         if stamp is not None:
             ds.header.stamp = stamp
         else:
@@ -403,8 +425,9 @@ class ControllerNode(Node):
     def _on_tick(self):
         """Timer mode: one control step on the latest valid state."""
         now = self._now_ns()
-        if self._last_tick is not None and now - self._last_tick > 1.5 * self.h * 1e9:
-            self._late_ticks += 1
+        if self.loop is None and self._last_tick is not None \
+                and now - self._last_tick > 1.5 * self.h * 1e9:
+            self._late_ticks += 1           # ROS-time timer (the loop counts its own)
         self._last_tick = now
         if self._state_is_stale():
             self._trip()
@@ -416,6 +439,7 @@ class ControllerNode(Node):
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
         count, p50, p99, worst = self._stats.pop()
+        skipped = 0 if self.loop is None else self.loop.skipped
         level = DiagnosticStatus.OK
         message = "running"
         if self._watchdog:
@@ -425,8 +449,11 @@ class ControllerNode(Node):
             "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
             "compute_time_max_us": f"{worst:.1f}",
             "compute_time_max_all_us": f"{self._stats.max_all * 1e6:.1f}",
-            "deadline_us": f"{self.h * 1e6:.1f}", "deadline_misses": self._deadline_misses,
-            "late_ticks": self._late_ticks,
+            "deadline_us": f"{self.h * 1e6:.1f}",
+            "deadline_misses": self._deadline_misses + skipped,
+            "compute_overruns": self._deadline_misses,
+            "late_ticks": self._late_ticks if self.loop is None else self.loop.late,
+            "skipped_ticks": skipped,
             "watchdog": "tripped" if self._watchdog else "ok",
             "watchdog_trips": self._watchdog_trips,
             "rejected_messages": self._throttle.total,

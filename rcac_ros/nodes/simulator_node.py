@@ -6,8 +6,9 @@ Two modes:
 * ``lockstep`` (default): state k is published (stamp = /clock = k dt); the node
   steps when the effort answering state k arrives, or after ``lockstep_timeout``
   (the previous effort held, a miss counted). Deterministic on a loaded machine.
-* ``realtime``: free-running on a steady-clock timer of period ``dt``, the latest
-  effort held (never paced on ROS time: see ROS_NOTES).
+* ``realtime``: free-running every ``dt`` on absolute deadlines of the steady clock
+  (:class:`rcac_ros.nodes.common.DeadlineLoop`: a late step is caught up, not skipped),
+  the latest effort held; never paced on ROS time (see ROS_NOTES).
 
 Parameters are documented in ``config/simulator.yaml``.
 """
@@ -30,8 +31,8 @@ from std_msgs.msg import Float64MultiArray
 from rcac_ros import topics
 from rcac_ros.core.exceptions import ConfigError, RcacError
 from rcac_ros.core.simulator import Simulator
-from rcac_ros.nodes.common import (declare, declare_joints, declare_model, effort_tag, per_joint,
-                                   positive, QOS, QOS_MONITOR, run,
+from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
+                                   effort_tag, per_joint, positive, QOS, QOS_MONITOR, run,
                                    Throttle)
 
 #: the paper's initial configuration (Section 4), the default q0 of the css_arm preset
@@ -78,6 +79,11 @@ class SimulatorNode(Node):
         self._rng = np.random.default_rng(self.noise_seed)
         self.sim.step(np.zeros(n))         # compile/load the integrator before starting
         self.sim.reset(self.q0, self.qd0)
+        # one message object each, reused (publish serialises at once)
+        self._state_msg = JointState(name=list(self.joints))
+        self._clock_msg = ClockMsg()
+        #: realtime pacing (started with the simulation; run() or a test drives it)
+        self.loop = DeadlineLoop(self.dt, self._on_tick) if self.mode == "realtime" else None
         self._pub_state = self.create_publisher(JointState, topics.JOINT_STATES, QOS_MONITOR)
         self._pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
@@ -172,23 +178,25 @@ class SimulatorNode(Node):
         self.get_logger().info("controller found: starting" if self.wait_for_controller
                                else "starting")
         self._publish_state()
-        if self.mode == "realtime":
-            self.create_timer(self.dt, self._on_tick,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self.loop is not None:
+            self.loop.start()
 
     def _publish_state(self):
         stamp_ns = self.k * self.dt_ns
         stamp = TimeMsg(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
-        self._pub_clock.publish(ClockMsg(clock=stamp))
+        self._clock_msg.clock = stamp
+        self._pub_clock.publish(self._clock_msg)
         q = self.sim.q
         qd = self.sim.qd
         if self.position_noise > 0.0:
             q = q + self._rng.normal(0.0, self.position_noise, q.shape)
         if self.velocity_noise > 0.0:
             qd = qd + self._rng.normal(0.0, self.velocity_noise, qd.shape)
-        msg = JointState(name=list(self.joints), position=q[self._out].tolist(),
-                         velocity=qd[self._out].tolist() if self.publish_velocity else [],
-                         effort=self._applied[self._out].tolist())
+        msg = self._state_msg
+        msg.position = q[self._out].tolist()
+        if self.publish_velocity:
+            msg.velocity = qd[self._out].tolist()
+        msg.effort = self._applied[self._out].tolist()
         msg.header.stamp = stamp
         self._pub_state.publish(msg)
         self._last_state = msg
@@ -210,6 +218,8 @@ class SimulatorNode(Node):
     def _finish(self):
         self._waiting_since = None
         self.finished = True
+        if self.loop is not None:
+            self.loop.stop()
         self._wall_end = time.monotonic()
         wall = self._wall_end - self._wall_start
         self._pub_state.wait_for_all_acked(Duration(seconds=1.0))
@@ -270,6 +280,9 @@ class SimulatorNode(Node):
         wall = 0.0 if self._wall_start is None else \
             (self._wall_end or time.monotonic()) - self._wall_start
         level = DiagnosticStatus.OK if self.misses == 0 else DiagnosticStatus.WARN
+        pacing = {} if self.loop is None else {
+            "deadline_misses": self.loop.skipped, "skipped_ticks": self.loop.skipped,
+            "late_ticks": self.loop.late}
         values = {
             "mode": self.mode, "started": self.started, "steps": self.k,
             "sim_time": f"{self.k * self.dt:.6f}", "wall_time": f"{wall:.3f}",
@@ -277,7 +290,7 @@ class SimulatorNode(Node):
             "real_time_factor": f"{self.k * self.dt / wall:.3f}" if wall > 0 else "nan",
             "lockstep_misses": self.misses, "late_efforts": self.late,
             "ignored_watchdog_efforts": self.ignored_watchdog,
-            "rejected_messages": self._throttle.total,
+            "rejected_messages": self._throttle.total, **pacing,
         }
         return DiagnosticStatus(
             level=level, name=f"{self.get_name()}: simulation",
