@@ -35,25 +35,48 @@ def test_exact_model_and_zero_error_gives_inverse_dynamics(gravity):
             assert np.allclose(tau, ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
+def random_spd(rng, size, scale):
+    A = rng.normal(size=(size, size))
+    return scale * (A @ A.T / size + np.eye(size))
+
+
+def compare_closed_loops(model, steps, rtol=1e-9, **gains):
+    rng = np.random.default_rng(model.n)
+    q0 = rng.normal(size=model.n) * 0.5
+    traj = PaperTrajectory(q0, reading="position", amplitude=0.3, period=4.0)
+    a = RecursiveCompositeController(model, **gains)
+    b = SlotineLiCompositeController(model, **gains)
+    sa = Simulator(model, q0=q0)
+    sb = Simulator(model, q0=q0)
+    for k in range(steps):
+        q_d, qd_d, qdd_d = traj(k * 0.002)
+        ta = a.step(sa.q, sa.qd, q_d, qd_d, qdd_d)
+        tb = b.step(sb.q, sb.qd, q_d, qd_d, qdd_d)
+        assert np.allclose(ta, tb, rtol=rtol, atol=rtol * np.abs(ta).max())
+        assert a.E == pytest.approx(b.E, rel=rtol, abs=rtol)  # joint 1's W row, built two ways
+        sa.step(ta)
+        sb.step(tb)
+    assert np.allclose(a.theta_hat, b.theta_hat, rtol=1e-8, atol=1e-10)
+    assert not np.allclose(a.theta_hat, 0.0)                    # it did adapt
+
+
 def test_recursive_equals_slotine_li_when_gamma_is_zero():
     """Both compute the same direct law (Y^T s = sum Y_ri^T s_i): closed loops agree."""
     rng = np.random.default_rng(2)
     model = random_chain(rng, 6, gravity=(0.0, 0.0, -9.81))
-    q0 = rng.normal(size=6) * 0.5
-    traj = PaperTrajectory(q0, reading="position", amplitude=0.3, period=4.0)
-    a = RecursiveCompositeController(model, K_D=50.0, P=2.0, gamma=0.0)
-    b = SlotineLiCompositeController(model, K_D=50.0, P=2.0, gamma=0.0)
-    sa = Simulator(model, q0=q0)
-    sb = Simulator(model, q0=q0)
-    for k in range(1500):
-        q_d, qd_d, qdd_d = traj(k * 0.002)
-        ta = a.step(sa.q, sa.qd, q_d, qd_d, qdd_d)
-        tb = b.step(sb.q, sb.qd, q_d, qd_d, qdd_d)
-        assert np.allclose(ta, tb, rtol=1e-9, atol=1e-9 * np.abs(ta).max())
-        assert a.E == pytest.approx(b.E, rel=1e-9, abs=1e-9)  # joint 1's W row, built two ways
-        sa.step(ta)
-        sb.step(tb)
-    assert np.allclose(a.theta_hat, b.theta_hat, rtol=1e-8, atol=1e-10)
+    compare_closed_loops(model, 1500, K_D=50.0, P=2.0, gamma=0.0)
+    # full (non-diagonal) gains take the kernel's dense paths
+    compare_closed_loops(model, 500, K_D=random_spd(rng, 6, 50.0), P=random_spd(rng, 13, 2.0),
+                         gamma=0.0, Lambda=rng.uniform(0.5, 2.0, 6))
+
+
+def test_recursive_equals_slotine_li_for_one_joint():
+    """n = 1: joint 1 is every joint, so the two composite laws coincide for gamma > 0 too
+    (Sherman-Morrison in one, Woodbury with a Cholesky solve in the other)."""
+    rng = np.random.default_rng(3)
+    model = random_chain(rng, 1, gravity=(0.0, -9.81, 0.0))
+    compare_closed_loops(model, 1500, K_D=random_spd(rng, 6, 20.0),
+                         P=random_spd(rng, 13, 5.0), gamma=0.7, lam=20.0)
 
 
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
