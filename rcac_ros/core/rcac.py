@@ -50,6 +50,23 @@ INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
 
 
 @njit(cache=True)
+def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
+    """Link i's ``V_i`` (eq 9), ``V_ri``, ``Vdot_ri`` (eq 18) and gravity from link i-1's.
+
+    Writes ``C[i]`` (eq 10's rotation); ``q ... qdd_d`` are joint i's scalars, ``row`` its
+    packed constants. Returns ``(V, V_r, Vdot_r, g)`` as tuples.
+    """
+    joint_rotation(row, RF0, q, C, i)
+    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+    qdr = qd_d - row[LAM] * (q - q_d)
+    qddr = qdd_d - row[LAM] * (qd - qd_d)
+    vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, V[0], V[1], V[2], V[3], V[4],
+                                              V[5])
+    Vr, Vdr = propagate(C, i, px, py, pz, qd, Vr, Vdr, qdr, qddr)   # Tdot with the actual qd
+    return (vx, vy, vz, wx, wy, wz + qd), Vr, Vdr, rotate(C, i, g[0], g[1], g[2])
+
+
+@njit(cache=True)
 def check_vectors(n, a, b, c, d, e):
     """0 if all five vectors have length n and are finite; else 1-5 (length) or 11-15 (NaN/Inf)."""
     vecs = (a, b, c, d, e)
@@ -114,25 +131,20 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
     p_diag = scal[I_P_DIAG] != 0.0
     y = 0.0 if first else fe * scal[I_Y] + fb0 * scal[I_TAU1]
     zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    vx = vy = vz = wx = wy = wz = 0.0                  # V_i
-    Vr, Vdr = zero, zero                               # V_ri, Vdot_ri
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
     A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
-    gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
     E = 0.0
     for i in range(n):
         row = const[i]
-        joint_rotation(row, RF0, q[i], C, i)
-        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
         qdi = qd[i]
-        qdr = qd_d[i] - row[LAM] * (q[i] - q_d[i])
-        qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
-        # eq 9, then eq 18 (Tdot with the actual qd_i)
-        vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
-        wz += qdi
-        Vr, Vdr = propagate(C, i, px, py, pz, qdi, Vr, Vdr, qdr, qddr)
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
         rvx, rvy, rvz, rwx, rwy, rwz = Vr
         dvx, dvy, dvz, dwx, dwy, dwz = Vdr
-        gx, gy, gz = rotate(C, i, gx, gy, gz)
+        gx, gy, gz = g
+        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
         # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
         if i == 0:
             A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)

@@ -27,9 +27,10 @@ from numba import njit
 
 from ._validate import as_array
 from .rcac import (I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H, I_K, I_LAM, I_Y, INPUT_NAMES,
-                   KD0, LAM, PG0, VEC, check_vectors, input_error, pack_gains)
+                   KD0, LAM, PG0, VEC, check_vectors, input_error, pack_gains,
+                   reference_motion)
 from .regressor import fill_regressor
-from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
+from .spatial import P0, propagate
 
 
 @njit(cache=True)
@@ -86,25 +87,21 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
     s = np.empty(n, q.dtype)
     y = np.empty(n, q.dtype)
     zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    vx = vy = vz = wx = wy = wz = 0.0
-    Vr, Vdr = zero, zero
-    gx, gy, gz = scal[I_G], scal[I_G + 1], scal[I_G + 2]
+    V, Vr, Vdr = zero, zero, zero
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
     for i in range(n):
         s[i] = qd[i] - (qd_d[i] - const[i, LAM] * (q[i] - q_d[i]))
         y[i] = 0.0 if first else fe * filt[0, i, m] + fb0 * filt[1, i, m]
     for i in range(n):
         row = const[i]
-        joint_rotation(row, RF0, q[i], C, i)
-        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
         qdi = qd[i]
-        qdr = qd_d[i] - row[LAM] * (q[i] - q_d[i])
-        qddr = qdd_d[i] - row[LAM] * (qdi - qd_d[i])
-        vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, vx, vy, vz, wx, wy, wz)
-        wz += qdi
-        Vr, Vdr = propagate(C, i, px, py, pz, qdi, Vr, Vdr, qdr, qddr)
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
         rvx, rvy, rvz, rwx, rwy, rwz = Vr
         dvx, dvy, dvz, dwx, dwy, dwz = Vdr
-        gx, gy, gz = rotate(C, i, gx, gy, gz)
+        gx, gy, gz = g
+        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
         # link Jacobian J_i = T_i J_{i-1} + z6 e_i^T and its derivative (explicit, O(n) a link)
         for k in range(i):
             a, b = propagate(C, i, px, py, pz, qdi,
