@@ -138,6 +138,9 @@ def add_arguments(parser):
                         help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
     parser.add_argument("--duration", type=float, default=60.0,
                         help="seconds of the --ros run (default 60)")
+    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
+                        help="--ros: the controller on its 500 Hz timer (default) or answering "
+                             "each joint state")
     parser.add_argument("--budget", type=float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
 
@@ -145,7 +148,7 @@ def add_arguments(parser):
 def run(args):
     if args.ros:
         from rcac_ros.ros_bench import run_ros_bench
-        result = run_ros_bench(args.duration, json_path=args.json)
+        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode)
         return 0 if result else 1
     try:
         import pinocchio  # noqa: F401
