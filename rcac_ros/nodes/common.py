@@ -251,6 +251,7 @@ class Percentiles:
     def __init__(self):
         self._samples = []
         self.max_all = 0.0
+        self._last = (math.nan, math.nan, math.nan)
 
     def add(self, seconds):
         """Record one sample, in seconds."""
@@ -258,13 +259,17 @@ class Percentiles:
         self.max_all = max(self.max_all, seconds)
 
     def pop(self):
-        """Return ``(count, p50, p99, max)`` in µs over the window, and start a new window."""
+        """Return ``(count, p50, p99, max)`` in µs over the window, and start a new window.
+
+        An empty window (the node is idle) repeats the figures of the last non-empty one.
+        """
         if not self._samples:
-            return 0, math.nan, math.nan, math.nan
+            return (0,) + self._last
         arr = np.asarray(self._samples) * 1e6
         self._samples = []
-        return arr.size, float(np.percentile(arr, 50)), float(np.percentile(arr, 99)), \
-            float(arr.max())
+        self._last = (float(np.percentile(arr, 50)), float(np.percentile(arr, 99)),
+                      float(arr.max()))
+        return (arr.size,) + self._last
 
 
 # ------------------------------------------------------------------ pacing
