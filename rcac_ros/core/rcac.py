@@ -32,7 +32,7 @@ from numba import njit
 
 from ._validate import as_array, per_link_matrix, positive_vector
 from .exceptions import GainError, InputError
-from .regressor import bias_row, fill_regressor, momentum_row
+from .regressor import bias_row, momentum_row, reference_wrench, regressor_row
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force_T, \
     transform_motion
 
@@ -113,17 +113,17 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    work = np.empty(n * 126 + 52, q.dtype)
+    work = np.empty(n * 67 + 39, q.dtype)
     C = work[:9 * n].reshape((n, 9))
-    Yr = work[9 * n:87 * n].reshape((n, 6, 13))
-    Wm = work[87 * n:100 * n].reshape((n, 13))
-    Rn = work[100 * n:113 * n].reshape((n, 13))
-    Un = work[113 * n:126 * n].reshape((n, 13))
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    Wm = work[28 * n:41 * n].reshape((n, 13))
+    Rn = work[41 * n:54 * n].reshape((n, 13))
+    Un = work[54 * n:67 * n].reshape((n, 13))
     tau = np.empty(n, q.dtype)
-    phi_row = work[126 * n:126 * n + 13]
-    psi_row = work[126 * n + 13:126 * n + 26]
-    tmp_row = work[126 * n + 26:126 * n + 39]
-    grad = work[126 * n + 39:126 * n + 52]
+    phi_row = work[67 * n:67 * n + 13]
+    psi_row = work[67 * n + 13:67 * n + 26]
+    tmp_row = work[67 * n + 26:67 * n + 39]
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
@@ -155,9 +155,15 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
         st = state[i]
         st[S0], st[S0 + 1], st[S0 + 2] = vx - rvx, vy - rvy, vz - rvz
         st[S0 + 3], st[S0 + 4], st[S0 + 5] = wx - rwx, wy - rwy, wz - rwz
-        # eq 19b's regressor, and Ym(V), Yc(V) for the filtered joint-1 torque
-        fill_regressor(Yr, i, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
-                       wx, wy, wz, gx, gy, gz)
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(st, TH, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy,
+                             rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
+                      dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                      wx, wy, wz, gx, gy, gz)
+        # a_j^T Ym(V_j), adot_j^T Ym(V_j), a_j^T Yc(V_j) for the filtered joint-1 torque
         momentum_row(phi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz)
         momentum_row(tmp_row, bvx, bvy, bvz, bwx, bwy, bwz, vx, vy, vz, wx, wy, wz)
         bias_row(psi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
@@ -188,9 +194,7 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
                                                        fx, fy, fz, nx, ny, nz)
         # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
         for r6 in range(6):
-            acc = 0.0
-            for c in range(13):
-                acc += Yr[i, r6, c] * st[TH + c]
+            acc = Fs[i, r6]
             if kd_diag:
                 acc -= row[KD0 + 7 * r6] * st[S0 + r6]
             else:
@@ -210,11 +214,9 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
                 nz += acc
         tau[i] = nz
         # eq 24, step 1: r_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), u_i = P_i W_i^T
+        grad = G[i]
         for c in range(13):
-            g_c = -gamma * Wm[i, c] * y
-            for r6 in range(6):
-                g_c += Yr[i, r6, c] * st[S0 + r6]
-            grad[c] = g_c
+            grad[c] -= gamma * Wm[i, c] * y
         if p_diag:
             for a in range(13):
                 Rn[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]

@@ -196,20 +196,13 @@ def _skew(v):
 
 
 @njit(cache=True)
-def inertia_terms(out, ax, ay, az, wx, wy, wz):
-    """``d(a^T I_o(theta) w) / d theta_5..13`` into ``out[4:13]`` (I_o of NOTES.md 2)."""
+def inertia_row(ax, ay, az, wx, wy, wz):
+    """``d(a^T I_o(theta) w) / d theta_5..13`` as a 9-tuple (I_o of NOTES.md 2)."""
     px = ax * wx
     py = ay * wy
     pz = az * wz
-    out[4] = py + pz
-    out[5] = px + pz
-    out[6] = px + py
-    out[7] = -(ax * wy + ay * wx)
-    out[8] = -(ax * wz + az * wx)
-    out[9] = -(ay * wz + az * wy)
-    out[10] = px
-    out[11] = py
-    out[12] = pz
+    return (py + pz, px + pz, px + py, -(ax * wy + ay * wx), -(ax * wz + az * wx),
+            -(ay * wz + az * wy), px, py, pz)
 
 
 @njit(cache=True)
@@ -223,7 +216,9 @@ def momentum_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz):
     out[1] = (vy * awz - vz * awy) - (wy * avz - wz * avy)
     out[2] = (vz * awx - vx * awz) - (wz * avx - wx * avz)
     out[3] = (vx * awy - vy * awx) - (wx * avy - wy * avx)
-    inertia_terms(out, awx, awy, awz, wx, wy, wz)
+    t = inertia_row(awx, awy, awz, wx, wy, wz)
+    for k in range(9):
+        out[4 + k] = t[k]
 
 
 @njit(cache=True)
@@ -243,5 +238,81 @@ def bias_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, 
     out[2] = (uz * awx - ux * awz) - ww * avy + aw * wy
     out[3] = (ux * awy - uy * awx) - ww * avz + aw * wz
     # a_w . (w x I_o w) = (a_w x w) . (I_o w)
-    inertia_terms(out, awy * wz - awz * wy, awz * wx - awx * wz, awx * wy - awy * wx,
-                  wx, wy, wz)
+    t = inertia_row(awy * wz - awz * wy, awz * wx - awx * wz, awx * wy - awy * wx, wx, wy, wz)
+    for k in range(9):
+        out[4 + k] = t[k]
+
+
+@njit(cache=True)
+def reference_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz,
+                     wx, wy, wz, gx, gy, gz):
+    """``Y(Vdot_r, V_r, w, g) theta`` of one link (eq 19b's ``Y_ri theta_hat_i``) without Y.
+
+    With ``a = vdot_r + w x v_r - g`` and ``c = w x w_r``:
+    force ``= m a + alpha_r x h - w x (h x w_r)``,
+    moment ``= h x a + I_o (alpha_r + c) + w x (I_o w_r) - (t5 + t6 + t7) c``.
+    """
+    m = th[o]
+    hx, hy, hz = th[o + 1], th[o + 2], th[o + 3]
+    t5, t6, t7 = th[o + 4], th[o + 5], th[o + 6]
+    t8, t9, t10 = th[o + 7], th[o + 8], th[o + 9]
+    Ixx = th[o + 10] + t6 + t7
+    Iyy = th[o + 11] + t5 + t7
+    Izz = th[o + 12] + t5 + t6
+    ax = vdx + wy * vrz - wz * vry - gx
+    ay = vdy + wz * vrx - wx * vrz - gy
+    az = vdz + wx * vry - wy * vrx - gz
+    cx = wy * wrz - wz * wry
+    cy = wz * wrx - wx * wrz
+    cz = wx * wry - wy * wrx
+    dx, dy, dz = alx + cx, aly + cy, alz + cz
+    hw = hx * wx + hy * wy + hz * wz
+    ww = wx * wrx + wy * wry + wz * wrz
+    # I_o d and I_o w_r
+    idx = Ixx * dx - t8 * dy - t9 * dz
+    idy = -t8 * dx + Iyy * dy - t10 * dz
+    idz = -t9 * dx - t10 * dy + Izz * dz
+    irx = Ixx * wrx - t8 * wry - t9 * wrz
+    iry = -t8 * wrx + Iyy * wry - t10 * wrz
+    irz = -t9 * wrx - t10 * wry + Izz * wrz
+    s = t5 + t6 + t7
+    # w x (h x w_r) = h (w . w_r) - w_r (w . h)
+    fx = m * ax + aly * hz - alz * hy - (hx * ww - wrx * hw)
+    fy = m * ay + alz * hx - alx * hz - (hy * ww - wry * hw)
+    fz = m * az + alx * hy - aly * hx - (hz * ww - wrz * hw)
+    nx = hy * az - hz * ay + idx + wy * irz - wz * iry - s * cx
+    ny = hz * ax - hx * az + idy + wz * irx - wx * irz - s * cy
+    nz = hx * ay - hy * ax + idz + wx * iry - wy * irx - s * cz
+    return fx, fy, fz, nx, ny, nz
+
+
+@njit(cache=True)
+def regressor_row(out, svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
+                  vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz):
+    """``s^T Y(Vdot_r, V_r, w, g)`` (1 x 13, eq 24's ``Y_ri^T s_i``) without forming Y.
+
+    The gradient in theta of ``s^T`` (the wrench of :func:`reference_wrench`).
+    """
+    ax = vdx + wy * vrz - wz * vry - gx
+    ay = vdy + wz * vrx - wx * vrz - gy
+    az = vdz + wx * vry - wy * vrx - gz
+    cx = wy * wrz - wz * wry
+    cy = wz * wrx - wx * wrz
+    cz = wx * wry - wy * wrx
+    ww = wx * wrx + wy * wry + wz * wrz
+    sw_r = svx * wrx + svy * wry + svz * wrz
+    out[0] = svx * ax + svy * ay + svz * az
+    # h . (s_v x alpha_r - (w . w_r) s_v + (s_v . w_r) w + a x s_w)
+    out[1] = (svy * alz - svz * aly) - ww * svx + sw_r * wx + (ay * swz - az * swy)
+    out[2] = (svz * alx - svx * alz) - ww * svy + sw_r * wy + (az * swx - ax * swz)
+    out[3] = (svx * aly - svy * alx) - ww * svz + sw_r * wz + (ax * swy - ay * swx)
+    # s_w . I_o (alpha_r + c) + (s_w x w) . I_o w_r - (t5 + t6 + t7) s_w . c
+    a = inertia_row(swx, swy, swz, alx + cx, aly + cy, alz + cz)
+    b = inertia_row(swy * wz - swz * wy, swz * wx - swx * wz, swx * wy - swy * wx,
+                    wrx, wry, wrz)
+    sc = swx * cx + swy * cy + swz * cz
+    for k in range(9):
+        out[4 + k] = a[k] + b[k]
+    out[4] -= sc
+    out[5] -= sc
+    out[6] -= sc
