@@ -7,7 +7,7 @@ from conftest import random_chain
 from rcac_ros.core import (coriolis_gravity_regressor, css_arm, inverse_dynamics, link_matrices,
                            link_regressor, mass_regressor, theta_from_inertia)
 from rcac_ros.core.model import rpy_matrix
-from rcac_ros.core.regressor import bias_row, momentum_row
+from rcac_ros.core.regressor import bias_row, momentum_row, reference_wrench, regressor_row
 
 
 def random_link(rng):
@@ -34,7 +34,7 @@ def test_regressor_identity_and_skew_symmetry():
 
 
 def test_closed_form_rows_equal_regressor_products():
-    """a^T Ym(V) and a^T Yc(V) computed without forming Y (the controller's O(n) rows)."""
+    """The controller's closed forms equal the products with the explicit 6x13 regressor."""
     rng = np.random.default_rng(12)
     for _ in range(50):
         a, V = rng.normal(size=(2, 6))
@@ -44,6 +44,16 @@ def test_closed_form_rows_equal_regressor_products():
         bias_row(psi, *a, *V, *g)
         assert np.allclose(phi, a @ mass_regressor(V), atol=1e-12)
         assert np.allclose(psi, a @ coriolis_gravity_regressor(V, g), atol=1e-12)
+        # eq 19b's Y_r theta and eq 24's Y_r^T s, as the controller computes them
+        theta, s = random_link(rng), rng.normal(size=6)
+        Vdot_r, V_r = rng.normal(size=(2, 6))
+        w = rng.normal(size=3)
+        Y = link_regressor(Vdot_r, V_r, w, g)
+        wrench = np.array(reference_wrench(theta, 0, *Vdot_r, *V_r, *w, *g))
+        assert np.allclose(wrench, Y @ theta, rtol=1e-12, atol=1e-11)
+        row = np.empty(13)
+        regressor_row(row, *s, *Vdot_r, *V_r, *w, *g)
+        assert np.allclose(row, s @ Y, atol=1e-12)
 
 
 def test_regressor_has_rank_11_or_10():
