@@ -7,17 +7,15 @@ control period with the torque held. Writes ``metrics.json``,
 """
 
 import json
-import math
 import os
 import time
 
 import numpy as np
 
 from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
+from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.progress import Progress
 
-#: The paper's initial position (Section 4), rad.
-PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
 #: The paper's gains (Section 4) and the filter bandwidth it leaves open.
 PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
 

@@ -337,6 +337,9 @@ def _inertia(value, name):
                       f"or a 3x3 list, got {value!r}")
 
 
+#: The paper's initial position of the CSS arm (Section 4), rad.
+PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
+
 #: Table 1 link lengths a1..a8 (Section 4), metres.
 CSS_LENGTHS = dict(a1=0.5, a2=0.5, a3=4.0, a4=0.5, a5=4.0, a6=0.5, a7=0.5, a8=1.0)
 

@@ -96,38 +96,12 @@ def fill_regressor(Y, k, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, 
 
 @njit(cache=True)
 def link_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
-    """``M Vdot + C(w) V + G`` of one link from its parameters ``th[o:o+13]`` (eq 13, V_r = V).
+    """``M Vdot + C(w) V + G`` of one link from its parameters ``th[o:o+13]`` (eq 13).
 
-    This is ``Y(Vdot, V, w, g) theta`` without forming Y (Newton-Euler about the frame origin).
+    Newton-Euler: :func:`reference_wrench` with ``V_r = V``.
     """
-    m = th[o]
-    hx, hy, hz = th[o + 1], th[o + 2], th[o + 3]
-    t5, t6, t7 = th[o + 4], th[o + 5], th[o + 6]
-    t8, t9, t10 = th[o + 7], th[o + 8], th[o + 9]
-    Ixx = th[o + 10] + t6 + t7
-    Iyy = th[o + 11] + t5 + t7
-    Izz = th[o + 12] + t5 + t6
-    ax = vdx + wy * vz - wz * vy - gx
-    ay = vdy + wz * vx - wx * vz - gy
-    az = vdz + wx * vy - wy * vx - gz
-    # I_o alpha and I_o w
-    iax = Ixx * alx - t8 * aly - t9 * alz
-    iay = -t8 * alx + Iyy * aly - t10 * alz
-    iaz = -t9 * alx - t10 * aly + Izz * alz
-    iwx = Ixx * wx - t8 * wy - t9 * wz
-    iwy = -t8 * wx + Iyy * wy - t10 * wz
-    iwz = -t9 * wx - t10 * wy + Izz * wz
-    # h x w, then w x (h x w)
-    bx = hy * wz - hz * wy
-    by = hz * wx - hx * wz
-    bz = hx * wy - hy * wx
-    fx = m * ax + aly * hz - alz * hy - (wy * bz - wz * by)
-    fy = m * ay + alz * hx - alx * hz - (wz * bx - wx * bz)
-    fz = m * az + alx * hy - aly * hx - (wx * by - wy * bx)
-    nx = hy * az - hz * ay + iax + wy * iwz - wz * iwy
-    ny = hz * ax - hx * az + iay + wz * iwx - wx * iwz
-    nz = hx * ay - hy * ax + iaz + wx * iwy - wy * iwx
-    return fx, fy, fz, nx, ny, nz
+    return reference_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vx, vy, vz, wx, wy, wz,
+                            wx, wy, wz, gx, gy, gz)
 
 
 def link_regressor(Vdot_r, V_r, w, g=(0.0, 0.0, 0.0)):

@@ -13,7 +13,6 @@ Two modes:
 Parameters are documented in ``config/simulator.yaml``.
 """
 
-import math
 import sys
 import time
 
@@ -30,13 +29,12 @@ from std_msgs.msg import Float64MultiArray
 
 from rcac_ros import topics
 from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.core.simulator import Simulator
 from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
                                    effort_tag, per_joint, positive, QOS, QOS_MONITOR, run,
                                    Throttle)
 
-#: the paper's initial configuration (Section 4), the default q0 of the css_arm preset
-PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
 NS = 1_000_000_000
 BIG_NOISE = 1e6
 
