@@ -16,6 +16,7 @@ import rclpy
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -221,6 +222,25 @@ def stamp_ns(stamp):
 
 
 # ------------------------------------------------------------------ warnings
+class RcacNode(Node):
+    """The start-up both nodes share: read and check every parameter, or leave nothing behind.
+
+    Subclasses implement ``_read_parameters`` (raising :class:`ConfigError` naming the
+    parameter); ``finished`` and ``exit_code`` tell :func:`run` when and how to stop.
+    """
+
+    def __init__(self, name, **kwargs):
+        super().__init__(name, **kwargs)
+        self.finished = False
+        self.exit_code = 0
+        try:
+            self._read_parameters()
+        except Exception:
+            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
+            raise
+        self._throttle = Throttle(self.get_logger())
+
+
 class Throttle:
     """One warning per kind per ``period`` seconds (steady clock), with counts per kind."""
 

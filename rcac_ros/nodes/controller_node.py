@@ -21,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
@@ -33,13 +32,13 @@ from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.core.trajectory import PaperTrajectory
 from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
                                    effort_layout, per_joint, Percentiles, positive, QOS,
-                                   QOS_MONITOR, run, stamp_ns, Throttle)
+                                   QOS_MONITOR, RcacNode, run, stamp_ns)
 from rcac_ros.nodes.trajectory import ActiveTrajectory, parse_trajectory, TrajectoryRejected
 
 BIG = 1e12
 
 
-class ControllerNode(Node):
+class ControllerNode(RcacNode):
     """The recursive composite adaptive controller as a ROS 2 node.
 
     Parameters
@@ -55,14 +54,6 @@ class ControllerNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
-        self.finished = False
-        self.exit_code = 0
-        try:
-            self._read_parameters()
-        except Exception:
-            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
-            raise
-        self._throttle = Throttle(self.get_logger())
         self._stats = Percentiles()
         n = self.model.n
         self._warm_up()

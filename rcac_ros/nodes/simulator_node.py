@@ -21,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -33,13 +32,13 @@ from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.core.simulator import Simulator
 from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
                                    effort_tag, per_joint, positive, QOS, QOS_MONITOR, run,
-                                   Throttle)
+                                   RcacNode)
 
 NS = 1_000_000_000
 BIG_NOISE = 1e6
 
 
-class SimulatorNode(Node):
+class SimulatorNode(RcacNode):
     """The arm simulator as a ROS 2 node.
 
     Parameters
@@ -55,14 +54,6 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(topics.SIMULATOR_NODE, **kwargs)
-        self.finished = False
-        self.exit_code = 0
-        try:
-            self._read_parameters()
-        except Exception:
-            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
-            raise
-        self._throttle = Throttle(self.get_logger())
         n = self.model.n
         self._tau = np.zeros(n)            # model order, the effort held
         self._applied = np.zeros(n)
