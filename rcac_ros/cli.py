@@ -21,7 +21,9 @@ SUBCOMMANDS = {
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="rcac", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="rcac", description="rcac_ros tools: the recursive composite adaptive controller "
+        "offline, over ROS 2, and its bags.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, (module, help_text) in SUBCOMMANDS.items():
