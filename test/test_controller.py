@@ -151,6 +151,10 @@ def test_step_input_errors_name_the_field():
     (dict(gamma=float("nan")), "gamma"),
     (dict(lam=0.0), "lam: must be > 0"),
     (dict(h=-1.0), "h: must be > 0"),
+    (dict(K_D="abc"), "K_D: not a numeric array"),
+    (dict(P=[[1.0, 2.0], [3.0]]), "P: not a numeric array"),
+    (dict(K_D=np.eye(3)), "K_D: expected shape"),
+    (dict(gamma="0.1"), "gamma: expected a number"),
 ])
 def test_bad_gains_raise_gain_error(kwargs, match):
     for cls in (RecursiveCompositeController, SlotineLiCompositeController):

@@ -66,6 +66,10 @@ def good():
     (dict(joint_names=["a", "b"]), "joint_names"),
     (dict(gravity=[0, 0]), "gravity: expected shape"),
     (dict(effort_limit=[0.0]), "effort_limit"),
+    (dict(effort_limit=[1.0, 2.0]), "effort_limit: expected a scalar or 1 values"),
+    (dict(velocity_limit=-1.0), "velocity_limit: every entry must be > 0"),
+    (dict(position_lower=1.0, position_upper=0.0), "position_lower\\[0\\]: above"),
+    (dict(mass="heavy"), "mass: not a numeric array"),
 ])
 def test_bad_model_raises_model_error(change, match):
     with pytest.raises(ModelError, match=match):

@@ -55,8 +55,14 @@ def test_torque_is_clipped_and_validated():
     assert np.array_equal(q, a.q) and a.t == pytest.approx(0.002)
     with pytest.raises(InputError, match="dt"):
         Simulator(model, dt=0.0)
+    with pytest.raises(InputError, match="dt: expected a number"):
+        Simulator(model, dt="x")
     with pytest.raises(InputError, match="substeps"):
         Simulator(model, substeps=0)
+    with pytest.raises(InputError, match="substeps: must be finite"):
+        Simulator(model, substeps=float("nan"))
+    with pytest.raises(InputError, match="effort_limit: expected a scalar or 7 values"):
+        Simulator(model, effort_limit=[1.0, 2.0])
 
 
 @pytest.mark.parametrize("traj", [
@@ -83,6 +89,12 @@ def test_paper_trajectory_readings():
     assert np.allclose(p(5.0)[0], 5 * np.pi / 180)        # q_d = A sin(pi t / 10)
     with pytest.raises(InputError, match="reading"):
         PaperTrajectory(q0, "acceleration")
+    with pytest.raises(InputError, match="period: expected a number"):
+        PaperTrajectory(q0, period="20")
+    with pytest.raises(InputError, match="amplitude: must be finite"):
+        PaperTrajectory(q0, amplitude=float("nan"))
+    with pytest.raises(InputError, match="amplitude: expected a scalar or 3 values"):
+        SinusoidTrajectory(np.zeros(3), [1.0, 2.0], 1.0)
 
 
 def test_quintic_is_rest_to_rest_and_holds():

@@ -10,16 +10,48 @@ def as_array(value, shape, name, exc=InputError):
 
     ``shape`` may contain ``None`` for a free dimension.
     """
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise exc(f"{name}: not a numeric array ({err})") from None
+    arr = numeric(value, name, exc)
     if arr.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, arr.shape)):
         want = "x".join("*" if s is None else str(s) for s in shape) or "scalar"
         raise exc(f"{name}: expected shape ({want}), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise exc(f"{name}: contains NaN or Inf")
     return np.ascontiguousarray(arr)
+
+
+def numeric(value, name, exc=InputError):
+    """``value`` as a float64 array, or ``exc`` naming the field (no finiteness check)."""
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise exc(f"{name}: not a numeric array ({err})") from None
+
+
+def scalar(value, name, exc=InputError, minimum=None, strict=False):
+    """A finite float, at least (``strict``: above) ``minimum`` if given, or ``exc``."""
+    if isinstance(value, (str, bytes)):
+        raise exc(f"{name}: expected a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise exc(f"{name}: expected a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise exc(f"{name}: must be finite, got {value!r}")
+    if minimum is not None and (v < minimum or (strict and v == minimum)):
+        raise exc(f"{name}: must be {'>' if strict else '>='} {minimum}, got {value!r}")
+    return v
+
+
+def joint_values(value, n, name, exc=InputError, finite=True):
+    """A scalar or an (n,) vector as an (n,) float64 array (Inf allowed unless ``finite``)."""
+    arr = numeric(value, name, exc)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise exc(f"{name}: expected a scalar or {n} values, got shape {arr.shape}")
+    if np.any(np.isnan(arr)) or (finite and not np.all(np.isfinite(arr))):
+        raise exc(f"{name}: contains NaN{' or Inf' if finite else ''}")
+    return arr
 
 
 def check_spd(mat, name, exc):
@@ -37,12 +69,12 @@ def per_link_matrix(value, n, size, name, exc):
 
     Every block must be symmetric positive definite. Returns an (n, size, size) array.
     """
-    arr = np.array(value, dtype=np.float64)
+    arr = numeric(value, name, exc)
     if arr.ndim == 0:
         arr = np.eye(size) * arr
-    elif arr.ndim == 1 and arr.shape == (size,):
+    elif arr.shape == (size,):
         arr = np.diag(arr)
-    if arr.ndim == 2:
+    if arr.shape == (size, size):
         arr = np.broadcast_to(arr, (n, size, size))
     arr = as_array(arr, (n, size, size), name, exc)
     for i in range(n):
@@ -52,12 +84,12 @@ def per_link_matrix(value, n, size, name, exc):
 
 def positive_vector(value, n, name, exc):
     """Broadcast a scalar or an (n,) vector (or a diagonal matrix) of strictly positive entries."""
-    arr = np.array(value, dtype=np.float64)
+    arr = numeric(value, name, exc)
     if arr.ndim == 2:
         if arr.shape != (n, n) or np.any(arr - np.diag(np.diag(arr))):
             raise exc(f"{name}: must be a scalar, a vector of {n} or a diagonal {n}x{n} matrix")
         arr = np.diag(arr)
-    arr = as_array(np.broadcast_to(arr, (n,)) if arr.ndim == 0 else arr, (n,), name, exc)
+    arr = joint_values(arr, n, name, exc)
     if np.any(arr <= 0.0):
         raise exc(f"{name}: every entry must be > 0, got {arr.tolist()}")
     return arr

@@ -17,7 +17,7 @@ import os
 import numpy as np
 import yaml
 
-from ._validate import as_array
+from ._validate import as_array, joint_values
 from .exceptions import ConfigError, ModelError
 
 #: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, NOTES.md 2).
@@ -130,17 +130,18 @@ class RobotModel:
         def limits(value, default, label):
             if value is None:
                 return np.full(n, default)
-            arr = np.array(np.broadcast_to(np.asarray(value, dtype=float), (n,)))
-            if np.any(np.isnan(arr)):
-                raise ModelError(f"{label}: contains NaN")
-            return arr
+            return joint_values(value, n, label, ModelError, finite=False)
 
         self.effort_limit = limits(effort_limit, np.inf, "effort_limit")
         self.velocity_limit = limits(velocity_limit, np.inf, "velocity_limit")
         self.position_lower = limits(position_lower, -np.inf, "position_lower")
         self.position_upper = limits(position_upper, np.inf, "position_upper")
-        if np.any(self.effort_limit <= 0.0) or np.any(np.isnan(self.effort_limit)):
-            raise ModelError("effort_limit: every entry must be > 0")
+        for label in ("effort_limit", "velocity_limit"):
+            if np.any(getattr(self, label) <= 0.0):
+                raise ModelError(f"{label}: every entry must be > 0")
+        bad = np.flatnonzero(self.position_lower > self.position_upper)
+        if bad.size:
+            raise ModelError(f"position_lower[{bad[0]}]: above position_upper[{bad[0]}]")
         self._theta = np.array([theta_from_inertia(self.mass[i], self.com[i], self.inertia[i])
                                 for i in range(n)])
         for arr in (self.p, self.R_fix, self.mass, self.com, self.inertia, self.gravity,

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._validate import as_array, per_link_matrix, positive_vector
+from ._validate import as_array, per_link_matrix, positive_vector, scalar
 from .exceptions import GainError, InputError
 from .regressor import bias_row, momentum_row, reference_wrench, regressor_row
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force_T, \
@@ -386,9 +386,9 @@ def pack_gains(model, K_D, Lambda, P, gamma, lam, h):
     K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
     P = per_link_matrix(P, n, 13, "P", GainError)
     Lambda = positive_vector(Lambda, n, "Lambda", GainError)
-    gamma = _scalar(gamma, "gamma", minimum=0.0)
-    lam = _scalar(lam, "lam", minimum=0.0, strict=True)
-    h = _scalar(h, "h", minimum=0.0, strict=True)
+    gamma = scalar(gamma, "gamma", GainError, minimum=0.0)
+    lam = scalar(lam, "lam", GainError, minimum=0.0, strict=True)
+    h = scalar(h, "h", GainError, minimum=0.0, strict=True)
     const = np.zeros((n, CONST_COLS))
     const[:, P0:P0 + 3] = model.p
     const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
@@ -418,13 +418,3 @@ def is_diagonal(stack):
     """True if every matrix of the (n, k, k) ``stack`` is diagonal."""
     k = stack.shape[-1]
     return not np.any(stack * (1.0 - np.eye(k)))
-
-
-def _scalar(value, name, minimum, strict=False):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise GainError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v) or v < minimum or (strict and v == minimum):
-        raise GainError(f"{name}: must be {'>' if strict else '>='} {minimum}, got {value!r}")
-    return v

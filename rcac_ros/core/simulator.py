@@ -3,7 +3,7 @@
 import numpy as np
 from numba import njit
 
-from ._validate import as_array
+from ._validate import as_array, joint_values, scalar
 from .aba import aba_kernel
 from .exceptions import InputError
 from .spatial import model_rows
@@ -49,17 +49,15 @@ class Simulator:
 
     def __init__(self, model, dt=0.002, q0=None, qd0=None, substeps=1, effort_limit=None):
         self.model = model
-        self.dt = float(dt)
-        if not np.isfinite(self.dt) or self.dt <= 0.0:
-            raise InputError(f"dt: must be > 0, got {dt!r}")
-        if int(substeps) != substeps or substeps < 1:
+        self.dt = scalar(dt, "dt", minimum=0.0, strict=True)
+        steps = scalar(substeps, "substeps", minimum=1.0)
+        if steps != int(steps):
             raise InputError(f"substeps: must be an integer >= 1, got {substeps!r}")
-        self.substeps = int(substeps)
+        self.substeps = int(steps)
         limit = model.effort_limit if effort_limit is None else effort_limit
-        limit = np.array(np.broadcast_to(np.asarray(limit, dtype=float), (model.n,)))
-        if np.any(np.isnan(limit)) or np.any(limit <= 0.0):
+        self.effort_limit = joint_values(limit, model.n, "effort_limit", finite=False)
+        if np.any(self.effort_limit <= 0.0):
             raise InputError("effort_limit: every entry must be > 0")
-        self.effort_limit = limit
         self._kin = model_rows(model)
         self.reset(q0, qd0)
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ._validate import as_array
+from ._validate import as_array, joint_values, scalar
 from .exceptions import InputError
 
 
@@ -35,11 +35,9 @@ class PaperTrajectory:
         self.q0 = as_array(q0, (None,), "q0")
         if reading not in ("velocity", "position"):
             raise InputError(f"reading: must be 'velocity' or 'position', got {reading!r}")
-        if not period > 0.0:
-            raise InputError(f"period: must be > 0, got {period!r}")
         self.reading = reading
-        self.amplitude = float(amplitude)
-        self.omega = 2.0 * math.pi / float(period)
+        self.amplitude = scalar(amplitude, "amplitude")
+        self.omega = 2.0 * math.pi / scalar(period, "period", minimum=0.0, strict=True)
 
     def __call__(self, t):
         A, w, one = self.amplitude, self.omega, np.ones_like(self.q0)
@@ -58,9 +56,9 @@ class SinusoidTrajectory:
     def __init__(self, offset, amplitude, frequency, phase=0.0):
         self.offset = as_array(offset, (None,), "offset")
         n = self.offset.shape[0]
-        self.amplitude = as_array(np.broadcast_to(amplitude, (n,)), (n,), "amplitude")
-        self.omega = 2.0 * math.pi * as_array(np.broadcast_to(frequency, (n,)), (n,), "frequency")
-        self.phase = as_array(np.broadcast_to(phase, (n,)), (n,), "phase")
+        self.amplitude = joint_values(amplitude, n, "amplitude")
+        self.omega = 2.0 * math.pi * joint_values(frequency, n, "frequency")
+        self.phase = joint_values(phase, n, "phase")
 
     def __call__(self, t):
         arg = self.omega * t + self.phase
@@ -94,9 +92,7 @@ class PolynomialTrajectory:
         """Rest-to-rest quintic from ``q_start`` to ``q_end`` in ``duration`` s."""
         q0 = as_array(q_start, (None,), "q_start")
         q1 = as_array(q_end, q0.shape, "q_end")
-        T = float(duration)
-        if not T > 0.0:
-            raise InputError(f"duration: must be > 0, got {duration!r}")
+        T = scalar(duration, "duration", minimum=0.0, strict=True)
         d = q1 - q0
         zero = np.zeros_like(q0)
         coeffs = np.stack([q0, zero, zero, 10 * d / T ** 3, -15 * d / T ** 4, 6 * d / T ** 5], 1)
