@@ -43,6 +43,7 @@ def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=N
             out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
             out["E"][k] = controller.E
             sim.step(tau)
+            controller.set_applied_torque(sim.applied)   # what the arm felt (limits)
             if k % 200 == 0:
                 bar.update(k)
     return out

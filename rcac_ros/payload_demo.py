@@ -145,6 +145,7 @@ def simulate(model, loaded, controller, trajectory, duration, jump, progress=Non
             out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
             out["E"][k] = controller.E
             sim.step(tau)
+            controller.set_applied_torque(sim.applied)
             if k % 250 == 0:
                 bar.update(k)
     return out

@@ -167,3 +167,53 @@ def test_bad_initial_estimate():
         RecursiveCompositeController(css_arm(), theta_hat0=np.zeros((7, 10)))
     with pytest.raises(InputError, match="theta_hat0: contains NaN"):
         RecursiveCompositeController(css_arm(), theta_hat0=np.full((7, 13), np.nan))
+
+
+def test_prediction_error_stays_exact_when_the_torque_saturates():
+    """With an effort limit, y must filter the torque the arm felt, not the one computed."""
+    model = css_arm()
+    traj = PaperTrajectory(Q0, reading="position")
+
+    def run(report_applied):
+        ctrl = RecursiveCompositeController(model, P=1e-12, theta_hat0=model.theta())
+        sim = Simulator(model, q0=Q0, effort_limit=300.0)
+        worst, saturated = 0.0, 0
+        for k in range(500):
+            tau = ctrl.step(sim.q, sim.qd, *traj(k * 0.002))
+            worst = max(worst, abs(ctrl.E))
+            sim.step(tau)
+            saturated += abs(tau[0]) > 300.0
+            if report_applied:
+                ctrl.set_applied_torque(sim.applied)
+        return worst, saturated
+
+    worst, saturated = run(True)
+    assert saturated > 400 and worst < 1e-6 * 300.0
+    assert run(False)[0] > 1e3          # without the feedback, E is wrong by the clipped part
+
+
+def test_restart_filters_keeps_estimates_and_exact_prediction():
+    """A gap the controller did not see (0.1 s of 2 kN m) breaks the filters; a restart
+    makes E exact again and keeps theta_hat."""
+    model = css_arm()
+    traj = PaperTrajectory(Q0)
+
+    def run(restart):
+        ctrl = RecursiveCompositeController(model, P=1e-12, theta_hat0=model.theta())
+        sim = Simulator(model, q0=Q0)
+        worst = 0.0
+        for k in range(300):
+            if k == 150:
+                for _ in range(50):
+                    sim.step(np.full(7, 2000.0))
+                if restart:
+                    ctrl.restart_filters()
+            tau = ctrl.step(sim.q, sim.qd, *traj(k * 0.002))
+            worst = max(worst, abs(ctrl.E) / max(1.0, abs(ctrl.y)))
+            sim.step(tau)
+        return worst, ctrl.theta_hat
+
+    worst, theta = run(True)
+    assert worst < 1e-4
+    assert np.allclose(theta, model.theta())
+    assert run(False)[0] > 1.0

@@ -144,3 +144,15 @@ def test_invalid_parameter_is_refused_naming_it(name, value):
             SimulatorNode(context=ctx, parameter_overrides=[Parameter(name, value=value)])
         assert str(err.value).startswith(name + ":"), str(err.value)
         assert "\n" not in str(err.value)
+
+
+def test_default_q0_follows_the_joint_names_when_joints_are_reordered():
+    """joints [joint2, joint1, ...]: the published state still gives each joint its own q0."""
+    order = ["joint2", "joint1"] + [f"joint{i}" for i in range(3, 8)]
+    with ros_context() as (ctx, ex):
+        node, probe, _ = make(ctx, ex, joints=order)
+        state = probe.states[0]
+        by_name = dict(zip(state.name, state.position))
+        for i, name in enumerate(JOINTS):
+            assert by_name[name] == pytest.approx(PAPER_Q0[i], abs=1e-12)
+        node.destroy_node()

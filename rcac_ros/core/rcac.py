@@ -40,7 +40,8 @@ from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force
 LAM, KD0, PG0, CONST_COLS = 12, 13, 49, 218
 # state per link: theta_hat, phi^f, psi^f, previous phi, previous psi (13 each), s_i (6)
 TH, PHF, PSF, PHP, PSP, S0, STATE_COLS = 0, 13, 26, 39, 52, 65, 71
-# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied, k, E, error,
+# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied,
+# k (steps since the filters started), E, error,
 # and two flags: every K_Di diagonal, every P_i diagonal (then the kernel skips the zeros)
 I_G = 0
 (I_LAM, I_H, I_GAMMA, I_FE, I_FB0, I_FB1, I_Y, I_TAU1, I_K, I_E, I_ERR, I_KD_DIAG, I_P_DIAG,
@@ -334,6 +335,28 @@ class RecursiveCompositeController:
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
+
+    def set_applied_torque(self, tau):
+        """Tell the filter ``y = tau_1^f`` (eq 22) the torque really applied after the last step.
+
+        By default ``y`` filters the torque :meth:`step` returned. When the arm receives
+        another one (clipped to an effort limit, or a safe effort), pass it here, or the
+        prediction error ``E`` compares the model with a torque the arm never felt.
+
+        Raises
+        ------
+        InputError
+            If ``tau`` has the wrong length or holds NaN/Inf.
+        """
+        self._scal[I_TAU1] = as_array(tau, (self.n,), "tau")[0]
+
+    def restart_filters(self):
+        """Restart the filters of eqs 21-24 at the next step, keeping ``theta_hat``.
+
+        For a gap in the measurements (a watchdog trip): the filters start again as at
+        t = 0 (``phi^f = phi``, ``psi^f = 0``, ``y = 0``), so ``E`` is exact from there on.
+        """
+        self._scal[I_K] = 0.0
 
     @property
     def theta_hat(self):

@@ -67,9 +67,12 @@ class Simulator:
         self.q = np.zeros(n) if q0 is None else as_array(q0, (n,), "q0")
         self.qd = np.zeros(n) if qd0 is None else as_array(qd0, (n,), "qd0")
         self.t = float(t)
+        self.applied = np.zeros(n)          # the torque held over the last step, after clipping
 
     def step(self, tau):
         """Hold ``tau`` (clipped to the effort limit) for ``dt``; return the new ``(q, qd)``.
+
+        The clipped torque is left in ``applied``.
 
         Raises
         ------
@@ -77,8 +80,8 @@ class Simulator:
             If ``tau`` has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         tau = as_array(tau, (self.model.n,), "tau")
-        tau = np.clip(tau, -self.effort_limit, self.effort_limit)
-        self.q, self.qd = rk4_kernel(self._kin, self.model.gravity, self.q, self.qd, tau,
-                                     self.dt, self.substeps)
+        self.applied = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.q, self.qd = rk4_kernel(self._kin, self.model.gravity, self.q, self.qd,
+                                     self.applied, self.dt, self.substeps)
         self.t += self.dt
         return self.q.copy(), self.qd.copy()

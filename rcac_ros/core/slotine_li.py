@@ -258,6 +258,10 @@ class SlotineLiCompositeController:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
 
+    def set_applied_torque(self, tau):
+        """The torques really applied after the last step (see the recursive controller's)."""
+        self._filt[1, :, 13 * self.n] = as_array(tau, (self.n,), "tau")
+
     @property
     def theta_hat(self):
         """Current estimates, shape (n, 13) (a copy)."""

@@ -73,7 +73,7 @@ def declare(node, name, default, description, *, lo=None, hi=None, read_only=Tru
             else type(default).__name__
         raise ConfigError(f"{name}: wrong type, expected {want} ({_first_line(err)})") from None
     except InvalidParameterValueException:
-        raise ConfigError(f"{name}: value out of range [{lo}, {hi}]") from None
+        raise ConfigError(f"{name}: value out of range [{lo:g}, {hi:g}]") from None
     except ParameterUninitializedException:
         return None
     if isinstance(value, float) and not math.isfinite(value):

@@ -280,6 +280,7 @@ class ControllerNode(RcacNode):
         if self._watchdog:
             self._watchdog = False
             if self._steps:
+                self.ctrl.restart_filters()     # the gap broke the filters of eqs 21-24
                 self.get_logger().info("watchdog: valid state again, control resumed")
         if self.mode == "lockstep":
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
@@ -339,6 +340,7 @@ class ControllerNode(RcacNode):
         q_d, qd_d, qdd_d = self._desired(t_ns)
         self._desired_last = (q_d, qd_d)
         start = time.perf_counter()
+        theta_before = self.ctrl.theta_hat
         try:
             tau = self.ctrl.step(self._q, self._qd, q_d, qd_d, qdd_d)
         except RcacError as err:
@@ -352,10 +354,12 @@ class ControllerNode(RcacNode):
         if tau is None or not np.all(np.isfinite(tau)):
             self._nonfinite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
-                                "publishing the safe effort")
+                                "publishing the safe effort, estimates restored")
+            self.ctrl.reset(theta_before)       # not poisoned for good: the last finite ones
             self._publish_effort(self.safe_effort, stamp)
             return
         tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         self._publish_effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
             self._publish_monitors(q_d, qd_d, qdd_d, stamp)

@@ -117,14 +117,13 @@ class SimulatorNode(RcacNode):
         self.min_subscribers = declare(
             self, "min_subscribers", 1, "with wait_for_controller: also wait for this many "
             "joint_states subscribers (e.g. 2 = the controller and a recorder)", lo=1, hi=1000)
-        default_q0 = PAPER_Q0 if self.model.name == "css_arm" else 0.0
         q0 = declare(self, "q0", Parameter.Type.DOUBLE_ARRAY,
                      "initial positions, rad, in joints order (unset: the paper's q0 for "
                      "css_arm, else zero)")
         qd0 = declare(self, "qd0", Parameter.Type.DOUBLE_ARRAY,
                       "initial velocities, rad/s, in joints order (unset: zero)")
         if q0 is None and self.model.name == "css_arm" and n == len(PAPER_Q0):
-            self.q0 = np.array(default_q0)[self._order]
+            self.q0 = np.array(PAPER_Q0)        # already in model order
         else:
             self.q0 = per_joint("q0", q0, n, 0.0)[self._order]
         self.qd0 = per_joint("qd0", qd0, n, 0.0)[self._order]
