@@ -158,10 +158,6 @@ class RobotModel:
         """The true parameters, shape (n, 13), in the paper's order (:data:`PARAMETER_NAMES`)."""
         return self._theta.copy()
 
-    def with_gravity(self, gravity):
-        """A copy of the model with another gravity vector."""
-        return self.replace(gravity=gravity)
-
     def replace(self, **changes):
         """A copy of the model with some constructor arguments changed."""
         args = dict(p=self.p, R_fix=self.R_fix, mass=self.mass, com=self.com,
