@@ -1,0 +1,232 @@
+"""The one closed-loop simulation: a controller driving a simulated arm along a trajectory.
+
+:func:`closed_loop` closes the loop between any controller of :mod:`rcac_ros.core`
+(``step``, ``set_applied_torque``, ``theta_hat``, ``E``, ``reset``) and a
+:class:`~rcac_ros.core.Simulator` (RK4, torque held over the period, clipped to the
+effort limit), with what a Monte Carlo campaign varies:
+
+- the true plant apart from the controller's model (a payload attached from the
+  start: :func:`attach_payload`), and plant changes at given times (``events``: a
+  payload grasped at ``t = jump``);
+- Gaussian sensor noise on the measured ``q`` and ``qd``;
+- a measurement delay of a whole number of control periods (the controller sees the
+  sample taken ``delay`` periods ago; the first sample is held until then);
+- the initial estimates ``theta_hat(0)`` (:func:`perturbed_estimates`).
+
+It returns the time series and :func:`run_metrics` summarises them. A run that
+produces NaN/Inf, or whose tracking error exceeds ``error_limit``, stops there and
+is marked diverged.
+"""
+
+import math
+from collections import deque
+
+import numpy as np
+
+from rcac_ros.core import RcacError, Simulator, theta_from_inertia
+
+#: Divergence is checked every this many control periods.
+CHECK_EVERY = 25
+
+
+def attach_payload(model, mass, com, inertia, link=None):
+    """``model`` with a rigid payload added to one link (default: the last).
+
+    The 13 parameters of eq 13 are linear in (mass, first moment, inertia about the
+    frame origin), so the loaded link's parameters are the sum of the link's and the
+    payload's; mass, centre of mass and inertia about it follow from that sum.
+
+    Parameters
+    ----------
+    model : RobotModel
+    mass : float
+        Payload mass, kg (0 returns ``model`` unchanged).
+    com : array_like (3,)
+        Payload centre of mass in the link's frame, m.
+    inertia : array_like (3, 3)
+        Payload inertia about its centre of mass, link axes, kg m^2.
+    link : int, optional
+        Index of the carrying link.
+    """
+    if mass == 0.0:
+        return model
+    i = model.n - 1 if link is None else int(link)
+    th = model.theta()[i] + theta_from_inertia(mass, com, inertia)
+    m = th[0]
+    c = th[1:4] / m
+    # theta[4:10] = m c c^T - I_c off-diagonals and m c_k^2 diagonals, theta[10:13] = I_c diag
+    inertia_c = np.diag(th[10:13])
+    for (a, b), k in (((0, 1), 7), ((0, 2), 8), ((1, 2), 9)):
+        inertia_c[a, b] = inertia_c[b, a] = m * c[a] * c[b] - th[k]
+    masses, coms, inertias = model.mass.copy(), model.com.copy(), model.inertia.copy()
+    masses[i], coms[i], inertias[i] = m, c, inertia_c
+    return model.replace(mass=masses, com=coms, inertia=inertias)
+
+
+def perturbed_estimates(base, scale, relative_error, rng):
+    """``base + relative_error * |scale| * N(0, 1)`` elementwise: an initial-estimate error.
+
+    Parameters
+    ----------
+    base : ndarray (n, 13)
+        The estimates without error (zero as in the paper, or the nominal parameters).
+    scale : ndarray (n, 13)
+        Size of each parameter (the nominal ``theta``).
+    relative_error : float
+        Standard deviation relative to ``|scale|``.
+    rng : numpy.random.Generator
+    """
+    if relative_error == 0.0:
+        return np.array(base, dtype=float)
+    return base + relative_error * np.abs(scale) * rng.standard_normal(np.shape(base))
+
+
+def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
+                noise_q=0.0, noise_qd=0.0, delay=0, rng=None, theta_hat0=None, events=(),
+                substeps=1, error_limit=math.inf, progress=None, progress_every=200):
+    """Close the loop for ``duration`` s at the controller's period ``h``.
+
+    Per period ``k``: the desired motion at ``t = k h``, the (noisy, delayed) measured
+    state, ``tau = controller.step(...)``, the plant integrated over ``h`` with ``tau``
+    held (clipped), and ``controller.set_applied_torque`` with what the arm felt.
+
+    Parameters
+    ----------
+    controller : RecursiveCompositeController or SlotineLiCompositeController
+    trajectory : callable
+        ``t -> (q_d, qd_d, qdd_d)``.
+    duration : float
+        Simulated time, s (``round(duration / h) + 1`` periods).
+    plant : RobotModel, optional
+        The true arm (default: the controller's model).
+    q0, qd0 : array_like (n,), optional
+        Initial state (default: the desired position and velocity at ``t = 0``).
+    noise_q, noise_qd : float or array_like (n,)
+        Standard deviation of the white Gaussian noise on the measured ``q`` (rad) and
+        ``qd`` (rad/s); ``rng`` draws it.
+    delay : int
+        Measurement delay, control periods.
+    rng : numpy.random.Generator, optional
+        Required when a noise level is not zero.
+    theta_hat0 : array_like (n, 13), optional
+        If given, the controller is reset to these estimates first.
+    events : sequence of (float, RobotModel)
+        Plant changes: at ``t >= time`` the plant becomes that model, state carried over.
+    substeps : int
+        RK4 steps of the plant per period.
+    error_limit : float
+        A run whose ``max |q - q_d|`` exceeds it (rad) stops and is marked diverged.
+    progress : str, optional
+        Label of a progress line (none if None).
+
+    Returns
+    -------
+    dict
+        ``t`` (T,), ``q`` (true), ``q_d``, ``tau`` (commanded), ``applied`` (T, n),
+        ``theta_hat`` (T, n, 13) (before each step's update), ``E`` (T,), ``status``
+        (``"ok"``, ``"nonfinite"`` or ``"error_limit"``), ``plant`` (the final true model),
+        ``effort_limit`` (n,). ``T`` is shorter than planned when the run diverged.
+    """
+    from rcac_ros.progress import Progress
+
+    h = controller.h
+    steps = int(round(duration / h)) + 1
+    plant = controller.model if plant is None else plant
+    n = plant.n
+    if theta_hat0 is not None:
+        controller.reset(theta_hat0)
+    q_d0, qd_d0, _ = trajectory(0.0)
+    sim = Simulator(plant, dt=h, q0=q_d0 if q0 is None else q0,
+                    qd0=qd_d0 if qd0 is None else qd0, substeps=substeps)
+    sigma = np.array([np.broadcast_to(np.asarray(noise_q, float), n),
+                      np.broadcast_to(np.asarray(noise_qd, float), n)])
+    noise = None
+    if np.any(sigma != 0.0):
+        noise = rng.standard_normal((steps, 2, n)) * sigma
+    measured = deque(maxlen=int(delay) + 1)
+    pending = sorted(events, key=lambda e: e[0])
+    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
+               tau=np.empty((steps, n)), applied=np.empty((steps, n)),
+               theta_hat=np.empty((steps, n, 13)), E=np.empty(steps))
+    status, done = "ok", steps
+    with np.errstate(all="ignore"), Progress(steps, progress or "",
+                                             enabled=progress is not None) as bar:
+        for k in range(steps):
+            t = k * h
+            while pending and t >= pending[0][0] - 1e-12:
+                loaded = Simulator(pending.pop(0)[1], dt=h, substeps=substeps)
+                loaded.reset(sim.q, sim.qd, t=sim.t)
+                sim = loaded
+            q_d, qd_d, qdd_d = trajectory(t)
+            if noise is None:
+                measured.append((sim.q, sim.qd))
+            else:
+                measured.append((sim.q + noise[k, 0], sim.qd + noise[k, 1]))
+            q_m, qd_m = measured[0]
+            out["theta_hat"][k] = controller.theta_hat
+            out["q"][k], out["q_d"][k] = sim.q, q_d
+            try:
+                tau = controller.step(q_m, qd_m, q_d, qd_d, qdd_d)
+                out["tau"][k] = tau
+                out["E"][k] = controller.E
+                sim.step(tau)
+                out["applied"][k] = sim.applied
+                controller.set_applied_torque(sim.applied)
+            except (RcacError, FloatingPointError):   # NaN/Inf reached the controller or plant
+                status, done = "nonfinite", k + 1
+                for key in ("tau", "applied", "E"):
+                    out[key][k] = np.nan
+                break
+            if k % CHECK_EVERY == CHECK_EVERY - 1 or k == steps - 1:
+                start = max(0, k + 1 - CHECK_EVERY)
+                worst = np.max(np.abs(out["q"][start:k + 1] - out["q_d"][start:k + 1]))
+                if not math.isfinite(worst) or not np.all(np.isfinite(sim.q)):
+                    status, done = "nonfinite", k + 1
+                    break
+                if worst > error_limit:
+                    status, done = "error_limit", k + 1
+                    break
+            if k % progress_every == 0:
+                bar.update(k)
+    if done < steps:
+        out = {key: v[:done] for key, v in out.items()}
+    out.update(status=status, plant=sim.model, effort_limit=sim.effort_limit)
+    return out
+
+
+def run_metrics(run, theta_true=None):
+    """The summary of one run: the figures a campaign's results table holds.
+
+    Parameters
+    ----------
+    run : dict
+        As returned by :func:`closed_loop`.
+    theta_true : ndarray (n, 13), optional
+        True parameters (default: those of the run's final plant).
+
+    Returns
+    -------
+    dict
+        ``rms_error`` (RMS of ``q - q_d`` over joints and time, rad), ``max_error``
+        (rad), ``parameter_error_norm`` (``||theta_hat - theta||`` at the end, all links),
+        ``abs_E_end`` (``|E|`` of the last step), ``max_effort`` (max commanded
+        ``|tau|``), ``max_effort_ratio`` (max ``|tau| / effort_limit``, 0 without limits),
+        ``diverged`` (bool), ``status``, ``t_end`` (s simulated).
+    """
+    theta = run["plant"].theta() if theta_true is None else theta_true
+    with np.errstate(all="ignore"):
+        e = run["q"] - run["q_d"]
+        tau = np.abs(run["tau"])
+        limit = run["effort_limit"]
+        ratio = tau[:, np.isfinite(limit)] / limit[np.isfinite(limit)]
+        return {
+            "rms_error": float(np.sqrt(np.mean(e ** 2))),
+            "max_error": float(np.max(np.abs(e))),
+            "parameter_error_norm": float(np.linalg.norm(run["theta_hat"][-1] - theta)),
+            "abs_E_end": float(abs(run["E"][-1])),
+            "max_effort": float(np.max(tau)),
+            "max_effort_ratio": float(np.max(ratio)) if ratio.size else 0.0,
+            "diverged": run["status"] != "ok",
+            "status": run["status"],
+            "t_end": float(run["t"][-1]),
+        }
