@@ -54,10 +54,13 @@ def attach_payload(model, mass, com, inertia, link=None):
     th = model.theta()[i] + theta_from_inertia(mass, com, inertia)
     m = th[0]
     c = th[1:4] / m
-    # theta[4:10] = m c c^T - I_c off-diagonals and m c_k^2 diagonals, theta[10:13] = I_c diag
-    inertia_c = np.diag(th[10:13])
+    # the inertia about the frame origin, I_o = I_c + m (|c|^2 1 - c c^T), is additive:
+    # diagonal I_o,aa = theta[10 + a] + the two other m c_k^2 (theta[4:7]),
+    # off-diagonal I_o,ab = -theta[7:10]; then back to the combined centre of mass
+    inertia_o = np.diag(th[10:13] + th[4:7].sum() - th[4:7])
     for (a, b), k in (((0, 1), 7), ((0, 2), 8), ((1, 2), 9)):
-        inertia_c[a, b] = inertia_c[b, a] = m * c[a] * c[b] - th[k]
+        inertia_o[a, b] = inertia_o[b, a] = -th[k]
+    inertia_c = inertia_o - m * (c @ c * np.eye(3) - np.outer(c, c))
     masses, coms, inertias = model.mass.copy(), model.com.copy(), model.inertia.copy()
     masses[i], coms[i], inertias[i] = m, c, inertia_c
     return model.replace(mass=masses, com=coms, inertia=inertias)
