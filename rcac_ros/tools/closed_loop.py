@@ -214,19 +214,26 @@ def run_metrics(run, theta_true=None):
         (rad), ``parameter_error_norm`` (``||theta_hat - theta||`` at the end, all links),
         ``abs_E_end`` (``|E|`` of the last step), ``max_effort`` (max commanded
         ``|tau|``), ``max_effort_ratio`` (max ``|tau| / effort_limit``, 0 without limits),
-        ``diverged`` (bool), ``status``, ``t_end`` (s simulated).
+        ``diverged`` (bool), ``status``, ``t_end`` (s simulated). A diverged run is
+        summarised up to its last period where everything was finite.
     """
     theta = run["plant"].theta() if theta_true is None else theta_true
     with np.errstate(all="ignore"):
         e = run["q"] - run["q_d"]
         tau = np.abs(run["tau"])
+        finite = (np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(tau), axis=1)
+                  & np.isfinite(run["E"])
+                  & np.all(np.isfinite(run["theta_hat"]), axis=(1, 2)))
+        # a run that produced NaN/Inf is summarised up to its last finite period
+        last = int(np.nonzero(finite)[0][-1]) + 1 if finite.any() else 1
+        e, tau = e[:last], tau[:last]
         limit = run["effort_limit"]
         ratio = tau[:, np.isfinite(limit)] / limit[np.isfinite(limit)]
         return {
             "rms_error": float(np.sqrt(np.mean(e ** 2))),
             "max_error": float(np.max(np.abs(e))),
-            "parameter_error_norm": float(np.linalg.norm(run["theta_hat"][-1] - theta)),
-            "abs_E_end": float(abs(run["E"][-1])),
+            "parameter_error_norm": float(np.linalg.norm(run["theta_hat"][last - 1] - theta)),
+            "abs_E_end": float(abs(run["E"][last - 1])),
             "max_effort": float(np.max(tau)),
             "max_effort_ratio": float(np.max(ratio)) if ratio.size else 0.0,
             "diverged": run["status"] != "ok",

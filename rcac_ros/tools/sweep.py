@@ -26,6 +26,7 @@ import os
 import sys
 import tempfile
 import time
+import uuid
 
 import numpy as np
 
@@ -358,8 +359,9 @@ def distribute(client, campaign, store, chunks, bar):
     """Submit the chunks to ``client`` and write each one as it completes."""
     from distributed import as_completed
     client.register_plugin(WarmUp(campaign), name="rcac-sweep-warm-up")
+    token = uuid.uuid4().hex[:12]
     futures = [client.submit(run_chunk, campaign, indices, pure=False,
-                             key=f"rcac-sweep-{indices[0]}-{len(indices)}-{os.getpid()}")
+                             key=f"rcac-sweep-{token}-{indices[0]}-{len(indices)}")
                for indices in chunks]
     for future in as_completed(futures):
         rows = future.result()
