@@ -125,7 +125,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     Returns
     -------
     dict
-        ``t`` (T,), ``q`` (true), ``q_d``, ``tau`` (commanded), ``applied`` (T, n),
+        ``t`` (T,), ``q``, ``qd`` (true), ``q_d``, ``tau`` (commanded), ``applied`` (T, n),
         ``theta_hat`` (T, n, 13) (before each step's update), ``E`` (T,), ``status``
         (``"ok"``, ``"nonfinite"`` or ``"error_limit"``), ``plant`` (the final true model),
         ``effort_limit`` (n,). ``T`` is shorter than planned when the run diverged.
@@ -148,7 +148,8 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
         noise = rng.standard_normal((steps, 2, n)) * sigma
     measured = deque(maxlen=int(delay) + 1)
     pending = sorted(events, key=lambda e: e[0])
-    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
+    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), qd=np.empty((steps, n)),
+               q_d=np.empty((steps, n)),
                tau=np.empty((steps, n)), applied=np.empty((steps, n)),
                theta_hat=np.empty((steps, n, 13)), E=np.empty(steps))
     status, done = "ok", steps
@@ -167,7 +168,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                 measured.append((sim.q + noise[k, 0], sim.qd + noise[k, 1]))
             q_m, qd_m = measured[0]
             out["theta_hat"][k] = controller.theta_hat
-            out["q"][k], out["q_d"][k] = sim.q, q_d
+            out["q"][k], out["qd"][k], out["q_d"][k] = sim.q, sim.qd, q_d
             try:
                 tau = controller.step(q_m, qd_m, q_d, qd_d, qdd_d)
                 out["tau"][k] = tau

@@ -1,0 +1,272 @@
+"""rcac sweep without Dask: the closed loop against its predecessors, campaign files,
+reproducibility, the command line's errors, Ctrl-C and --resume."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import yaml
+
+from rcac_ros import cli
+from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, SinusoidTrajectory, \
+    css_arm
+from rcac_ros.core.model import PAPER_Q0
+from rcac_ros.tools import campaign as cp
+from rcac_ros.tools.closed_loop import attach_payload, closed_loop, run_metrics
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+#: A small campaign on the paper's arm: 20 runs of 0.5 s, every kind of distribution.
+SMALL = {
+    "name": "small", "seed": 11, "samples": 10,
+    "scenario": {"model": "css_arm", "duration": 0.5},
+    "vary": {"law": {"grid": ["direct", "composite"]},
+             "K_D": {"loguniform": {"low": 5e3, "high": 2e4}},
+             "P": {"normal": {"mean": 100.0, "std": 30.0, "low": 10.0}},
+             "noise_q": {"uniform": {"low": 0.0, "high": 1e-5}},
+             "delay": {"choice": [0, 1, 3]},
+             "payload_mass": {"uniform": {"low": 0.0, "high": 100.0}},
+             "payload_com": {"normal": {"mean": [0.0, 0.5, 1.0], "std": 0.1}},
+             "estimate_error": {"uniform": {"low": 0.0, "high": 0.3}}},
+}
+
+
+class Recorder:
+    """Wraps a controller and keeps what it was given (the measured state)."""
+
+    def __init__(self, ctrl):
+        self.ctrl, self.seen = ctrl, []
+
+    def __getattr__(self, name):
+        return getattr(self.ctrl, name)
+
+    def step(self, q, qd, *desired):
+        self.seen.append((np.array(q), np.array(qd)))
+        return self.ctrl.step(q, qd, *desired)
+
+
+def test_closed_loop_is_experiment_simulate():
+    """The paper's experiment loop and closed_loop without noise or delay: the same run."""
+    from rcac_ros.experiment import PAPER_GAINS, simulate
+    model = css_arm()
+    q0 = np.array(PAPER_Q0)
+    traj = PaperTrajectory(q0, reading="position")          # a large initial error
+    old = simulate(model, RecursiveCompositeController(model, **PAPER_GAINS), traj, q0, 0.6)
+    new = closed_loop(RecursiveCompositeController(model, **PAPER_GAINS), traj, 0.6, q0=q0,
+                      qd0=np.zeros(7))
+    for key in ("q", "q_d", "tau", "theta_hat", "E"):
+        np.testing.assert_array_equal(new[key], old[key], err_msg=key)
+    assert new["status"] == "ok"
+
+
+def test_closed_loop_is_payload_demo_simulate():
+    """payload-demo's grasp at t = jump is closed_loop's plant event."""
+    from rcac_ros.payload_demo import gains_for, simulate, with_payload
+    model = css_arm(gravity=(0.0, 0.0, -9.81))
+    loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
+    traj = SinusoidTrajectory(np.array(PAPER_Q0), 0.1, 0.3)
+    gains = gains_for(model, kappa=50.0, Lambda=5.0, rho=10.0, gamma=1.0, lam=10.0, h=0.002)
+    old = simulate(model, loaded, RecursiveCompositeController(model, **gains), traj, 0.4, 0.2)
+    new = closed_loop(RecursiveCompositeController(model, **gains), traj, 0.4,
+                      events=((0.2, loaded),))
+    for key in ("q", "q_d", "tau", "E"):
+        np.testing.assert_array_equal(new[key], old[key], err_msg=key)
+    np.testing.assert_array_equal(new["theta_hat"][:, -1], old["theta_last"])
+    assert new["plant"] is loaded
+
+
+def test_attach_payload_matches_parallel_axis():
+    """Parameter additivity (attach_payload) against payload-demo's parallel-axis sums."""
+    from rcac_ros.payload_demo import FLANGE, with_payload
+    model = css_arm()
+    for mass, com, radius in ((2.0, (0.03, -0.02, 0.08), 0.05), (80.0, (1.0, 0.5, -0.3), 0.4)):
+        ref = with_payload(model, mass, com, radius)
+        got = attach_payload(model, mass, np.add(FLANGE, com), 0.4 * mass * radius ** 2 *
+                             np.eye(3))
+        np.testing.assert_allclose(got.mass, ref.mass, rtol=1e-14)
+        np.testing.assert_allclose(got.com, ref.com, atol=1e-14)
+        np.testing.assert_allclose(got.inertia, ref.inertia, atol=1e-12)
+
+
+def test_delay_and_noise_reach_the_controller():
+    """The controller sees the true state of ``delay`` periods earlier plus N(0, sigma)."""
+    model = css_arm()
+    traj = PaperTrajectory(np.array(PAPER_Q0))
+    rec = Recorder(RecursiveCompositeController(model))
+    run = closed_loop(rec, traj, 2.0, delay=3)
+    seen = np.array([s[0] for s in rec.seen])
+    np.testing.assert_array_equal(seen[3:], run["q"][:-3])
+    np.testing.assert_array_equal(seen[:3], np.repeat(run["q"][:1], 3, axis=0))
+    rec = Recorder(RecursiveCompositeController(model))
+    run = closed_loop(rec, traj, 2.0, noise_q=1e-3, noise_qd=[2e-3] * 7,
+                      rng=np.random.default_rng(5))
+    dq = np.array([s[0] for s in rec.seen]) - run["q"]
+    dqd = np.array([s[1] for s in rec.seen]) - run["qd"]
+    for d, sigma in ((dq, 1e-3), (dqd, 2e-3)):                 # 7007 samples each
+        assert abs(d.std() / sigma - 1.0) < 0.03 and abs(d.mean()) < 0.05 * sigma
+    assert abs(np.corrcoef(dq.ravel(), dqd.ravel())[0, 1]) < 0.05
+
+
+def test_divergence_stops_the_run():
+    """A gain far beyond stability: the run stops at the error limit and says so."""
+    model = css_arm()
+    traj = PaperTrajectory(np.array(PAPER_Q0), reading="position")
+    run = closed_loop(RecursiveCompositeController(model, K_D=1e4, Lambda=1e4), traj, 2.0,
+                      q0=np.array(PAPER_Q0), error_limit=0.5)
+    m = run_metrics(run)
+    assert m["diverged"] and m["status"] in ("error_limit", "nonfinite")
+    assert m["t_end"] < 2.0 and len(run["t"]) < 1001
+
+
+def test_runs_reproducible_from_campaign_and_index():
+    """Run i's inputs and row do not depend on what ran before it."""
+    c = cp.validate(SMALL)
+    assert cp.run_count(c) == 20
+    forward = [cp.sample(c, i) for i in range(20)]
+    assert [cp.sample(c, i) for i in reversed(range(20))] == forward[::-1]
+    assert {s["law"] for s in forward[0::2]} == {"direct"}        # grid cell = i % 2
+    assert len({s["K_D"] for s in forward}) == 20
+    a = cp.simulate(c, 7)
+    cp.simulate(c, 3)
+    b = cp.simulate(c, 7)
+    a.pop("wall_time_s"), b.pop("wall_time_s")
+    assert a == b
+    # the payload really is in the plant: the row's parameter error is against it
+    inputs, ctrl, kw = cp.setup(c, 7)
+    assert kw["plant"].mass[-1] == pytest.approx(css_arm().mass[-1] + inputs["payload_mass"])
+
+
+def test_shipped_campaigns_validate_and_build():
+    for name, model, runs in (("robustness", "css_arm", 400), ("payload", "panda", 300)):
+        c = cp.load(os.path.join(ROOT, "campaigns", f"{name}.yaml"))
+        assert c["scenario"]["model"] == model and cp.run_count(c) == runs
+        if model == "panda":
+            from rcac_ros.payload_demo import find_panda_urdf
+            if find_panda_urdf() is None:
+                pytest.skip("example-robot-data's panda.urdf not installed")
+        inputs, ctrl, kw = cp.setup(c, 0)
+        assert ctrl.h == 0.002
+
+
+@pytest.mark.parametrize("change, key", [
+    (lambda d: d.update(colour="red"), "colour: unknown key"),
+    (lambda d: d["scenario"].update(modle="css_arm"), "scenario.modle: unknown key"),
+    (lambda d: d["vary"].update(K_D={"normal": {"mean": 1e4, "std": -1.0}}),
+     "vary.K_D.normal.std: must be >= 0"),
+    (lambda d: d["vary"].update(delay={"grid": []}), "vary.delay.grid: empty list"),
+    (lambda d: d.update(samples="ten"), "samples: expected a number"),
+    (lambda d: d["vary"].update(noise_q={"gaussian": {"mean": 0, "std": 1}}),
+     "vary.noise_q.gaussian: unknown distribution"),
+    (lambda d: d["vary"].update(delay={"uniform": {"low": 0, "high": 3}}),
+     "vary.delay.uniform: delay takes choice or grid"),
+    (lambda d: d["vary"].update(payload_com={"choice": [[0, 0]]}),
+     "vary.payload_com.choice[0]: expected a list of 3 numbers"),
+    (lambda d: d["vary"].update(law={"choice": ["pid"]}), "vary.law.choice[0]: expected one"),
+    (lambda d: d["scenario"]["gains"].update(P=[1, 2]), "scenario.gains.P: expected a number"),
+])
+def test_bad_campaign_one_line_exit_2(tmp_path, capsys, change, key):
+    doc = yaml.safe_load(yaml.safe_dump(dict(SMALL, scenario=dict(SMALL["scenario"],
+                                                                  gains={"K_D": 1e4}))))
+    change(doc)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    assert cli.main(["sweep", str(path), "--out", str(tmp_path / "out"), "--workers", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"rcac sweep: error: {key}"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_yaml_and_bad_numbers(tmp_path, capsys):
+    path = tmp_path / "broken.yaml"
+    path.write_text("seed: [1, 2\n")
+    assert cli.main(["sweep", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not valid YAML" in err
+    for args in (["--samples", "0"], ["--duration", "-1"], ["--workers", "x"],
+                 ["--scheduler", "localhost"]):
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["sweep", str(path), "--out", "o"] + args)
+        assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sweep", "rerun", "results", "-3"])
+    assert exc.value.code == 2
+
+
+def assert_same_row(got, ref):
+    """Numbers equal to 1e-12 (relative), everything else equal."""
+    for k, v in ref.items():
+        if isinstance(v, float):
+            assert got[k] == pytest.approx(v, rel=1e-12, abs=0.0, nan_ok=True), k
+        else:
+            assert got[k] == v, k
+
+
+def rows(path):
+    t = pq.read_table(path).drop(["wall_time_s"]).to_pandas()
+    return t.sort_values("run").reset_index(drop=True)
+
+
+def test_ctrl_c_keeps_runs_and_resume_completes(tmp_path):
+    """SIGINT mid-campaign keeps the finished runs; --resume runs the rest once each."""
+    doc = dict(SMALL, samples=15, scenario=dict(SMALL["scenario"], duration=3.0))
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    cmd = [sys.executable, "-m", "rcac_ros.cli", "sweep", str(path), "--out", str(out),
+           "--workers", "0", "--quiet"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    deadline = time.monotonic() + 120
+    while len(list((out / "parts").glob("*.parquet"))) < 5 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    kept = rows(out / "results.parquet")
+    assert 5 <= len(kept) < 30 and "--resume continues" in err
+    again = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert again.returncode == 2 and "--resume" in again.stderr       # never silently appends
+    done = subprocess.run(cmd + ["--resume"], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    full = rows(out / "results.parquet")
+    assert list(full["run"]) == list(range(30))
+    assert not list((out / "parts").glob("*"))
+    # the kept runs were not rerun, and every row is the one run i gives alone
+    c = cp.load(path)
+    for i in (0, 29):
+        ref = cp.simulate(c, i)
+        ref.pop("wall_time_s")
+        assert_same_row(full.iloc[i].to_dict(), ref)
+    pd = pytest.importorskip("pandas")
+    pd.testing.assert_frame_equal(full.iloc[kept["run"]].reset_index(drop=True), kept)
+
+
+def test_report_and_rerun(tmp_path, capsys):
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(SMALL))
+    out = tmp_path / "out"
+    assert cli.main(["sweep", str(path), "--out", str(out), "--workers", "0", "--quiet"]) == 0
+    capsys.readouterr()
+    assert cli.main(["sweep", "report", str(out / "results.parquet"), "--worst", "3"]) == 0
+    text = capsys.readouterr().out
+    assert "20 of 20 runs" in text and "Spearman" in text and "K_D" in text
+    assert (out / "report.png").stat().st_size > 10000
+    df = rows(out / "results.parquet")
+    # the sensitivity printed is the rank correlation (an independent computation: numpy ranks)
+    ok = df[~df["diverged"]]
+    rank = lambda v: np.argsort(np.argsort(v))  # noqa: E731
+    rho = np.corrcoef(rank(ok["K_D"].to_numpy()), rank(ok["rms_error"].to_numpy()))[0, 1]
+    line = next(s for s in text.splitlines() if s.strip().startswith("K_D "))
+    assert float(line.split()[1]) == pytest.approx(rho, abs=1e-3)
+    assert cli.main(["sweep", "rerun", str(out), "13"]) == 0
+    text = capsys.readouterr().out
+    assert "inputs identical, largest relative metric difference 0" in text
+    assert (out / "rerun_13.png").exists()
+    assert cli.main(["sweep", "rerun", str(out), "20"]) == 2
