@@ -484,8 +484,8 @@ def rerun(path, index, plot=None):
         raise ConfigError(f"INDEX: the campaign has {cp.run_count(campaign)} runs, got {index}")
     row, result = cp.simulate(campaign, index, keep_run=True)
     stored = df[df["run"] == index]
-    print(f"run {index}: " + ", ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}"
-                                      for k, v in row.items()))
+    cells = [f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()]
+    print(f"run {index}: " + ", ".join(cells))
     if len(stored):
         old = stored.iloc[0]
         diffs = [abs(row[m] - old[m]) / max(abs(old[m]), 1e-300) for m in METRICS
