@@ -405,7 +405,8 @@ def report(path, worst=10, plot=None):
         sel = df["law"] == law
         print(f"  {law:11s} {int(div[sel].sum()):5d} / {int(sel.sum()):5d}  "
               f"({100.0 * div[sel].mean():.1f} %)")
-    print("\nmetric distributions per law (median [5 %, 95 %] max; finished runs):")
+    print("\nmetric distributions per law (median [5 %, 95 %] max; runs that did not "
+          "diverge):")
     for m in METRICS:
         for law in laws:
             v = df.loc[(df["law"] == law) & ~div, m]
@@ -422,11 +423,14 @@ def report(path, worst=10, plot=None):
     with pd.option_context("display.width", 200, "display.max_columns", 30,
                            "display.float_format", "{:.4g}".format):
         print(order[cols].head(worst).to_string(index=False))
-    print("\nsensitivity of the RMS error (Spearman rank correlation; finished runs):")
+    print("\nsensitivity (Spearman rank correlation) of the RMS error of the runs that did "
+          "not diverge, per law, and of divergence (0/1, all runs):")
     ok = df[~div]
     sens = {"all": sensitivity(ok, varied)}
     for law in laws:
         sens[law] = sensitivity(ok[ok["law"] == law], varied)
+    if div.any():
+        sens["diverged"] = sensitivity(df.assign(_div=div.astype(float)), varied, "_div")
     names = sorted({c for s in sens.values() for c in s}, key=lambda c: -abs(
         sens["all"].get(c, 0.0)))
     print(f"  {'input':22s}" + "".join(f"{k:>12s}" for k in sens))
