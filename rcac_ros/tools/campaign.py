@@ -41,6 +41,8 @@ from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_e
                                         run_metrics)
 
 LAWS = ("direct", "composite", "slotine_li")
+#: The columns that differ from one execution of a run to the next (everything else is equal).
+TIMING = ("wall_time_s", "cpu_time_s")
 MODELS = ("css_arm", "panda")
 DISTRIBUTIONS = ("normal", "uniform", "loguniform", "choice", "grid")
 
@@ -439,13 +441,14 @@ def setup(campaign, index):
 
 def simulate(campaign, index, keep_run=False):
     """Run ``index`` of a validated campaign: its results row (and the time series)."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     inputs, controller, kwargs = setup(campaign, index)
     run = closed_loop(controller, **kwargs)
     row = {"run": int(index)}
     row.update(input_columns(inputs))
     row.update(run_metrics(run))
     row["wall_time_s"] = time.perf_counter() - t0
+    row["cpu_time_s"] = time.process_time() - c0
     return (row, run) if keep_run else row
 
 

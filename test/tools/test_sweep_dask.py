@@ -88,7 +88,7 @@ def cluster(tmp_path):
 
 
 def table(path):
-    return pq.read_table(path).drop(["wall_time_s"]).to_pandas()
+    return pq.read_table(path).drop(list(cp.TIMING)).to_pandas()
 
 
 def assert_same_tables(a, b):
@@ -139,8 +139,26 @@ def test_killed_worker_loses_and_duplicates_nothing(tmp_path, cluster):
     campaign = cp.load(path)
     for i in (0, 7, 19):                                     # and each is the run itself
         ref = cp.simulate(campaign, i)
-        ref.pop("wall_time_s")
+        for k in cp.TIMING:
+            ref.pop(k)
         row = got.iloc[i].to_dict()
         for k, v in ref.items():
             assert row[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
     assert "Dask dashboard" in stderr and "20 runs in" in stdout
+
+
+def test_bench_reports_what_it_measured(tmp_path, capsys):
+    """--bench on a tiny campaign: its figures are consistent with one another."""
+    from rcac_ros import cli
+    assert cli.main(["sweep", "--bench", "--samples", "4", "--duration", "0.2", "--out",
+                     str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    figures = json.loads((tmp_path / "bench.json").read_text())
+    assert figures["runs"] == 4 and figures["duration_s"] == 0.2
+    for key in ("w1", "w2", "w1_chunk1"):
+        f = figures[key]
+        assert f["runs_per_s"] == pytest.approx(4 / f["wall_s"])
+        assert max(f["rounds_runs_per_s"]) == pytest.approx(f["runs_per_s"])
+    assert figures["efficiency_2_workers"] == pytest.approx(
+        figures["w2"]["runs_per_s"] / (2 * figures["w1"]["runs_per_s"]))
+    assert f"{100 * figures['efficiency_2_workers']:.1f} %" in text
