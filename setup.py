@@ -24,7 +24,7 @@ setup(
     extras_require={"test": ["pytest"]},
     entry_points={
         "console_scripts": [
-            "rcac = rcac_ros.cli:main",
+            "rcac = rcac_ros.tools.cli:main",
             "controller = rcac_ros.nodes.controller_node:main",
             "simulator = rcac_ros.nodes.simulator_node:main",
         ],

@@ -4,7 +4,7 @@ Model (constant) and state (per step) are kept apart, as in Pinocchio:
 :class:`RobotModel` is immutable; controllers and the simulator own their state.
 """
 
-from .exceptions import ConfigError, GainError, InputError, ModelError, RcacError
+from rcac_ros.errors import ConfigError, GainError, InputError, ModelError, RcacError
 from .model import PARAMETER_NAMES, RobotModel, css_arm, theta_from_inertia
 from .aba import forward_dynamics
 from .crba import mass_matrix

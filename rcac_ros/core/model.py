@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 from ._validate import as_array, joint_values
-from .exceptions import ConfigError, ModelError
+from rcac_ros.errors import ConfigError, ModelError
 
 #: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, NOTES.md 2).
 PARAMETER_NAMES = (

@@ -5,7 +5,7 @@ from numba import njit
 
 from ._validate import as_array, joint_values, scalar
 from .aba import aba_kernel
-from .exceptions import InputError
+from rcac_ros.errors import InputError
 from .spatial import model_rows
 
 

@@ -28,7 +28,7 @@ import os
 
 import numpy as np
 
-from .exceptions import ConfigError, ModelError
+from rcac_ros.errors import ConfigError, ModelError
 from .model import RobotModel, check_inertia
 
 #: Joint types that become a degree of freedom of the chain.

@@ -6,7 +6,7 @@ message. Two timing modes:
 * ``lockstep`` (default): one step per valid JointState, the trajectory time taken
   from the state's stamp (deterministic with the simulator node);
 * ``timer``: ``rate`` Hz on the latest valid state (real arms). On the steady clock the
-  ticks keep absolute deadlines (:class:`rcac_ros.nodes.common.DeadlineLoop`: a late tick
+  ticks keep absolute deadlines (:class:`rcac_ros.nodes.base.DeadlineLoop`: a late tick
   is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
 
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
@@ -27,15 +27,17 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiA
 from trajectory_msgs.msg import JointTrajectory
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.core.trajectory import PaperTrajectory
-from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
-                                   effort_layout, per_joint, Percentiles, positive, QOS,
-                                   QOS_MONITOR, RcacNode, run, stamp_ns)
-from rcac_ros.nodes.trajectory import ActiveTrajectory, parse_trajectory, TrajectoryRejected
+from rcac_ros.nodes.base import (declare, declare_joints, declare_model, effort_layout,
+                                 per_joint, Percentiles, positive, RcacNode, run, stamp_ns)
+from rcac_ros.nodes.pacing import DeadlineLoop
+from rcac_ros.nodes.trajectory_msg import ActiveTrajectory, parse_trajectory, TrajectoryRejected
 
 BIG = 1e12
+QOS = topics.qos()
+QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
 
 
 class ControllerNode(RcacNode):

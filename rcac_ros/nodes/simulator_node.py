@@ -7,7 +7,7 @@ Two modes:
   steps when the effort answering state k arrives, or after ``lockstep_timeout``
   (the previous effort held, a miss counted). Deterministic on a loaded machine.
 * ``realtime``: free-running every ``dt`` on absolute deadlines of the steady clock
-  (:class:`rcac_ros.nodes.common.DeadlineLoop`: a late step is caught up, not skipped),
+  (:class:`rcac_ros.nodes.base.DeadlineLoop`: a late step is caught up, not skipped),
   the latest effort held; never paced on ROS time (see ROS_NOTES).
 
 Parameters are documented in ``config/simulator.yaml``.
@@ -27,15 +27,17 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.core.simulator import Simulator
-from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
-                                   effort_tag, per_joint, positive, QOS, QOS_MONITOR, run,
-                                   RcacNode)
+from rcac_ros.nodes.base import (declare, declare_joints, declare_model, per_joint, positive,
+                                 RcacNode, run)
+from rcac_ros.nodes.pacing import DeadlineLoop
 
 NS = 1_000_000_000
 BIG_NOISE = 1e6
+QOS = topics.qos()
+QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
 
 
 class SimulatorNode(RcacNode):
@@ -232,7 +234,7 @@ class SimulatorNode(RcacNode):
             return
         if not self.started or self.finished or self._waiting_since is None:
             return
-        tag = effort_tag(msg)
+        tag = topics.effort_tag(msg.layout.dim[0].label) if msg.layout.dim else None
         if tag is not None and tag[0] == "watchdog":
             self.ignored_watchdog += 1
             return

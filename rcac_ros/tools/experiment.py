@@ -14,7 +14,7 @@ import numpy as np
 
 from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core.model import PAPER_Q0
-from rcac_ros.progress import Progress
+from rcac_ros.tools.progress import Progress
 
 #: The paper's gains (Section 4) and the filter bandwidth it leaves open.
 PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
@@ -85,7 +85,7 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
 
 def write_outputs(model, runs, report, out_dir, settings):
     """metrics.json, tracking_errors.png and parameter_estimates.png into ``out_dir``."""
-    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=settings), f, indent=2)

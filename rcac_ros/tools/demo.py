@@ -20,8 +20,8 @@ import sys
 import time
 
 from rcac_ros import topics
-from rcac_ros.bag import BagRecorder, format_counts, init_context, StopFlag
-from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros.tools.record import BagRecorder, format_counts, init_context, StopFlag
+from rcac_ros.errors import ConfigError, RcacError
 
 #: node -> (executable, module, params file)
 NODES = {
@@ -42,8 +42,8 @@ def config_file(name):
         candidates.append(os.path.join(get_package_share_directory("rcac_ros"), "config", name))
     except Exception:  # noqa: BLE001 - not installed with colcon: use the source tree
         pass
-    here = os.path.dirname(os.path.abspath(__file__))
-    candidates.append(os.path.join(os.path.dirname(here), "config", name))   # source tree
+    package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))     # rcac_ros/
+    candidates.append(os.path.join(os.path.dirname(package), "config", name))  # source tree
     candidates.append(os.path.join(sys.prefix, "share", "rcac_ros", "config", name))  # pip
     for path in candidates:
         if os.path.isfile(path):
@@ -315,7 +315,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    from rcac_ros.inspect_bag import format_metrics, format_summary, inspect
+    from rcac_ros.tools.inspect_bag import format_metrics, format_summary, inspect
 
     out = os.path.abspath(args.out)
     try:
@@ -343,8 +343,3 @@ def run(args):
         print(f"  figure   {path}")
     print(f"  logs     {os.path.join(out, 'logs')}")
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["demo"] + sys.argv[1:]))

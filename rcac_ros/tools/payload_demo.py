@@ -31,8 +31,8 @@ import numpy as np
 from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory)
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.progress import Progress
-from rcac_ros.robots import example_robot_urdf
+from rcac_ros.tools.progress import Progress
+from rcac_ros.tools.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
 READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
@@ -216,8 +216,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
 
 def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
     """metrics.json and the three figures into ``out_dir``."""
-    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
-    import matplotlib.pyplot as plt     # rcac_ros.plots selected the Agg backend
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
+    import matplotlib.pyplot as plt     # rcac_ros.tools.plots selected the Agg backend
 
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:

@@ -14,12 +14,11 @@ state received before them.
 
 import json
 import os
-import sys
 
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 
 #: seconds at the end of the run for ``rms_tracking_error_last_5s``
 LAST_WINDOW = 5.0
@@ -246,7 +245,7 @@ class Timeline:
 
 
 def effort_tags(td):
-    """Lockstep tags of effort commands (see ``rcac_ros.nodes.common.effort_layout``).
+    """Lockstep tags of effort commands (see ``rcac_ros.topics.effort_label``).
 
     Returns
     -------
@@ -258,14 +257,12 @@ def effort_tags(td):
     watchdog = np.zeros(td.count, dtype=bool)
     stamp = np.full(td.count, np.nan)
     for k, label in enumerate(td.labels):
-        if label.endswith(" watchdog"):
+        tag = topics.effort_tag(label)
+        if tag is not None and tag[0] == "watchdog":
             watchdog[k] = True
-        elif " stamp=" in label:
-            sec, _, nsec = label.split(" stamp=", 1)[1].partition(".")
-            try:
-                stamp[k] = int(sec) + 1e-9 * int(nsec)
-            except ValueError:
-                pass
+        elif tag is not None:
+            sec, nsec = divmod(tag[1], 1_000_000_000)
+            stamp[k] = sec + 1e-9 * nsec     # as _stamp(header): matched to state stamps
     return watchdog, stamp
 
 
@@ -491,7 +488,7 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
     list of str
         Paths written.
     """
-    from rcac_ros import plots
+    from rcac_ros.tools import plots
 
     os.makedirs(out_dir, exist_ok=True)
     written = []
@@ -585,8 +582,3 @@ def run(args):
     if result["metrics_path"]:
         print(f"wrote {result['metrics_path']}")
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["inspect"] + sys.argv[1:]))

@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter  # noqa: E402  (after the importorskip in 
 from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
-from rcac_ros.core.exceptions import ConfigError  # noqa: E402
+from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
 
 H_NS = 2_000_000

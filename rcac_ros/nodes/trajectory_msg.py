@@ -13,7 +13,7 @@ Pure numpy: no rclpy types beyond reading the message fields.
 
 import numpy as np
 
-from rcac_ros.core.exceptions import InputError
+from rcac_ros.errors import InputError
 
 
 class TrajectoryRejected(InputError):

@@ -13,11 +13,10 @@ import importlib
 import os
 import signal
 import struct
-import sys
 import time
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 
 #: recorded topics (relative names are resolved against the controller node) -> message type
 TOPIC_TYPES = (
@@ -115,7 +114,7 @@ class BagRecorder:
     def __init__(self, path, context, storage="mcap", controller_node=topics.CONTROLLER_NODE,
                  depth=1000, node_name="rcac_recorder"):
         from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.qos import ReliabilityPolicy
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import get_typestore, Stores
 
@@ -127,12 +126,8 @@ class BagRecorder:
         os.makedirs(parent, exist_ok=True)
         self.path = os.path.abspath(path)
         self._qos = {
-            ReliabilityPolicy.RELIABLE: QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=depth,
-                reliability=ReliabilityPolicy.RELIABLE),
-            ReliabilityPolicy.BEST_EFFORT: QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=depth,
-                reliability=ReliabilityPolicy.BEST_EFFORT),
+            ReliabilityPolicy.RELIABLE: topics.qos(depth),
+            ReliabilityPolicy.BEST_EFFORT: topics.qos(depth, reliable=False),
         }
         self._best_effort = ReliabilityPolicy.BEST_EFFORT
         typestore = get_typestore(Stores.ROS2_JAZZY)
@@ -377,8 +372,3 @@ def run(args):
     print(f"rcac record: closed {recorder.path}: {recorder.total} messages", flush=True)
     print(format_counts(recorder), flush=True)
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["record"] + sys.argv[1:]))

@@ -28,8 +28,8 @@ import time
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.bag import init_context, StopFlag
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.tools.record import init_context, StopFlag
+from rcac_ros.errors import ConfigError
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
 #: delay); free-running, the effort lands up to one period late and that loop diverges within
@@ -51,12 +51,10 @@ class Probe:
     def __init__(self, context, depth=1000):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                         reliability=ReliabilityPolicy.RELIABLE)
+        qos = topics.qos(depth)
         self.node = Node("rcac_bench_probe", context=context)
         self.recording = False
         self.states = []     # (source, receive) ns
@@ -227,7 +225,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
     import domain_coordinator
     from rclpy.executors import SingleThreadedExecutor
 
-    from rcac_ros.demo import Child, child_env, NodeFailed, node_command
+    from rcac_ros.tools.demo import Child, child_env, NodeFailed, node_command
 
     if not duration > 0.0:
         raise ConfigError(f"duration: must be > 0 s, got {duration}")
@@ -309,7 +307,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
 
 
 def _main(argv):
-    """``python -m rcac_ros.ros_bench [SECONDS [JSON [timer|on_state [NAME=VALUE ...]]]]``."""
+    """``python -m rcac_ros.tools.ros_bench [SECONDS [JSON [timer|on_state [NAME=VALUE]...]]]``."""
     secs = float(argv[0]) if argv else 60.0
     json_path = argv[1] if len(argv) > 1 and argv[1] else None
     mode = argv[2] if len(argv) > 2 else "timer"

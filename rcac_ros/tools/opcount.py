@@ -96,7 +96,7 @@ def count_step(kind="rcac", n_links=7):
         A multiple of 7 (the CSS arm repeated).
     """
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    out = subprocess.run([sys.executable, "-m", "rcac_ros.core.opcount", kind, str(n_links)],
+    out = subprocess.run([sys.executable, "-m", "rcac_ros.tools.opcount", kind, str(n_links)],
                          env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
