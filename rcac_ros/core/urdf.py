@@ -29,7 +29,7 @@ import os
 import numpy as np
 
 from rcac_ros.errors import ConfigError, ModelError
-from .model import RobotModel, check_inertia
+from .model import check_inertia, RobotModel
 
 #: Joint types that become a degree of freedom of the chain.
 MOVING_TYPES = ("revolute", "continuous")

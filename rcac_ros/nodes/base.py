@@ -5,7 +5,6 @@ warnings and the ``main`` wrapper (clean start-up refusal, clean shutdown).
 """
 
 import math
-import os
 import signal
 import sys
 import time
@@ -22,11 +21,11 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import MultiArrayDimension, MultiArrayLayout
 
 from rcac_ros import topics
+from rcac_ros.core.load import load_model
+from rcac_ros.core.model import PRESETS
+from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.pacing import spin_node_once
-
-#: model presets accepted by the ``model`` parameter
-PRESETS = ("css_arm",)
 
 
 # ------------------------------------------------------------------ parameters
@@ -111,7 +110,6 @@ def declare_model(node):
     ConfigError
         Naming the parameter whose value could not be turned into a model.
     """
-    from rcac_ros.core.model import RobotModel, css_arm
     name = declare(node, "model", "css_arm",
                    f"robot model: a preset ({', '.join(PRESETS)}) or a YAML model file")
     urdf = declare(node, "robot_description", "",
@@ -120,26 +118,16 @@ def declare_model(node):
     tip = declare(node, "tip_link", "", "URDF chain end (empty: the single leaf)")
     gravity = declare(node, "gravity", Parameter.Type.DOUBLE_ARRAY,
                       "gravity in the base frame, m/s^2 (unset: the model's own)")
-    if urdf:
-        try:
-            model = RobotModel.from_urdf(urdf, base_link=base or None, tip_link=tip or None)
-        except RcacError as err:
-            raise ConfigError(f"robot_description: {err}") from None
-        except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
-            raise ConfigError(f"robot_description: cannot load URDF ({_first_line(err)})") \
-                from None
-    elif name == "css_arm":
-        model = css_arm()
-    elif name.endswith((".yaml", ".yml")) or os.path.sep in name:
-        if not os.path.isfile(name):
-            raise ConfigError(f"model: no such file {name!r}")
-        try:
-            model = RobotModel.from_yaml(name)
-        except RcacError as err:
-            raise ConfigError(f"model: {err}") from None
-    else:
-        raise ConfigError(f"model: unknown model {name!r} (presets: {', '.join(PRESETS)}, "
-                          "or a path to a .yaml model file)")
+    which = "robot_description" if urdf else "model"
+    try:
+        if urdf:
+            model = model_from_urdf(urdf, base_link=base or None, tip_link=tip or None)
+        else:
+            model = load_model(name)
+    except RcacError as err:
+        raise ConfigError(f"{which}: {err}") from None
+    except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
+        raise ConfigError(f"{which}: cannot load ({_first_line(err)})") from None
     if gravity is not None:
         if len(gravity) != 3:
             raise ConfigError(f"gravity: expected 3 values, got {len(gravity)}")

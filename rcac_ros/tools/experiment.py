@@ -12,12 +12,9 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
-from rcac_ros.core.model import PAPER_Q0
+from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
+                           Simulator, css_arm)
 from rcac_ros.tools.progress import Progress
-
-#: The paper's gains (Section 4) and the filter bandwidth it leaves open.
-PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
 
 
 def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=None):
@@ -103,14 +100,14 @@ def add_arguments(parser):
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (NOTES.md 5)")
-    for name, default, text in (("K_D", 1e4, "link gain K_Di = K_D I6"),
-                                ("Lambda", 1.0, "Lambda = value * I"),
-                                ("P", 100.0, "adaptation gain P_i = P I13"),
-                                ("gamma", 0.1, "prediction-error weight of the composite law"),
-                                ("lam", 10.0, "filter bandwidth lambda, rad/s"),
-                                ("h", 0.002, "control period, s")):
-        parser.add_argument(f"--{name}", type=float, default=default,
-                            help=f"{text} (default {default:g})")
+    for name, text in (("K_D", "link gain K_Di = K_D I6"),
+                       ("Lambda", "Lambda = value * I"),
+                       ("P", "adaptation gain P_i = P I13"),
+                       ("gamma", "prediction-error weight of the composite law"),
+                       ("lam", "filter bandwidth lambda, rad/s"),
+                       ("h", "control period, s")):
+        parser.add_argument(f"--{name}", type=float, default=PAPER_GAINS[name],
+                            help=f"{text} (default {PAPER_GAINS[name]:g})")
     parser.add_argument("--substeps", type=int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -342,17 +342,15 @@ def _percentiles(x, prefix, unit="ms"):
 
 
 def load_truth(model):
-    """The true parameters (n, 13) of ``model`` ("css", "none", a YAML or URDF path)."""
+    """The true parameters (n, 13) of ``model`` (a preset, "none", a YAML or URDF path)."""
     if model in (None, "", "none"):
         return None
-    from rcac_ros.core.model import css_arm, RobotModel
-    if model == "css":
-        return css_arm().theta()
-    if not os.path.exists(model):
-        raise ConfigError(f"model: {model} is neither 'css', 'none' nor an existing file")
-    if model.endswith((".urdf", ".xml")):
-        return RobotModel.from_urdf(model).theta()
-    return RobotModel.from_yaml(model).theta()
+    from rcac_ros.core.load import is_urdf, load_model
+    from rcac_ros.core.model import PRESETS
+    if model not in PRESETS and not is_urdf(model) and not os.path.exists(model):
+        raise ConfigError(f"model: {model} is neither a preset ({', '.join(PRESETS)}), 'none' "
+                          "nor an existing file")
+    return load_model(model).theta()
 
 
 def _estimates(td):
@@ -527,7 +525,8 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
     return written
 
 
-def inspect(path, plots_dir=None, model="css", link=None, controller_node=topics.CONTROLLER_NODE):
+def inspect(path, plots_dir=None, model="css_arm", link=None,
+            controller_node=topics.CONTROLLER_NODE):
     """Read, summarise and (optionally) plot a bag; write metrics.json beside the plots.
 
     Returns
@@ -562,8 +561,8 @@ def add_arguments(parser):
     parser.add_argument("bag", help="rosbag2 directory")
     parser.add_argument("--plots", default=None, metavar="DIR",
                         help="write the figures and metrics.json into DIR")
-    parser.add_argument("--model", default="css",
-                        help="true model for the estimate errors: 'css' (default, the paper's "
+    parser.add_argument("--model", default="css_arm",
+                        help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
     parser.add_argument("--link", type=int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")

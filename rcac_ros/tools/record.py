@@ -11,12 +11,12 @@ import datetime
 import functools
 import importlib
 import os
-import signal
 import struct
 import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import init_context, StopFlag
 
 #: recorded topics (relative names are resolved against the controller node) -> message type
 TOPIC_TYPES = (
@@ -263,49 +263,6 @@ class BagRecorder:
         self._subs.clear()
         self._writer.close()
         self.node.destroy_node()
-
-
-class StopFlag:
-    """Set by SIGINT / SIGTERM; restores the previous handlers on :meth:`restore`."""
-
-    def __init__(self, signals=(signal.SIGINT, signal.SIGTERM)):
-        self.signum = None
-        self._previous = {}
-        for sig in signals:
-            self._previous[sig] = signal.signal(sig, self._handler)
-
-    def _handler(self, signum, frame):
-        if self.signum is not None and signum == signal.SIGINT:
-            raise KeyboardInterrupt  # a second Ctrl-C: stop waiting for a clean exit
-        self.signum = signum
-
-    def __bool__(self):
-        return self.signum is not None
-
-    def restore(self):
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-
-
-def init_context(domain_id=None):
-    """A fresh rclpy context without rclpy's signal handlers (ours close the bag).
-
-    Parameters
-    ----------
-    domain_id : int, optional
-        ROS domain; default ``ROS_DOMAIN_ID`` from the environment.
-
-    Returns
-    -------
-    rclpy.context.Context
-    """
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-
-    ctx = rclpy.Context()
-    kwargs = {} if domain_id is None else {"domain_id": int(domain_id)}
-    rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
-    return ctx
 
 
 def format_counts(recorder):

@@ -28,8 +28,9 @@ import time
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.tools.record import init_context, StopFlag
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
+    StopFlag
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
 #: delay); free-running, the effort lands up to one period late and that loop diverges within
@@ -224,8 +225,6 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
     """
     import domain_coordinator
     from rclpy.executors import SingleThreadedExecutor
-
-    from rcac_ros.tools.demo import Child, child_env, NodeFailed, node_command
 
     if not duration > 0.0:
         raise ConfigError(f"duration: must be > 0 s, got {duration}")

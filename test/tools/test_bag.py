@@ -232,7 +232,7 @@ def procs(tmp_path, ros_env):
 
 
 def _node(name, **over):
-    from rcac_ros.tools.demo import node_command
+    from rcac_ros.tools.launch import node_command
     return node_command(name, overrides=over)
 
 
