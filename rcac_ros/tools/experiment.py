@@ -14,6 +14,7 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            Simulator, css_arm)
+from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 from rcac_ros.tools.progress import Progress
 
 
@@ -46,21 +47,11 @@ def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=N
     return out
 
 
-def metrics(run, theta_true, last_seconds=5.0):
-    """The figures of ``metrics.json`` for one run (see the README for their definitions)."""
-    e = run["q"] - run["q_d"]
-    last = run["t"] >= run["t"][-1] - last_seconds
-    err = run["theta_hat"] - theta_true
-    return {
-        "rms_tracking_error": float(np.sqrt(np.mean(e ** 2))),
-        "max_tracking_error": float(np.max(np.abs(e))),
-        "rms_tracking_error_last_5s": float(np.sqrt(np.mean(e[last] ** 2))),
-        "parameter_error_norm_start": float(np.linalg.norm(err[0])),
-        "parameter_error_norm_end": float(np.linalg.norm(err[-1])),
-        f"link{theta_true.shape[0]}_parameter_error_norm_end": float(np.linalg.norm(err[-1, -1])),
-        "final_abs_prediction_error": float(abs(run["E"][-1])),
-        "max_abs_torque": float(np.max(np.abs(run["tau"]))),
-    }
+def metrics(run, theta_true, last_seconds=LAST_WINDOW):
+    """The figures of ``metrics.json`` for one run (defined in :mod:`rcac_ros.tools.metrics`)."""
+    return {**tracking(run["t"], run["q"] - run["q_d"], last_seconds),
+            **estimates(run["theta_hat"], theta_true),
+            **prediction(run["E"]), **torque(run["tau"])}
 
 
 def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True):

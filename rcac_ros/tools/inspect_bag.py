@@ -19,9 +19,8 @@ import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools import metrics as measure
 
-#: seconds at the end of the run for ``rms_tracking_error_last_5s``
-LAST_WINDOW = 5.0
 #: diagnostics values shown in the summary (all are kept in metrics.json)
 DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
              "compute_time_p50_us", "compute_time_p99_us", "deadline_misses", "late_ticks",
@@ -333,14 +332,6 @@ def loop_timing(data, eff=None, js=None, tagged=None):
     return {"period_ms": period, "latency_ms": latency, "unanswered": unanswered}
 
 
-def _percentiles(x, prefix, unit="ms"):
-    if len(x) == 0:
-        return {}
-    return {f"{prefix}_p50_{unit}": float(np.percentile(x, 50)),
-            f"{prefix}_p99_{unit}": float(np.percentile(x, 99)),
-            f"{prefix}_max_{unit}": float(np.max(x))}
-
-
 def load_truth(model):
     """The true parameters (n, 13) of ``model`` (a preset, "none", a YAML or URDF path)."""
     if model in (None, "", "none"):
@@ -388,10 +379,7 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if te is not None and te.count and isinstance(te.values, np.ndarray):
         t, e = tl.controller_time(te), te.values
         series["tracking_error"] = (t, e)
-        metrics["rms_tracking_error"] = float(np.sqrt(np.mean(e ** 2)))
-        metrics["max_tracking_error"] = float(np.max(np.abs(e)))
-        last = t >= t[-1] - LAST_WINDOW
-        metrics["rms_tracking_error_last_5s"] = float(np.sqrt(np.mean(e[last] ** 2)))
+        metrics.update(measure.tracking(t, e))
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     watchdog_efforts = 0
     repeated_answers = 0
@@ -407,21 +395,17 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         tagged = tagged[first]
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
-        metrics["max_abs_torque"] = float(np.max(np.abs(eff.values)))
+        metrics.update(measure.torque(eff.values))
     pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
     if pe is not None and pe.count:
         est = _estimates(pe)
         series["parameter_estimates"] = (tl.controller_time(pe), est)
         if theta_true is not None and theta_true.shape == est.shape[1:]:
-            err = est - theta_true
-            metrics["parameter_error_norm_start"] = float(np.linalg.norm(err[0]))
-            metrics["parameter_error_norm_end"] = float(np.linalg.norm(err[-1]))
-            metrics[f"link{est.shape[1]}_parameter_error_norm_end"] = \
-                float(np.linalg.norm(err[-1, -1]))
+            metrics.update(measure.estimates(est, theta_true))
     pr = data.get(priv + topics.PREDICTION_ERROR[2:])
     if pr is not None and pr.count:
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
-        metrics["final_abs_prediction_error"] = float(abs(pr.values[-1]))
+        metrics.update(measure.prediction(pr.values))
     js = data.get("/" + topics.JOINT_STATES)
     resent_states = 0
     if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -441,8 +425,10 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     timing = loop_timing(data, eff, js, tagged)
     if timing is not None:
         series["timing"] = timing
-        metrics.update(_percentiles(timing["period_ms"], "state_period"))
-        metrics.update(_percentiles(timing["latency_ms"], "state_to_effort_latency"))
+        for key, prefix in (("period_ms", "state_period"),
+                            ("latency_ms", "state_to_effort_latency")):
+            if len(timing[key]):
+                metrics.update(measure.percentiles(timing[key], prefix))
         metrics["unanswered_states"] = timing["unanswered"]
     return metrics, series
 

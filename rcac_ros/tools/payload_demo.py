@@ -31,6 +31,7 @@ import numpy as np
 from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory)
 from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.progress import Progress
 from rcac_ros.tools.robots import example_robot_urdf
 
@@ -153,9 +154,7 @@ def simulate(model, loaded, controller, trajectory, duration, jump, progress=Non
 
 def window_rms(run, start, stop):
     """RMS of ``q - q_d`` over all joints for ``start <= t < stop``."""
-    sel = (run["t"] >= start) & (run["t"] < stop)
-    e = run["q"][sel] - run["q_d"][sel]
-    return float(np.sqrt(np.mean(e ** 2)))
+    return measure.window_rms(run["t"], run["q"] - run["q_d"], start, stop)
 
 
 def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None):
