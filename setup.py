@@ -13,7 +13,6 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
-    package_data={package_name: ["data/*.yaml"]},
     install_requires=["setuptools", "numpy", "numba", "pyyaml", "matplotlib", "rosbags",
                       "yourdfpy"],
     zip_safe=True,

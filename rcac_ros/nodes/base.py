@@ -1,7 +1,9 @@
-"""Helpers shared by the controller and simulator nodes (they never import each other).
+"""What the controller and simulator nodes share (they never import each other).
 
-Parameters, model loading, the lockstep tag of an effort message, throttled
-warnings and the ``main`` wrapper (clean start-up refusal, clean shutdown).
+Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
+left behind), diagnostics, throttled warnings, compute-time statistics, the effort
+message's layout, and :func:`run`: the ``main`` of a node (clean start-up refusal with one
+line and exit 2, clean shutdown on SIGINT/SIGTERM).
 """
 
 import math
@@ -10,184 +12,181 @@ import sys
 import time
 
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import MultiArrayDimension, MultiArrayLayout
 
-from rcac_ros import topics
+from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
-from rcac_ros.core.model import PRESETS
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.pacing import spin_node_once
 
+#: reliable, keep-last 10: the control topics (what ros2_control uses)
+QOS = topics.qos()
+#: reliable, keep-last 1000: the topics a recorder or a test reads
+QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
+
 
 # ------------------------------------------------------------------ parameters
-def declare(node, name, default, description, *, lo=None, hi=None, read_only=True,
-            constraints=""):
-    """Declare one parameter with a descriptor and return its value (``None`` if unset).
+def declare(node, p):
+    """Declare the parameter of row ``p`` (:mod:`rcac_ros.params`); return its checked value.
 
-    ``default`` is a value, or a :class:`rclpy.parameter.Parameter.Type` for a parameter
-    that has no default (its value is then ``None`` unless the user sets it).
-    ``lo``/``hi`` give a floating-point or integer range (inclusive).
+    Returns ``None`` for a row without default that the user left unset.
 
     Raises
     ------
     ConfigError
-        If the value given by the user has the wrong type or is out of range; the
-        message names the parameter.
+        If the value given by the user has the wrong type or is invalid; the message
+        names the parameter.
     """
-    desc = ParameterDescriptor(description=description, read_only=read_only,
-                               additional_constraints=constraints)
-    if lo is not None or hi is not None:
-        if isinstance(default, int) and not isinstance(default, bool):
-            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
-        else:
-            desc.floating_point_range = [FloatingPointRange(from_value=float(lo),
-                                                            to_value=float(hi), step=0.0)]
+    desc = ParameterDescriptor(description=p.description, read_only=p.read_only,
+                               additional_constraints=p.constraints)
+    if p.lo is not None and p.type == "integer":
+        desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
+    elif p.lo is not None and p.type == "double":
+        desc.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
+                                                        to_value=float(p.hi), step=0.0)]
+    default = Parameter.Type[p.type.upper()] if p.default is None else p.default
     try:
-        node.declare_parameter(name, default, desc)
-        value = node.get_parameter(name).value
+        node.declare_parameter(p.name, default, desc)
+        value = node.get_parameter(p.name).value
     except InvalidParameterTypeException as err:
-        want = default.name.lower() if isinstance(default, Parameter.Type) \
-            else type(default).__name__
-        raise ConfigError(f"{name}: wrong type, expected {want} ({_first_line(err)})") from None
+        raise ConfigError(f"{p.name}: wrong type, expected {p.type} ({_first_line(err)})") \
+            from None
     except InvalidParameterValueException:
-        raise ConfigError(f"{name}: value out of range [{lo:g}, {hi:g}]") from None
+        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]") from None
     except ParameterUninitializedException:
         return None
-    if isinstance(value, float) and not math.isfinite(value):
-        raise ConfigError(f"{name}: must be finite, got {value}")
-    return value
+    if p.type.endswith("_array"):
+        value = list(value)         # rclpy gives array.array for double arrays
+    return params.check(p, value)
 
 
 def _first_line(err):
     return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
-def positive(name, value, strict=True):
-    """Raise :class:`ConfigError` unless ``value`` is > 0 (or >= 0 when not ``strict``)."""
-    if (strict and not value > 0.0) or (not strict and not value >= 0.0):
-        raise ConfigError(f"{name}: must be {'>' if strict else '>='} 0, got {value}")
-    return value
-
-
-def per_joint(name, value, n, default, strict_positive=False, nonnegative=False):
-    """A double-array parameter: 1 (broadcast) or ``n`` finite values; ``default`` if unset."""
-    if value is None:
-        return None if default is None else np.array(np.broadcast_to(default, (n,)), float)
-    arr = np.asarray(list(value), dtype=float)
-    if arr.size == 1:
-        arr = np.full(n, arr[0])
-    if arr.shape != (n,):
-        raise ConfigError(f"{name}: expected 1 or {n} values (one per joint), got {len(value)}")
-    if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{name}: contains NaN or Inf")
-    if strict_positive and np.any(arr <= 0.0):
-        raise ConfigError(f"{name}: every value must be > 0, got {arr.tolist()}")
-    if nonnegative and np.any(arr < 0.0):
-        raise ConfigError(f"{name}: every value must be >= 0, got {arr.tolist()}")
-    return arr
-
-
-def declare_model(node):
-    """Declare ``model``, ``robot_description``, ``base_link``, ``tip_link``, ``gravity``.
+def declare_parameters(node, rows):
+    """Declare every row of a node's table (:mod:`rcac_ros.params`) and load its robot.
 
     Returns
     -------
-    RobotModel
-        ``robot_description`` (URDF XML or a file path) wins when it is set; otherwise
-        ``model`` is a preset name (:data:`PRESETS`) or a YAML file.
+    values : dict
+        name -> checked value (``None``: unset).
+    model : RobotModel
+        ``robot_description`` (URDF XML or a file path) when it is set, else ``model``
+        (a preset, a YAML or a URDF file), with ``gravity`` if given.
+    joints : tuple of str
+        The joint order of the node's messages (``joints``, default the model's).
 
     Raises
     ------
     ConfigError
-        Naming the parameter whose value could not be turned into a model.
+        Naming the parameter whose value is invalid or could not be turned into a model.
     """
-    name = declare(node, "model", "css_arm",
-                   f"robot model: a preset ({', '.join(PRESETS)}) or a YAML model file")
-    urdf = declare(node, "robot_description", "",
-                   "URDF XML string or URDF file path; when set it replaces 'model'")
-    base = declare(node, "base_link", "", "URDF chain start (empty: the root link)")
-    tip = declare(node, "tip_link", "", "URDF chain end (empty: the single leaf)")
-    gravity = declare(node, "gravity", Parameter.Type.DOUBLE_ARRAY,
-                      "gravity in the base frame, m/s^2 (unset: the model's own)")
+    values = {p.name: declare(node, p) for p in rows}
+    urdf = values["robot_description"]
     which = "robot_description" if urdf else "model"
     try:
         if urdf:
-            model = model_from_urdf(urdf, base_link=base or None, tip_link=tip or None)
+            model = model_from_urdf(urdf, base_link=values["base_link"] or None,
+                                    tip_link=values["tip_link"] or None)
         else:
-            model = load_model(name)
+            model = load_model(values["model"])
     except RcacError as err:
         raise ConfigError(f"{which}: {err}") from None
     except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
         raise ConfigError(f"{which}: cannot load ({_first_line(err)})") from None
-    if gravity is not None:
-        if len(gravity) != 3:
-            raise ConfigError(f"gravity: expected 3 values, got {len(gravity)}")
-        if not np.all(np.isfinite(gravity)):
-            raise ConfigError("gravity: contains NaN or Inf")
-        model = model.replace(gravity=list(gravity))
-    return model
+    if values["gravity"] is not None:
+        model = model.replace(gravity=list(values["gravity"]))
+    return values, model, _joints(values["joints"], model)
 
 
-def declare_joints(node, model):
-    """Declare ``joints`` (default: the model's joint names) and check it against the model.
-
-    Returns
-    -------
-    tuple of str
-        The joint order of the node's effort messages.
-    """
-    joints = declare(node, "joints", Parameter.Type.STRING_ARRAY,
-                     "joint names, in the order of the effort commands (unset: the model's)")
+def _joints(joints, model):
     if joints is None:
         return tuple(model.joint_names)
-    joints = tuple(joints)
     if len(set(joints)) != len(joints):
         raise ConfigError(f"joints: duplicate names in {list(joints)}")
     if set(joints) != set(model.joint_names):
         raise ConfigError(f"joints: {list(joints)} does not match the model's joints "
                           f"{list(model.joint_names)}")
-    return joints
+    return tuple(joints)
 
 
-# ------------------------------------------------------------------ effort tag
-def effort_layout(n, stamp=None, watchdog=False):
-    """The layout of an effort message: one dimension of size ``n``, tagged (:mod:`topics`)."""
-    return MultiArrayLayout(dim=[MultiArrayDimension(label=topics.effort_label(stamp, watchdog),
-                                                     size=n, stride=n)], data_offset=0)
-
-
-def stamp_ns(stamp):
-    """A builtin_interfaces/Time as integer nanoseconds."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-# ------------------------------------------------------------------ warnings
+# ------------------------------------------------------------------ node
 class RcacNode(Node):
     """The start-up both nodes share: read and check every parameter, or leave nothing behind.
 
-    Subclasses implement ``_read_parameters`` (raising :class:`ConfigError` naming the
-    parameter); ``finished`` and ``exit_code`` tell :func:`run` when and how to stop.
+    A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
+    ``_read_parameters(values)`` (raising :class:`ConfigError` naming the parameter),
+    ``diagnostics()`` (a DiagnosticStatus, published every ``diagnostics_period`` s of the
+    steady clock) and ``on_shutdown()``; ``finished`` and ``exit_code`` tell :func:`run`
+    when and how to stop.
+
+    Attributes
+    ----------
+    model : RobotModel
+    joints : tuple of str
+        The joint order of the node's messages.
     """
+
+    #: the node's rows of :mod:`rcac_ros.params`
+    PARAMETERS = ()
 
     def __init__(self, name, **kwargs):
         super().__init__(name, **kwargs)
         self.finished = False
         self.exit_code = 0
         try:
-            self._read_parameters()
+            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS)
+            # index arrays: model order -> message (joints) order, and back
+            self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
+            self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
+            self._read_parameters(values)
         except Exception:
             self.destroy_node()     # leave no half-built node (and its rosout logger) behind
             raise
         self._throttle = Throttle(self.get_logger())
+        self._rows = {p.name: p for p in self.PARAMETERS}
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
+        self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _check_parameters(self, changed):
+        """On-set callback: validate against the table (a subclass applies them post-set)."""
+        for p in changed:
+            row = self._rows.get(p.name)
+            if row is None:
+                continue                # rclpy's own (use_sim_time, ...)
+            value = p.value
+            if row.type.endswith("_array") and value is not None:
+                value = list(value)
+            try:
+                params.check(row, value)
+            except ConfigError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _publish_diagnostics(self):
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._pub_diag.publish(msg)
+
+    def status(self, level, name, message, values):
+        """A DiagnosticStatus of this node from a ``{key: value}`` dict."""
+        return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
+                                hardware_id=self.model.name,
+                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
 
 class Throttle:
