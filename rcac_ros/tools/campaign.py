@@ -34,11 +34,12 @@ import time
 import numpy as np
 import yaml
 
-from rcac_ros.core import (ConfigError, PaperTrajectory, RecursiveCompositeController,
+from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
-from rcac_ros.core.model import PAPER_Q0
+from rcac_ros.errors import ConfigError
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
+from rcac_ros.tools.payload_demo import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
@@ -70,10 +71,11 @@ SUFFIXES = {"payload_com": ("x", "y", "z"), "payload_inertia": ("xx", "yy", "zz"
 #: panda: payload_demo's (K_Di = K_D M_i, P_7 = P diag(scale)^2, links 1-6 known),
 #: payload from the flange, theta_hat(0) = the URDF's nominal parameters.
 MODEL_DEFAULTS = {
-    "css_arm": dict(gains=dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002),
+    "css_arm": dict(gains=dict(PAPER_GAINS),
                     tool=(0.0, 0.0, 0.0), initial_estimate="zero",
                     trajectory=dict(type="paper", reading="velocity")),
-    "panda": dict(gains=dict(K_D=100.0, Lambda=10.0, P=30.0, gamma=1.0, lam=10.0, h=0.002),
+    "panda": dict(gains=dict(K_D=PANDA_GAINS["kappa"], P=PANDA_GAINS["rho"],
+                             **{k: PANDA_GAINS[k] for k in ("Lambda", "gamma", "lam", "h")}),
                   tool=(0.0, 0.0, 0.107), initial_estimate="nominal",
                   trajectory=dict(type="sinusoid")),
 }
@@ -210,7 +212,7 @@ def check_trajectory(value, model):
                                     f"{key}.amplitude"),
                    period=number(value.get("period", 20.0), f"{key}.period", 0.0, True))
         return out
-    from rcac_ros.payload_demo import AMPLITUDE, FREQUENCY, READY
+    from rcac_ros.tools.payload_demo import AMPLITUDE, FREQUENCY, READY
     defaults = dict(offset=READY, amplitude=AMPLITUDE, frequency=FREQUENCY) \
         if model == "panda" else {}
     for k in ("offset", "amplitude", "frequency"):
@@ -369,7 +371,7 @@ def nominal_model(name):
     """The controller's model of a scenario (loaded once per process)."""
     if name == "css_arm":
         return css_arm()
-    from rcac_ros.payload_demo import load_panda
+    from rcac_ros.tools.payload_demo import load_panda
     return load_panda()
 
 
@@ -380,7 +382,7 @@ def controller_for(campaign, inputs, model):
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
              gamma=0.0 if law == "direct" else inputs["gamma"], lam=inputs["lam"], h=sc["h"])
     if sc["model"] == "panda":
-        from rcac_ros.payload_demo import gains_for
+        from rcac_ros.tools.payload_demo import gains_for
         gamma = g["gamma"]
         g = gains_for(model, kappa=g["K_D"], Lambda=g["Lambda"], rho=g["P"], gamma=gamma,
                       lam=g["lam"], h=g["h"])

@@ -24,6 +24,7 @@ from collections import deque
 import numpy as np
 
 from rcac_ros.core import RcacError, Simulator, theta_from_inertia
+from rcac_ros.tools import metrics
 
 #: Divergence is checked every this many control periods.
 CHECK_EVERY = 25
@@ -130,7 +131,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
         (``"ok"``, ``"nonfinite"`` or ``"error_limit"``), ``plant`` (the final true model),
         ``effort_limit`` (n,). ``T`` is shorter than planned when the run diverged.
     """
-    from rcac_ros.progress import Progress
+    from rcac_ros.tools.progress import Progress
 
     h = controller.h
     steps = int(round(duration / h)) + 1
@@ -201,6 +202,9 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
 def run_metrics(run, theta_true=None):
     """The summary of one run: the figures a campaign's results table holds.
 
+    The figures of :mod:`rcac_ros.tools.metrics` (same names, same meaning as in
+    ``rcac experiment``), and what a campaign adds.
+
     Parameters
     ----------
     run : dict
@@ -211,12 +215,12 @@ def run_metrics(run, theta_true=None):
     Returns
     -------
     dict
-        ``rms_error`` (RMS of ``q - q_d`` over joints and time, rad), ``max_error``
-        (rad), ``parameter_error_norm`` (``||theta_hat - theta||`` at the end, all links),
-        ``abs_E_end`` (``|E|`` of the last step), ``max_effort`` (max commanded
-        ``|tau|``), ``max_effort_ratio`` (max ``|tau| / effort_limit``, 0 without limits),
-        ``diverged`` (bool), ``status``, ``t_end`` (s simulated). A diverged run is
-        summarised up to its last period where everything was finite.
+        ``rms_tracking_error``, ``max_tracking_error``, ``rms_tracking_error_last_5s``
+        (rad), ``parameter_error_norm_start``/``_end`` and ``linkN_parameter_error_norm_end``
+        (``||theta_hat - theta||``), ``final_abs_prediction_error`` (``|E|``),
+        ``max_abs_torque`` (commanded), ``max_effort_ratio`` (max ``|tau| / effort_limit``,
+        0 without limits), ``diverged`` (bool), ``status``, ``t_end`` (s simulated). A
+        diverged run is summarised up to its last period where everything was finite.
     """
     theta = run["plant"].theta() if theta_true is None else theta_true
     with np.errstate(all="ignore"):
@@ -225,19 +229,12 @@ def run_metrics(run, theta_true=None):
         finite = (np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(tau), axis=1)
                   & np.isfinite(run["E"])
                   & np.all(np.isfinite(run["theta_hat"]), axis=(1, 2)))
-        # a run that produced NaN/Inf is summarised up to its last finite period
         last = int(np.nonzero(finite)[0][-1]) + 1 if finite.any() else 1
-        e, tau = e[:last], tau[:last]
         limit = run["effort_limit"]
-        ratio = tau[:, np.isfinite(limit)] / limit[np.isfinite(limit)]
-        return {
-            "rms_error": float(np.sqrt(np.mean(e ** 2))),
-            "max_error": float(np.max(np.abs(e))),
-            "parameter_error_norm": float(np.linalg.norm(run["theta_hat"][last - 1] - theta)),
-            "abs_E_end": float(abs(run["E"][last - 1])),
-            "max_effort": float(np.max(tau)),
-            "max_effort_ratio": float(np.max(ratio)) if ratio.size else 0.0,
-            "diverged": run["status"] != "ok",
-            "status": run["status"],
-            "t_end": float(run["t"][-1]),
-        }
+        ratio = tau[:last, np.isfinite(limit)] / limit[np.isfinite(limit)]
+        return {**metrics.tracking(run["t"][:last], e[:last]),
+                **metrics.estimates(run["theta_hat"][:last], theta),
+                **metrics.prediction(run["E"][:last]), **metrics.torque(tau[:last]),
+                "max_effort_ratio": float(np.max(ratio)) if ratio.size else 0.0,
+                "diverged": run["status"] != "ok", "status": run["status"],
+                "t_end": float(run["t"][-1])}

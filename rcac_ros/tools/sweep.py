@@ -24,6 +24,7 @@ import json
 import logging
 import math
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -31,11 +32,12 @@ import uuid
 
 import numpy as np
 
-from rcac_ros.core import ConfigError
+from rcac_ros.errors import ConfigError
 from rcac_ros.tools import campaign as cp
 
 ACTIONS = ("report", "rerun")
-METRICS = ("rms_error", "max_error", "parameter_error_norm", "abs_E_end", "max_effort",
+METRICS = ("rms_tracking_error", "max_tracking_error", "rms_tracking_error_last_5s",
+           "parameter_error_norm_end", "final_abs_prediction_error", "max_abs_torque",
            "max_effort_ratio")
 #: The campaign --bench runs when none is given: the paper's arm, 5-s runs, gains spread.
 BENCH_CAMPAIGN = {
@@ -278,6 +280,43 @@ class WarmUp(WorkerPlugin):
         run_chunk(cp.with_overrides(self.campaign, duration=0.01), [0])
 
 
+class DeferredInterrupt:
+    """Ctrl-C inside ``with guard:`` waits for the block's end (a numba kernel must not be
+    interrupted half-way: it would surface as a SystemError); a second Ctrl-C, or one
+    outside the block, interrupts at once."""
+
+    def __init__(self):
+        self.inside = self.requested = False
+        self.previous = None
+
+    def handler(self, signum, frame):
+        if self.inside and not self.requested:
+            self.requested = True
+            return
+        raise KeyboardInterrupt
+
+    def __enter__(self):
+        if self.previous is None:                    # the outer use installs the handler
+            try:
+                self.previous = signal.signal(signal.SIGINT, self.handler)
+            except ValueError:                       # not the main thread: nothing to defer
+                self.previous = signal.default_int_handler
+            return self
+        self.inside = True
+        return self
+
+    def __exit__(self, *exc):
+        if self.inside:
+            self.inside = False
+            if self.requested and exc[0] is None:
+                raise KeyboardInterrupt
+            return False
+        if signal.getsignal(signal.SIGINT) == self.handler:
+            signal.signal(signal.SIGINT, self.previous)
+        self.previous = None
+        return False
+
+
 def chunks_of(pending, chunk):
     return [pending[i:i + chunk] for i in range(0, len(pending), chunk)]
 
@@ -336,9 +375,12 @@ def execute(campaign, store, workers=None, scheduler=None, chunk=None, progress=
                    smoothing=0.1, dynamic_ncols=True)
         if serial:
             cp.warm_up()
-            for indices in chunks_of(pending, chunk or 1):
-                store.write(run_chunk(campaign, indices))
-                bar.update(len(indices))
+            with DeferredInterrupt() as guard:
+                for indices in chunks_of(pending, chunk or 1):
+                    with guard:
+                        rows = run_chunk(campaign, indices)
+                    store.write(rows)
+                    bar.update(len(indices))
         else:
             distribute(client, campaign, store, chunks_of(
                 pending, chunk or auto_chunk(len(pending), nworkers)), bar)
@@ -384,7 +426,7 @@ def load_table(path):
     return df, {"campaign": campaign, "varied": cp.varied_columns(campaign)}, store
 
 
-def sensitivity(df, inputs, metric="rms_error"):
+def sensitivity(df, inputs, metric="rms_tracking_error"):
     """Spearman rank correlation of ``metric`` with each numeric input (NaN if constant)."""
     numeric = [c for c in inputs if df[c].dtype.kind in "fiu" and df[c].nunique() > 1]
     if not numeric or len(df) < 3:
@@ -416,11 +458,11 @@ def report(path, worst=10, plot=None):
             v = df.loc[(df["law"] == law) & ~div, m]
             if len(v):
                 q = v.quantile([0.5, 0.05, 0.95])
-                print(f"  {m:22s} {law:11s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
+                print(f"  {m:27s} {law:11s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
                       f"{q.iloc[2]:10.4g}] {v.max():10.4g}")
-    cols = ["run", "law", "status", "rms_error", "max_error"] + [
+    cols = ["run", "law", "status", "rms_tracking_error", "max_tracking_error"] + [
         c for c in varied if c != "law"]
-    order = df.assign(_d=div).sort_values(["_d", "rms_error"], ascending=[False, False],
+    order = df.assign(_d=div).sort_values(["_d", "rms_tracking_error"], ascending=[False, False],
                                           na_position="first")
     print(f"\nworst {min(worst, n)} runs (diverged first, then by RMS error); "
           "rerun one with 'rcac sweep rerun RESULTS INDEX':")
@@ -442,8 +484,9 @@ def report(path, worst=10, plot=None):
         print(f"  {c:22s}" + "".join(f"{s[c]:12.3f}" if c in s else f"{'-':>12s}"
                                      for s in sens.values()))
     for c in [c for c in varied if df[c].dtype.kind not in "fiu" and c != "law"]:
+        medians = ok.groupby(c)["rms_tracking_error"].median()
         print(f"  {c}: median RMS per value: " + ", ".join(
-            f"{k or '-'}: {v:.4g}" for k, v in ok.groupby(c)["rms_error"].median().items()))
+            f"{k or '-'}: {v:.4g}" for k, v in medians.items()))
     plot = plot or os.path.join(store.out, "report.png")
     plot_report(df, div, laws, sens["all"], plot)
     print(f"\nwrote {plot}")
@@ -452,10 +495,10 @@ def report(path, worst=10, plot=None):
 
 def plot_report(df, div, laws, sens, path):
     """Four panels: RMS per law, failure rate per law, sensitivity, RMS vs the top input."""
-    from rcac_ros.plots import plt
+    from rcac_ros.tools.plots import plt
     fig, axes = plt.subplots(1, 4, figsize=(22, 4.5))
     ok = df[~div]
-    data = [np.clip(ok.loc[ok["law"] == law, "rms_error"].to_numpy(), 1e-12, None)
+    data = [np.clip(ok.loc[ok["law"] == law, "rms_tracking_error"].to_numpy(), 1e-12, None)
             for law in laws]
     axes[0].boxplot(data, tick_labels=laws)
     axes[0].set_yscale("log")
@@ -470,7 +513,7 @@ def plot_report(df, div, laws, sens, path):
         top = names[-1]
         for law in laws:
             sel = ok["law"] == law
-            axes[3].scatter(ok.loc[sel, top], ok.loc[sel, "rms_error"], s=8, label=law)
+            axes[3].scatter(ok.loc[sel, top], ok.loc[sel, "rms_tracking_error"], s=8, label=law)
         axes[3].set_yscale("log")
         axes[3].set_xlabel(top)
         axes[3].set_title(f"RMS error vs {top}")
@@ -505,7 +548,7 @@ def rerun(path, index, plot=None):
               f"metric difference {max(diffs, default=0.0):.3g}")
     else:
         print("stored row: none (run not in the results yet)")
-    from rcac_ros.plots import plt
+    from rcac_ros.tools.plots import plt
     plot = plot or os.path.join(store.out, f"rerun_{index}.png")
     fig, axes = plt.subplots(1, 3, figsize=(18, 4))
     t = result["t"]

@@ -12,10 +12,9 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from rcac_ros import cli
-from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, SinusoidTrajectory, \
-    css_arm
-from rcac_ros.core.model import PAPER_Q0
+from rcac_ros.tools import cli
+from rcac_ros.core import PAPER_Q0, PaperTrajectory, RecursiveCompositeController, \
+    SinusoidTrajectory, css_arm
 from rcac_ros.tools import campaign as cp
 from rcac_ros.tools.closed_loop import attach_payload, closed_loop, run_metrics
 
@@ -52,7 +51,8 @@ class Recorder:
 
 def test_closed_loop_is_experiment_simulate():
     """The paper's experiment loop and closed_loop without noise or delay: the same run."""
-    from rcac_ros.experiment import PAPER_GAINS, simulate
+    from rcac_ros.core import PAPER_GAINS
+    from rcac_ros.tools.experiment import simulate
     model = css_arm()
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0, reading="position")          # a large initial error
@@ -66,7 +66,7 @@ def test_closed_loop_is_experiment_simulate():
 
 def test_closed_loop_is_payload_demo_simulate():
     """payload-demo's grasp at t = jump is closed_loop's plant event."""
-    from rcac_ros.payload_demo import gains_for, simulate, with_payload
+    from rcac_ros.tools.payload_demo import gains_for, simulate, with_payload
     model = css_arm(gravity=(0.0, 0.0, -9.81))
     loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
     traj = SinusoidTrajectory(np.array(PAPER_Q0), 0.1, 0.3)
@@ -82,7 +82,7 @@ def test_closed_loop_is_payload_demo_simulate():
 
 def test_attach_payload_matches_parallel_axis():
     """Parameter additivity (attach_payload) against payload-demo's parallel-axis sums."""
-    from rcac_ros.payload_demo import FLANGE, with_payload
+    from rcac_ros.tools.payload_demo import FLANGE, with_payload
     model = css_arm()
     for mass, com, radius in ((2.0, (0.03, -0.02, 0.08), 0.05), (80.0, (1.0, 0.5, -0.3), 0.4)):
         ref = with_payload(model, mass, com, radius)
@@ -147,7 +147,7 @@ def test_shipped_campaigns_validate_and_build():
         c = cp.load(os.path.join(ROOT, "campaigns", f"{name}.yaml"))
         assert c["scenario"]["model"] == model and cp.run_count(c) == runs
         if model == "panda":
-            from rcac_ros.payload_demo import find_panda_urdf
+            from rcac_ros.tools.payload_demo import find_panda_urdf
             if find_panda_urdf() is None:
                 pytest.skip("example-robot-data's panda.urdf not installed")
         inputs, ctrl, kw = cp.setup(c, 0)
@@ -219,7 +219,7 @@ def test_ctrl_c_keeps_runs_and_resume_completes(tmp_path):
     path.write_text(yaml.safe_dump(doc))
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    cmd = [sys.executable, "-m", "rcac_ros.cli", "sweep", str(path), "--out", str(out),
+    cmd = [sys.executable, "-m", "rcac_ros.tools.cli", "sweep", str(path), "--out", str(out),
            "--workers", "0", "--quiet"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
@@ -264,7 +264,7 @@ def test_report_and_rerun(tmp_path, capsys):
     # the sensitivity printed is the rank correlation (an independent computation: numpy ranks)
     ok = df[~df["diverged"]]
     rank = lambda v: np.argsort(np.argsort(v))  # noqa: E731
-    rho = np.corrcoef(rank(ok["K_D"].to_numpy()), rank(ok["rms_error"].to_numpy()))[0, 1]
+    rho = np.corrcoef(rank(ok["K_D"].to_numpy()), rank(ok["rms_tracking_error"].to_numpy()))[0, 1]
     line = next(s for s in text.splitlines() if s.strip().startswith("K_D "))
     assert float(line.split()[1]) == pytest.approx(rho, abs=1e-3)
     assert cli.main(["sweep", "rerun", str(out), "13"]) == 0

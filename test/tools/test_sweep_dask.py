@@ -122,8 +122,8 @@ def test_killed_worker_loses_and_duplicates_nothing(tmp_path, cluster):
     path = tmp_path / "c.yaml"
     path.write_text(yaml.safe_dump(doc))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "rcac_ros.cli", "sweep", str(path), "--out",
-                             str(out), "--scheduler", cluster.address, "--chunk", "1"],
+    proc = subprocess.Popen([sys.executable, "-m", "rcac_ros.tools.cli", "sweep", str(path),
+                             "--out", str(out), "--scheduler", cluster.address, "--chunk", "1"],
                             env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while len(list((out / "parts").glob("*.parquet"))) < 4 and time.monotonic() < deadline:
@@ -149,7 +149,7 @@ def test_killed_worker_loses_and_duplicates_nothing(tmp_path, cluster):
 
 def test_bench_reports_what_it_measured(tmp_path, capsys):
     """--bench on a tiny campaign: its figures are consistent with one another."""
-    from rcac_ros import cli
+    from rcac_ros.tools import cli
     assert cli.main(["sweep", "--bench", "--samples", "4", "--duration", "0.2", "--out",
                      str(tmp_path)]) == 0
     text = capsys.readouterr().out
