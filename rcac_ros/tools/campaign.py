@@ -129,13 +129,16 @@ def check_value(name, value, key):
         if value not in LAWS:
             fail(key, f"expected one of {', '.join(LAWS)}, got {value!r}")
         return value
-    if kind == "channels":
-        if isinstance(value, str):
+    if kind == "channels":               # the controller checks the names and the joint range
+        def channel(c):
+            return isinstance(c, str) or (isinstance(c, int) and not isinstance(c, bool)
+                                          and c >= 1)
+        if channel(value):
             return value
-        if isinstance(value, list) and value and all(
-                isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in value):
+        if isinstance(value, list) and value and all(channel(c) for c in value):
             return list(value)
-        fail(key, f"expected a list of joint numbers (>= 1) or a name, got {value!r}")
+        fail(key, "expected joint numbers (>= 1), a channel name ('all', 'power') or a list "
+             f"of those, got {value!r}")
     if kind == "int":
         return number(value, key, minimum=0, integer=True)
     minimum = None if kind == "signed" else 0.0

@@ -127,7 +127,8 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     -------
     dict
         ``t`` (T,), ``q``, ``qd`` (true), ``q_d``, ``tau`` (commanded), ``applied`` (T, n),
-        ``theta_hat`` (T, n, 13) (before each step's update), ``E`` (T,), ``status``
+        ``theta_hat`` (T, n, 13) (before each step's update), ``E`` (T,) (or (T, m) for a
+        controller with m prediction channels), ``status``
         (``"ok"``, ``"nonfinite"`` or ``"error_limit"``), ``plant`` (the final true model),
         ``effort_limit`` (n,). ``T`` is shorter than planned when the run diverged.
     """
@@ -152,7 +153,8 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), qd=np.empty((steps, n)),
                q_d=np.empty((steps, n)),
                tau=np.empty((steps, n)), applied=np.empty((steps, n)),
-               theta_hat=np.empty((steps, n, 13)), E=np.empty(steps))
+               theta_hat=np.empty((steps, n, 13)),
+               E=np.empty((steps,) + np.shape(controller.E)))   # (T,) or (T, channels)
     status, done = "ok", steps
     with np.errstate(all="ignore"), Progress(steps, progress or "",
                                              enabled=progress is not None) as bar:
@@ -217,7 +219,8 @@ def run_metrics(run, theta_true=None):
     dict
         ``rms_tracking_error``, ``max_tracking_error``, ``rms_tracking_error_last_5s``
         (rad), ``parameter_error_norm_start``/``_end`` and ``linkN_parameter_error_norm_end``
-        (``||theta_hat - theta||``), ``final_abs_prediction_error`` (``|E|``),
+        (``||theta_hat - theta||``), ``final_abs_prediction_error`` (``|E|``, the norm
+        over the channels of a multi-channel law),
         ``max_abs_torque`` (commanded), ``max_effort_ratio`` (max ``|tau| / effort_limit``,
         0 without limits), ``diverged`` (bool), ``status``, ``t_end`` (s simulated). A
         diverged run is summarised up to its last period where everything was finite.
@@ -226,15 +229,16 @@ def run_metrics(run, theta_true=None):
     with np.errstate(all="ignore"):
         e = run["q"] - run["q_d"]
         tau = np.abs(run["tau"])
+        E = run["E"] if run["E"].ndim == 1 else np.linalg.norm(run["E"], axis=1)
         finite = (np.all(np.isfinite(e), axis=1) & np.all(np.isfinite(tau), axis=1)
-                  & np.isfinite(run["E"])
+                  & np.isfinite(E)
                   & np.all(np.isfinite(run["theta_hat"]), axis=(1, 2)))
         last = int(np.nonzero(finite)[0][-1]) + 1 if finite.any() else 1
         limit = run["effort_limit"]
         ratio = tau[:last, np.isfinite(limit)] / limit[np.isfinite(limit)]
         return {**metrics.tracking(run["t"][:last], e[:last]),
                 **metrics.estimates(run["theta_hat"][:last], theta),
-                **metrics.prediction(run["E"][:last]), **metrics.torque(tau[:last]),
+                **metrics.prediction(E[:last]), **metrics.torque(tau[:last]),
                 "max_effort_ratio": float(np.max(ratio)) if ratio.size else 0.0,
                 "diverged": run["status"] != "ok", "status": run["status"],
                 "t_end": float(run["t"][-1])}

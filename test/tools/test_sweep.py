@@ -272,3 +272,24 @@ def test_report_and_rerun(tmp_path, capsys):
     assert "inputs identical, largest relative metric difference 0" in text
     assert (out / "rerun_13.png").exists()
     assert cli.main(["sweep", "rerun", str(out), "20"]) == 2
+
+
+def test_channels_reach_the_controller_when_given(tmp_path, capsys):
+    """``channels`` is passed to the recursive law only when the campaign gives it."""
+    import inspect
+    doc = dict(SMALL, samples=1, vary={"channels": {"grid": [[1], "all"]}})
+    c = cp.validate(doc)
+    assert [cp.sample(c, i)["channels"] for i in range(2)] == [[1], "all"]
+    assert cp.validate(SMALL)["scenario"]["fixed"]["channels"] is None   # not passed
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    code = cli.main(["sweep", str(path), "--out", str(tmp_path / "o"), "--workers", "0",
+                     "--quiet"])
+    if "channels" in inspect.signature(RecursiveCompositeController).parameters:
+        assert code == 0
+        assert cp.setup(c, 1)[1].channels == tuple(range(1, 8))
+        assert rows(tmp_path / "o" / "results.parquet")["channels"].tolist() == ['[1]', '"all"']
+    else:                                   # a controller without channels: one clear line
+        assert code == 2
+        assert capsys.readouterr().err.startswith("rcac sweep: error: channels: this "
+                                                  "controller does not take channels")
