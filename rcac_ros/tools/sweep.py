@@ -576,14 +576,23 @@ def rerun(path, index, plot=None):
 # --------------------------------------------------------------------------- bench
 
 def timed_campaign(client, campaign, chunk=None):
-    """``(wall s, summed in-run wall s)`` of the whole campaign on ``client``."""
+    """``(wall s, summed in-run wall s, results.parquet bytes)`` of the campaign on ``client``."""
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(tmp)
         store.claim(campaign)
         t0 = time.perf_counter()
         execute(campaign, store, chunk=chunk, progress=False, client=client)
         wall = time.perf_counter() - t0
-        return wall, float(store.table().column("wall_time_s").to_numpy().sum())
+        table = store.merge()
+        return (wall, float(table.column("wall_time_s").to_numpy().sum()),
+                os.path.getsize(store.results))
+
+
+def worker_memory_mb(client):
+    """Resident memory of each worker process, MB."""
+    import psutil
+    return [v / 2 ** 20 for v in client.run(lambda: psutil.Process().memory_info().rss)
+            .values()]
 
 
 def bench(path=None, samples=None, duration=None, out=None, rounds=3):
@@ -617,11 +626,16 @@ def bench(path=None, samples=None, duration=None, out=None, rounds=3):
             for workers, chunk in results:
                 results[(workers, chunk)].append(timed_campaign(clients[workers], campaign,
                                                                 chunk))
+        memory = worker_memory_mb(clients[2])
     finally:
         for client in clients.values():
             close_client(client)
+    figures["worker_rss_mb"] = max(memory)
+    figures["results_bytes_per_run"] = results[(1, None)][0][2] / n
+    print(f"  worker memory {max(memory):.0f} MB resident; results.parquet "
+          f"{figures['results_bytes_per_run']:.0f} bytes per run")
     for (workers, chunk), measured in results.items():
-        wall, task_time = min(measured)
+        wall, task_time, _ = min(measured)
         # worker time not spent inside runs: scheduling, transfer, Parquet, idle at the end
         overhead = (wall * workers - task_time) / n
         key = f"w{workers}{'_chunk1' if chunk else ''}"
@@ -632,7 +646,7 @@ def bench(path=None, samples=None, duration=None, out=None, rounds=3):
               f"({100.0 * overhead * n / task_time:.1f} %)")
         figures[key] = dict(runs_per_s=n / wall, wall_s=wall, run_time_s=task_time / n,
                             overhead_per_run_s=overhead,
-                            rounds_runs_per_s=[n / w for w, _ in measured])
+                            rounds_runs_per_s=[n / m[0] for m in measured])
     eff = figures["w2"]["runs_per_s"] / (2.0 * figures["w1"]["runs_per_s"])
     figures["efficiency_2_workers"] = eff
     w1 = figures["w1"]
