@@ -576,7 +576,7 @@ def rerun(path, index, plot=None):
 # --------------------------------------------------------------------------- bench
 
 def timed_campaign(client, campaign, chunk=None):
-    """``(wall s, summed in-run wall s, results.parquet bytes)`` of the campaign on ``client``."""
+    """``(wall s, summed in-run wall s, summed in-run CPU s, results.parquet bytes)``."""
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(tmp)
         store.claim(campaign)
@@ -585,6 +585,7 @@ def timed_campaign(client, campaign, chunk=None):
         wall = time.perf_counter() - t0
         table = store.merge()
         return (wall, float(table.column("wall_time_s").to_numpy().sum()),
+                float(table.column("cpu_time_s").to_numpy().sum()),
                 os.path.getsize(store.results))
 
 
@@ -631,21 +632,23 @@ def bench(path=None, samples=None, duration=None, out=None, rounds=3):
         for client in clients.values():
             close_client(client)
     figures["worker_rss_mb"] = max(memory)
-    figures["results_bytes_per_run"] = results[(1, None)][0][2] / n
+    figures["results_bytes_per_run"] = results[(1, None)][0][3] / n
     print(f"  worker memory {max(memory):.0f} MB resident; results.parquet "
           f"{figures['results_bytes_per_run']:.0f} bytes per run")
     for (workers, chunk), measured in results.items():
-        wall, task_time, _ = min(measured)
+        wall, task_time, task_cpu, _ = min(measured)
         # worker time not spent inside runs: scheduling, transfer, Parquet, idle at the end
         overhead = (wall * workers - task_time) / n
+        share = task_cpu / (wall * workers)     # < 1: the cores were busy with other work too
         key = f"w{workers}{'_chunk1' if chunk else ''}"
         label = f"{workers} worker{'s' if workers > 1 else ''}, chunk " + (
             "1" if chunk else f"{auto_chunk(n, workers)}")
         print(f"  LocalCluster {label:18s} {n / wall:7.2f} runs/s  {1e3 * task_time / n:6.1f} "
               f"ms per run + overhead {1e3 * overhead:6.2f} ms "
-              f"({100.0 * overhead * n / task_time:.1f} %)")
+              f"({100.0 * overhead * n / task_time:.1f} %); runs got {100.0 * share:.0f} % "
+              "of the workers' time on CPU")
         figures[key] = dict(runs_per_s=n / wall, wall_s=wall, run_time_s=task_time / n,
-                            overhead_per_run_s=overhead,
+                            overhead_per_run_s=overhead, cpu_share=share,
                             rounds_runs_per_s=[n / m[0] for m in measured])
     eff = figures["w2"]["runs_per_s"] / (2.0 * figures["w1"]["runs_per_s"])
     figures["efficiency_2_workers"] = eff
