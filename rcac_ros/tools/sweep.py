@@ -107,18 +107,18 @@ def add_arguments(parser):
                          help="PNG (default RESULTS_DIR/rerun_INDEX.png)")
         return
     parser.set_defaults(action="run")
-    parser.add_argument("campaign", nargs="?", help="campaign YAML file")
-    parser.add_argument("--out", default=None, help="results directory")
-    parser.add_argument("--samples", type=positive_int, default=None,
+    parser.add_argument("campaign", nargs="?", metavar="CAMPAIGN", help="campaign YAML file")
+    parser.add_argument("--out", default=None, metavar="DIR", help="results directory")
+    parser.add_argument("--samples", type=positive_int, metavar="N", default=None,
                         help="random draws per grid cell (overrides the campaign's)")
-    parser.add_argument("--duration", type=positive_float, default=None,
+    parser.add_argument("--duration", type=positive_float, metavar="S", default=None,
                         help="seconds simulated per run (overrides the scenario's)")
-    parser.add_argument("--workers", type=workers_int, default=None,
+    parser.add_argument("--workers", type=workers_int, metavar="K", default=None,
                         help="LocalCluster workers (default: one per core; 0: this process, "
                              "no Dask)")
-    parser.add_argument("--scheduler", type=scheduler_address, default=None,
+    parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS", default=None,
                         help="address of a running Dask scheduler, tcp://HOST:PORT")
-    parser.add_argument("--chunk", type=positive_int, default=None,
+    parser.add_argument("--chunk", type=positive_int, metavar="C", default=None,
                         help="runs per task (default: about 4 tasks per worker, <= 50)")
     parser.add_argument("--resume", action="store_true",
                         help="continue the campaign in --out, skipping finished runs")
