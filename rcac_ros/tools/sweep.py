@@ -119,7 +119,7 @@ def add_arguments(parser):
     parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS", default=None,
                         help="address of a running Dask scheduler, tcp://HOST:PORT")
     parser.add_argument("--chunk", type=positive_int, metavar="C", default=None,
-                        help="runs per task (default: about 4 tasks per worker, <= 50)")
+                        help="runs per task (default: about 8 tasks per worker, <= 25)")
     parser.add_argument("--resume", action="store_true",
                         help="continue the campaign in --out, skipping finished runs")
     parser.add_argument("--bench", action="store_true",
@@ -322,8 +322,8 @@ def chunks_of(pending, chunk):
 
 
 def auto_chunk(pending, workers):
-    """About 4 tasks per worker, at most 50 runs per task."""
-    return max(1, min(50, math.ceil(pending / (4 * max(1, workers)))))
+    """About 8 tasks per worker (balance, progress), at most 25 runs per task."""
+    return max(1, min(25, math.ceil(pending / (8 * max(1, workers)))))
 
 
 def start_client(workers=None, scheduler=None, dashboard=":8787"):
