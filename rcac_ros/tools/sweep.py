@@ -460,12 +460,14 @@ def report(path, worst=10, plot=None):
                 q = v.quantile([0.5, 0.05, 0.95])
                 print(f"  {m:27s} {law:11s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
                       f"{q.iloc[2]:10.4g}] {v.max():10.4g}")
-    cols = ["run", "law", "status", "rms_tracking_error", "max_tracking_error"] + [
+    cols = ["run", "law", "status", "t_end", "rms_tracking_error", "max_tracking_error"] + [
         c for c in varied if c != "law"]
-    order = df.assign(_d=div).sort_values(["_d", "rms_tracking_error"], ascending=[False, False],
-                                          na_position="first")
-    print(f"\nworst {min(worst, n)} runs (diverged first, then by RMS error); "
-          "rerun one with 'rcac sweep rerun RESULTS INDEX':")
+    # diverged first, the earliest divergence first; then the largest RMS error
+    key = np.where(div, -df["t_end"].to_numpy(), df["rms_tracking_error"].to_numpy())
+    order = df.assign(_d=div, _k=key).sort_values(["_d", "_k"], ascending=[False, False],
+                                                  na_position="first")
+    print(f"\nworst {min(worst, n)} runs (diverged first, earliest first; then by RMS error)"
+          "; rerun one with 'rcac sweep rerun RESULTS INDEX':")
     with pd.option_context("display.width", 200, "display.max_columns", 30,
                            "display.float_format", "{:.4g}".format):
         print(order[cols].head(worst).to_string(index=False))
