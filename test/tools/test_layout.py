@@ -166,6 +166,15 @@ def test_offline_modules_do_not_load_rclpy(module):
     assert "rclpy" not in loaded_after_import(module)
 
 
+def test_every_folder_of_the_package_is_a_regular_package():
+    """setup.py's find_packages (and so colcon and pip) installs only folders with __init__."""
+    from setuptools import find_packages
+    found = set(find_packages(ROOT, exclude=["test", "test.*"]))
+    folders = {os.path.relpath(os.path.dirname(path), ROOT).replace(os.sep, ".")
+               for path in modules().values()}
+    assert folders <= found, f"missing __init__.py: {sorted(folders - found)}"
+
+
 def test_test_files_have_unique_names():
     seen = collections.defaultdict(list)
     for folder, _, files in os.walk(os.path.join(ROOT, "test")):
