@@ -151,7 +151,7 @@ def run(args):
     table = store.merge()
     failed = int(sum(table.column("diverged").to_pylist()))
     print(f"{done} runs in {time.perf_counter() - t0:.1f} s; {table.num_rows}/{total} runs in "
-          f"{store.results}; {failed} diverged")
+          f"{store.results}; {failed} diverged; summary and plot: rcac sweep report {args.out}")
     return 0
 
 
