@@ -33,4 +33,3 @@ def test_frozen_estimates_stay_and_the_law_uses_them():
     ctrl.set_adaptation(True)
     ctrl.step(q + 0.05, qd, q, qd, qdd)
     assert ctrl.adapting and not np.allclose(ctrl.theta_hat, theta0)
-
