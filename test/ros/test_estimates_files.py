@@ -1,5 +1,6 @@
 """Estimate files: YAML round trip, URDF inertials checked by Pinocchio, inconsistent links."""
 
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -9,40 +10,9 @@ from conftest import random_chain
 from rcac_ros.core.model import css_arm, RobotModel
 from rcac_ros.nodes.estimates import initial_estimates, load, rigid_body, save, urdf_path
 
-URDF = """<?xml version="1.0"?>
-<robot name="three">
-  <link name="base"/>
-  <joint name="shoulder" type="revolute">
-    <parent link="base"/><child link="upper"/>
-    <origin xyz="0 0 0.3" rpy="0.2 0 0.1"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="50" velocity="2"/>
-  </joint>
-  <link name="upper">
-    <inertial><origin xyz="0.02 -0.01 0.15" rpy="0.3 -0.2 0.5"/><mass value="3.5"/>
-      <inertia ixx="0.05" ixy="0.002" ixz="-0.001" iyy="0.04" iyz="0.003" izz="0.02"/>
-    </inertial>
-  </link>
-  <joint name="elbow" type="revolute">
-    <parent link="upper"/><child link="fore"/>
-    <origin xyz="0.1 0 0.4" rpy="1.5707963 0 0"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="30" velocity="2"/>
-  </joint>
-  <link name="fore">
-    <inertial><origin xyz="0.2 0.01 0" rpy="0 0.4 0"/><mass value="1.2"/>
-      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.025"/>
-    </inertial>
-  </link>
-  <joint name="wrist" type="continuous">
-    <parent link="fore"/><child link="hand"/>
-    <origin xyz="0.35 0 0" rpy="0 1.5707963 0"/><axis xyz="0 0 1"/>
-  </joint>
-  <link name="hand">
-    <inertial><origin xyz="0 0 0.05" rpy="0 0 0"/><mass value="0.4"/>
-      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.0008"/>
-    </inertial>
-  </link>
-</robot>
-"""
+URDF_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf")
+with open(URDF_PATH, encoding="utf-8") as _f:
+    URDF = _f.read()
 
 
 def test_rigid_body_recovers_mass_com_and_inertia():
