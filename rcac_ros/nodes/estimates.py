@@ -193,3 +193,17 @@ def initial_estimates(spec, model, joint_names=None):
     if not spec:
         raise ConfigError("initial_estimates: must be 'zero', 'model' or a file path")
     return load(spec, names)
+
+
+def urdf_child_links(urdf, joint_names):
+    """The link each joint moves, read from URDF XML or a URDF file (``None`` if unknown)."""
+    import xml.etree.ElementTree as ET
+    if not urdf:
+        return None
+    try:
+        root = ET.fromstring(urdf) if urdf.lstrip().startswith("<") else ET.parse(urdf).getroot()
+    except (ET.ParseError, OSError):
+        return None
+    child = {j.get("name"): j.find("child") for j in root.iter("joint")}
+    links = [child[j].get("link") if child.get(j) is not None else None for j in joint_names]
+    return None if None in links else links
