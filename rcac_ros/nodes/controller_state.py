@@ -16,7 +16,7 @@ All four carry the same stamp (the state's in lockstep), so they pair up sample 
 
 from sensor_msgs.msg import JointState
 
-from rcac_ros.nodes.common import QOS_MONITOR
+from rcac_ros.nodes.base import QOS_MONITOR
 
 #: the sub-topics of ``~/controller_state``
 PARTS = ("reference", "feedback", "error", "output")
@@ -37,7 +37,7 @@ class ControllerStatePublisher:
 
     def __init__(self, node, joints, create=None):
         create = create or node.create_publisher
-        self._pubs = [create(JointState, f"{TOPIC}/{part}", QOS_MONITOR) for part in PARTS]
+        self.publishers = [create(JointState, f"{TOPIC}/{part}", QOS_MONITOR) for part in PARTS]
         self._msgs = [JointState(name=list(joints)) for _ in PARTS]
 
     def publish(self, stamp, q_d, qd_d, qdd_d, q, qd, tau):
@@ -47,6 +47,6 @@ class ControllerStatePublisher:
         fb.position, fb.velocity = q.tolist(), qd.tolist()
         err.position, err.velocity = (q_d - q).tolist(), (qd_d - qd).tolist()
         out.effort = tau.tolist()
-        for pub, msg in zip(self._pubs, self._msgs):
+        for pub, msg in zip(self.publishers, self._msgs):
             msg.header.stamp = stamp
             pub.publish(msg)

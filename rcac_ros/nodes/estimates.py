@@ -25,8 +25,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import yaml
 
-from rcac_ros.core.exceptions import ConfigError
 from rcac_ros.core.model import PARAMETER_NAMES
+from rcac_ros.errors import ConfigError
 
 #: the ``format`` key of an estimates file
 FORMAT = "rcac_ros/estimates 1"

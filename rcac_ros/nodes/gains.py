@@ -9,12 +9,11 @@ per-joint form. Pure: no rclpy.
 
 import numpy as np
 
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
+from rcac_ros.params import GAINS_PREFIX as PREFIX
 
 #: the gains that have a per-joint (per-link) value in the core, with their size
 PER_JOINT = {"K_D": 6, "Lambda": 1, "P": 13}
-
-PREFIX = "gains."
 
 
 def parse_overrides(values, joint_names):

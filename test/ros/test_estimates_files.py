@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from conftest import random_chain
 
-from rcac_ros.core.model import css_arm, RobotModel
+from rcac_ros.core.model import css_arm
+from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.nodes.estimates import initial_estimates, load, rigid_body, save, urdf_path
 
 URDF_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf")
@@ -29,7 +30,7 @@ def test_saved_urdf_inertials_match_the_original_in_pinocchio(tmp_path):
     """The fragment's <inertial> blocks, put into the URDF in place of the originals, give
     Pinocchio the same bodies (an independent URDF parser and inertia algebra)."""
     pin = pytest.importorskip("pinocchio")
-    model = RobotModel.from_urdf(URDF)
+    model = model_from_urdf(URDF)
     _, fragment, problems = save(str(tmp_path / "est.yaml"), model.theta(), model.joint_names,
                                  model.name, link_names=["upper", "fore", "hand"])
     assert problems == []
@@ -86,7 +87,7 @@ def test_inconsistent_links_are_named_with_the_reason(tmp_path):
     ("format: rcac_ros/estimates 1\nlinks:\n- {joint: a, theta: [1]}\n", "do not match"),
 ])
 def test_bad_estimate_files_name_the_parameter(tmp_path, content, text):
-    from rcac_ros.core.exceptions import ConfigError
+    from rcac_ros.errors import ConfigError
     path = tmp_path / "bad.yaml"
     if content is not None:
         path.write_text(content)

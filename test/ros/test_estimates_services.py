@@ -48,13 +48,13 @@ class Operator(Node):
         self.sub = self.create_subscription(
             Float64MultiArray, f"{NODE}/parameter_estimates",
             lambda m: self.theta.append(np.reshape(m.data, (7, 13))), DEEP)
-        self.clients = {name: self.create_client(kind, f"{NODE}/{name}") for name, kind in (
+        self.services_ = {name: self.create_client(kind, f"{NODE}/{name}") for name, kind in (
             ("reset_estimates", Trigger), ("set_adaptation", SetBool),
             ("save_estimates", Trigger))}
         executor.add_node(self)
 
     def call(self, name, **fields):
-        client = self.clients[name]
+        client = self.services_[name]
         assert spin_until(self.ex, client.service_is_ready, timeout=60.0), name
         future = client.call_async(client.srv_type.Request(**fields))
         assert spin_until(self.ex, future.done, timeout=60.0), name
@@ -71,7 +71,7 @@ def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
     with ros_context() as (ctx, ex):
         op = Operator(ctx, ex)
         ctrl = start("controller_node", f"estimates_file:={path}")
-        sim = start("simulator_node", "min_subscribers:=2")
+        sim = start("simulator_node")
         try:
             assert spin_until(ex, lambda: op.sub.get_publisher_count() > 0, timeout=60.0)
             op.wait_steps(200)
@@ -88,12 +88,14 @@ def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
             np.testing.assert_array_equal(saved, frozen[0])
             # resume: they move again
             assert op.call("set_adaptation", data=True).success
-            moving = op.wait_steps(50)
-            assert not np.array_equal(moving[-1], frozen[0])
+            assert spin_until(ex, lambda: not np.array_equal(op.theta[-1], frozen[0]),
+                              timeout=30.0)
             # reset (while frozen, so nothing moves after it): back to the initial zero
             assert op.call("set_adaptation", data=False).success
             res = op.call("reset_estimates")
             assert res.success, res.message
+            assert spin_until(ex, lambda: np.array_equal(op.theta[-1], np.zeros((7, 13))),
+                              timeout=30.0)
             np.testing.assert_array_equal(op.wait_steps(20)[-1], np.zeros((7, 13)))
         finally:
             stop(sim)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 from rcac_ros.nodes.gains import parse_overrides, per_joint_gains
 
 JOINTS = ("shoulder", "elbow", "wrist")
