@@ -1,9 +1,9 @@
 """What the controller and simulator nodes share (they never import each other).
 
 Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
-left behind), diagnostics, throttled warnings, compute-time statistics, the effort
-message's layout, and :func:`run`: the ``main`` of a node (clean start-up refusal with one
-line and exit 2, clean shutdown on SIGINT/SIGTERM).
+left behind), the QoS profiles, diagnostics, on-set parameter checks, throttled warnings,
+compute-time statistics, and :func:`run`: the ``main`` of a node (clean start-up refusal
+with one line and exit 2, clean shutdown on SIGINT/SIGTERM).
 """
 
 import math
@@ -11,10 +11,9 @@ import signal
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
@@ -29,6 +28,7 @@ from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.description import wait_for_description
+from rcac_ros.nodes.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.pacing import spin_node_once
 
 #: reliable, keep-last 10: the control topics (what ros2_control uses)
@@ -129,54 +129,18 @@ def _joints(joints, model):
 
 
 # ------------------------------------------------------------------ node
-class RcacNodeMixin:
-    """Parameter checks and diagnostics of both nodes (plain or managed).
-
-    Needs ``_rows`` (name -> :class:`rcac_ros.params.Param`), ``model``, ``_pub_diag`` and
-    a ``diagnostics()`` method.
-    """
-
-    def _check_parameters(self, changed):
-        """On-set callback: validate against the table (a subclass applies them post-set)."""
-        for p in changed:
-            row = self._rows.get(p.name)
-            if row is None:
-                continue                # rclpy's own (use_sim_time, ...)
-            value = p.value
-            if row.type.endswith("_array") and value is not None:
-                value = list(value)
-            try:
-                params.check(row, value)
-            except ConfigError as err:
-                return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
-
-    def _publish_diagnostics(self):
-        msg = DiagnosticArray(status=[self.diagnostics()])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self._pub_diag.publish(msg)
-
-    def status(self, level, name, message, values):
-        """A DiagnosticStatus of this node from a ``{key: value}`` dict."""
-        return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
-                                hardware_id=self.model.name,
-                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-
-
 class RcacNode(RcacNodeMixin, Node):
-    """The start-up both nodes share: read and check every parameter, or leave nothing behind.
+    """The start-up of a plain node: read and check every parameter, or leave nothing behind.
 
-    A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
-    ``_read_parameters(values)`` (raising :class:`ConfigError` naming the parameter),
-    ``diagnostics()`` (a DiagnosticStatus, published every ``diagnostics_period`` s of the
-    steady clock) and ``on_interrupt()``; ``finished`` and ``exit_code`` tell :func:`run`
-    when and how to stop.
-
-    Attributes
-    ----------
-    model : RobotModel
-    joints : tuple of str
-        The joint order of the node's messages.
+    ``RcacNode(name, **kwargs)``: ``kwargs`` go to :class:`rclpy.node.Node` (``context``,
+    ``parameter_overrides``, ...); an invalid parameter raises :class:`ConfigError` naming
+    it. A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
+    ``_read_parameters(values)``, ``diagnostics()`` (a DiagnosticStatus, published every
+    ``diagnostics_period`` s of the steady clock) and ``on_interrupt()``. It finds the robot
+    in ``model``, the joint order of its messages in ``joints``; ``finished`` and
+    ``exit_code`` tell :func:`run` when and how to stop. With a ``description_topic`` row
+    set, it waits for the robot description first. (The controller is managed:
+    :class:`rcac_ros.nodes.managed.ManagedNode`.)
     """
 
     #: the node's rows of :mod:`rcac_ros.params`
@@ -187,8 +151,10 @@ class RcacNode(RcacNodeMixin, Node):
         self.finished = False
         self.exit_code = 0
         try:
-            values, self.model, self.joints = declare_parameters(
-                self, self.PARAMETERS, self._wait_for_description())
+            topic = [declare(self, p) for p in self.PARAMETERS if p.name == "description_topic"]
+            xml = wait_for_description(self, topic[0], SingleThreadedExecutor) \
+                if topic and topic[0] else None
+            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS, xml)
             # index arrays: model order -> message (joints) order, and back
             self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
             self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
@@ -202,12 +168,6 @@ class RcacNode(RcacNodeMixin, Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-    def _wait_for_description(self):
-        """The URDF of ``description_topic`` when that row is set (waiting for it), else None."""
-        row = [p for p in self.PARAMETERS if p.name == "description_topic"]
-        topic = declare(self, row[0]) if row else None
-        return wait_for_description(self, topic, SingleThreadedExecutor) if topic else None
 
 
 class Throttle:

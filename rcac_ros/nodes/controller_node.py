@@ -1,25 +1,20 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
-A managed node (:class:`rcac_ros.nodes.managed.ManagedNode`: ``~/get_state``,
-``~/change_state``): configure reads the parameters, builds the model, the gains (with the
-per-joint overrides ``gains.<joint>.<gain>``) and the kernels, warmed by one step;
-activate starts the efforts (the motion starts again from the next state); deactivate
-sends one zero effort, then silence; ``autostart`` (default) does it all at start-up.
-Operator services (:mod:`rcac_ros.nodes.estimate_services`): ``~/reset_estimates``,
-``~/set_adaptation``, ``~/save_estimates``. ``~/controller_state/*`` gives reference,
-feedback, error and output per joint (:mod:`rcac_ros.nodes.controller_state`).
+A managed node (:class:`~rcac_ros.nodes.managed.ManagedNode`, ``~/get_state``,
+``~/change_state``): configure reads the parameters, the model, the gains (and their
+overrides ``gains.<joint>.<gain>``) and warms the kernels; activate starts the efforts (the
+motion starts again from the next state); deactivate sends one zero effort, then silence;
+``autostart`` (default) does both at start-up. Services ``~/reset_estimates``,
+``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.estimate_services`);
+``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller_state`); doc/nodes.md.
 
-Thin: message -> arrays -> :class:`rcac_ros.core.rcac.RecursiveCompositeController` ->
-message. Two timing modes:
-
-* ``lockstep`` (default): one step per valid JointState, the trajectory time taken
-  from the state's stamp (deterministic with the simulator node);
-* ``timer``: ``rate`` Hz on the latest valid state (real arms). On the steady clock the
-  ticks keep absolute deadlines (:class:`rcac_ros.nodes.pacing.DeadlineLoop`: a late tick
-  is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
-
+Thin: message -> arrays -> :class:`~rcac_ros.core.rcac.RecursiveCompositeController` ->
+message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
+from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
+latest valid state (real arms), on absolute deadlines of the steady clock
+(:class:`~rcac_ros.nodes.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
-``state_timeout`` seconds. Parameters are documented in ``config/controller.yaml``.
+``state_timeout`` s. Parameters: ``config/controller.yaml``, doc/parameters.md.
 """
 
 import sys
@@ -46,16 +41,9 @@ from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, Traje
 class ControllerNode(ManagedNode):
     """The recursive composite adaptive controller as a managed ROS 2 node.
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    ConfigError
-        With ``autostart`` (and no ``description_topic``), on an invalid parameter (the
-        message names it). Otherwise a failed configure leaves the node unconfigured.
+    Constructed as :class:`~rcac_ros.nodes.managed.ManagedNode` (keyword arguments of
+    :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
+    parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
     """
 
     PARAMETERS = params.CONTROLLER

@@ -26,8 +26,9 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes.base import declare, declare_parameters, QOS, RcacNodeMixin, Throttle
+from rcac_ros.nodes.base import declare, declare_parameters, QOS, Throttle
 from rcac_ros.nodes.description import subscribe_description
+from rcac_ros.nodes.diagnosed import RcacNodeMixin
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
