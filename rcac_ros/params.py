@@ -373,7 +373,9 @@ def document():
              "doc/parameters.md`; do not edit by hand (a test compares the two).",
              "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
              "decimal point in a YAML file. Settable parameters can be changed with "
-             "`ros2 param set` while the node runs; the others are read once at start-up."]
+             "`ros2 param set` while the node runs; the others are read once at start-up (the "
+             "managed controller: at each configure). The controller also takes per-joint "
+             "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
                   markdown(node)]

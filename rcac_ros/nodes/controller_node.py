@@ -56,9 +56,8 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ lifecycle
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
-        self._read_parameters(values)
+        read_parameters(self, values)      # ... and the core controller, its kernels warmed
         self._stats = Percentiles()
-        self._warm_up()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, self._out, tagged=self.mode == "lockstep"))
         self._reader = JointStateReader(self.model.joint_names)
@@ -139,9 +138,6 @@ class ControllerNode(ManagedNode):
         return True
 
     # ------------------------------------------------------------------ parameters
-    def _read_parameters(self, v):
-        read_parameters(self, v)
-
     def _apply_parameters(self, changed):
         """Post-set callback: the run-time parameters take effect."""
         for p in changed:
@@ -149,12 +145,6 @@ class ControllerNode(ManagedNode):
                 self.state_timeout = float(p.value)
             elif p.name == "monitor_decimation":
                 self.publish_every = int(p.value)
-
-    def _warm_up(self):
-        """Run the compiled step once so the first real step is not slow, then reset."""
-        z = np.zeros(self.model.n)
-        self.ctrl.step(z, z, z, z, z)
-        self.ctrl.reset(self.theta0)
 
     # ------------------------------------------------------------------ inputs
     def _now_ns(self):

@@ -16,7 +16,8 @@ from rcac_ros.nodes.gains import parse_overrides, per_joint_gains
 
 
 def read_parameters(node, v):
-    """Apply the checked values ``v`` (name -> value) to the controller ``node``.
+    """Apply the checked values ``v`` (name -> value) to the controller ``node``; build its
+    core controller (``node.ctrl``) and warm its kernels up.
 
     Raises
     ------
@@ -52,6 +53,9 @@ def read_parameters(node, v):
             gamma=v["gamma"], lam=v["lambda"], h=node.h, theta_hat0=node.theta0)
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
+    z = np.zeros(n)             # warm up: one compiled step, so the first real one is not slow
+    node.ctrl.step(z, z, z, z, z)
+    node.ctrl.reset(node.theta0)
 
 
 def _gain_overrides(node):

@@ -32,3 +32,11 @@ def test_bad_overrides_are_rejected_in_one_line_naming_them(name, value, text):
         parse_overrides({name: value}, JOINTS)
     assert str(err.value).startswith(f"{name}: ") and text in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def test_a_parameters_file_may_hold_gains_overrides():
+    from rcac_ros.params import check_file_params
+    check_file_params("controller", {"gains": {"joint7": {"K_D": 2.0e3, "P": 10.0}}})
+    with pytest.raises(ConfigError) as err:
+        check_file_params("controller", {"gains": {"joint7": {"K_D": -1.0}}})
+    assert str(err.value).startswith("gains.joint7.K_D:")
