@@ -94,7 +94,7 @@ def test_every_transition_through_the_lifecycle_services():
     with ros_context() as (ctx, ex):
         probe = Probe(ctx)
         ex.add_node(probe)
-        ctrl = start("controller_node", "autostart:=false", "state_timeout:=1000.0")
+        ctrl = start("controller_node", "autostart:=false", "state_timeout:=1.0")
         try:
             lc = Lifecycle(probe, ex)
             assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
@@ -115,10 +115,12 @@ def test_every_transition_through_the_lifecycle_services():
             n = len(probe.efforts)
             assert lc.transition(Transition.TRANSITION_DEACTIVATE)
             assert lc.state() == State.PRIMARY_STATE_INACTIVE
-            assert spin_until(ex, lambda: len(probe.efforts) > n, timeout=10.0)
+            assert spin_until(ex, lambda: any("stamp=" not in lab
+                                              for lab, _ in probe.efforts[n:]), timeout=10.0)
             assert silent(ex, probe, k) == 0
+            # (an answer to a state re-sent during discovery may precede it: stamped)
             after = [d for lab, d in probe.efforts[n:] if "stamp=" not in lab]
-            assert len(after) == 1 and len(probe.efforts) == n + 1
+            assert len(after) == 1 and "stamp=" not in probe.efforts[-1][0]
             np.testing.assert_array_equal(after[0], np.zeros(7))
             # activate again: control resumes
             assert lc.transition(Transition.TRANSITION_ACTIVATE)
@@ -165,7 +167,7 @@ def test_autostart_is_active_in_one_step():
     with ros_context() as (ctx, ex):
         probe = Probe(ctx)
         ex.add_node(probe)
-        ctrl = start("controller_node", "state_timeout:=1000.0")
+        ctrl = start("controller_node", "state_timeout:=1.0")
         try:
             lc = Lifecycle(probe, ex)
             assert spin_until(ex, lambda: lc.state() == State.PRIMARY_STATE_ACTIVE, timeout=30.0)
