@@ -9,10 +9,10 @@ Writing (:class:`BagWriter`):
   PlotJuggler read the files.
 - sqlite3 through Python's ``sqlite3`` with rosbag2's schema (version 4); a rollback journal
   (rosbags opens a bag ``immutable``, so a WAL would be ignored by readers).
-- At most every ``flush_period`` seconds (default 1 s) the open mcap chunk is finished and
+- Every ``flush_period`` seconds (default 0.5 s) the open mcap chunk is finished and
   written, or the sqlite transaction committed, and ``metadata.yaml`` is rewritten (first at
   open) with the counts so far and ``custom_data.rcac_state: recording``. A ``kill -9`` of the
-  recorder therefore loses at most the last period. :meth:`BagWriter.close` writes the
+  recorder therefore loses at most the last period (under 1 s). :meth:`BagWriter.close` writes the
   summary and ``rcac_state: closed``.
 
 Reading (:func:`verify`, :func:`recover`): verification uses the format's own checks through
@@ -30,14 +30,15 @@ import time
 
 import yaml
 
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 
 #: rosbag2 metadata version written (Jazzy)
 METADATA_VERSION = 9
 #: the ROS distribution written in metadata.yaml (and sqlite's schema table)
 ROS_DISTRO = "jazzy"
-#: seconds between two flushes (mcap chunk, sqlite commit, metadata.yaml)
-FLUSH_PERIOD = 1.0
+#: seconds between two flushes (mcap chunk, sqlite commit, metadata.yaml): a crash loses at
+#: most this, plus what DDS had not yet delivered
+FLUSH_PERIOD = 0.5
 STORAGES = ("mcap", "sqlite3")
 #: custom_data key telling a bag being written (or cut by a crash) from a closed one
 STATE_KEY = "rcac_state"
@@ -500,7 +501,9 @@ def _sqlite_check(file_path, report, strict=True):
         try:
             result = db.execute("PRAGMA integrity_check").fetchall()
             if result != [("ok",)]:
-                raise BagError(f"bag: {name} fails sqlite's integrity check: {result[0][0]}")
+                text = " ".join(" ".join(r[0] for r in result[:3]).split())
+                text = text.replace("*** in database main *** ", "")
+                raise BagError(f"bag: {name} fails sqlite's integrity check: {text}")
             rows = db.execute("SELECT t.name, t.type, COUNT(m.id), MIN(m.timestamp), "
                               "MAX(m.timestamp) FROM topics t LEFT JOIN messages m "
                               "ON m.topic_id = t.id GROUP BY t.id").fetchall()
@@ -517,13 +520,16 @@ def _sqlite_check(file_path, report, strict=True):
     report.checks.append("sqlite integrity check")
 
 
-def verify(path):
+def verify(path, on_message=None):
     """Check a bag with what its format offers; raise :class:`BagError` naming the problem.
 
     Parameters
     ----------
     path : str
         Bag directory.
+    on_message : callable, optional
+        mcap: called as ``on_message(channel, schemas, message)`` (``mcap.records``) for every
+        message while scanning (the publishers' send stamps and sequence numbers).
 
     Returns
     -------
@@ -549,7 +555,7 @@ def verify(path):
     for rel in info["relative_file_paths"]:
         file_path = os.path.join(path, rel)
         if storage == "mcap":
-            _mcap_scan(file_path, report, recording=state == "recording")
+            _mcap_scan(file_path, report, on_message, recording=state == "recording")
         else:
             _sqlite_check(file_path, report)
     expected = _metadata_counts(info)
@@ -571,6 +577,47 @@ def verify(path):
                           f"recorder was killed?); run `rcac inspect --recover {path}`")
     report.checks.append("message counts against metadata.yaml")
     return report
+
+
+def _size_text(n):
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{n} B"
+        n /= 1024.0
+
+
+def _time_text(ns):
+    t = datetime.datetime.fromtimestamp(ns * 1e-9)
+    return f"{t.strftime('%b %e %Y %H:%M:%S')}.{ns % 1_000_000_000:09d} " \
+        f"({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
+
+
+def bag_info(path):
+    """The header ``ros2 bag info`` prints, from ``metadata.yaml`` and the file sizes."""
+    info = read_metadata(path)
+    files = info["relative_file_paths"]
+    size = sum(os.path.getsize(os.path.join(path, f)) for f in files
+               if os.path.isfile(os.path.join(path, f)))
+    start = int(info.get("starting_time", {}).get("nanoseconds_since_epoch", 0))
+    dur = int(info.get("duration", {}).get("nanoseconds", 0))
+    lines = [f"Files:             {', '.join(files)}",
+             f"Bag size:          {_size_text(size)}",
+             f"Storage id:        {info['storage_identifier']}",
+             f"ROS Distro:        {info.get('ros_distro', 'unknown')}",
+             f"Duration:          {dur // 1_000_000_000}.{dur % 1_000_000_000:09d}s",
+             f"Start:             {_time_text(start)}",
+             f"End:               {_time_text(start + dur)}",
+             f"Messages:          {info.get('message_count', 0)}"]
+    first = True
+    for t in info.get("topics_with_message_count") or []:
+        meta = t["topic_metadata"]
+        head = "Topic information: " if first else " " * 19
+        lines.append(f"{head}Topic: {meta['name']} | Type: {meta['type']} | Count: "
+                     f"{t.get('message_count', 0)} | Serialization Format: "
+                     f"{meta.get('serialization_format', 'cdr')}")
+        first = False
+    lines += ["Service:           0", "Service information: "]
+    return "\n".join(lines)
 
 
 # ----------------------------------------------------------------------------- recovering
