@@ -31,7 +31,8 @@ def _prepare_out(out):
     bag = os.path.join(out, "bag")
     if os.path.exists(bag):
         leftovers = set(os.listdir(bag)) - {"metadata.yaml"}
-        if not all(f.endswith((".mcap", ".db3", ".db3-wal", ".db3-shm")) for f in leftovers):
+        kinds = (".mcap", ".db3", ".db3-wal", ".db3-shm", ".db3-journal", "metadata.yaml.tmp")
+        if not all(f.endswith(kinds) for f in leftovers):
             raise ConfigError(f"out: {bag} exists and does not look like a bag; move it away")
         shutil.rmtree(bag)
     os.makedirs(os.path.join(out, "logs"), exist_ok=True)
@@ -82,7 +83,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
         try:
             ctx = init_context(domain)
             executor = SingleThreadedExecutor(context=ctx)
-            recorder = BagRecorder(bag, ctx, storage=storage)
+            recorder = BagRecorder(bag, ctx, storage=storage, log=log)
             executor.add_node(recorder.node)
             log(f"rcac demo: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
                 f"lockstep (dt {dt * 1e3:g} ms); bag {bag}")
@@ -194,7 +195,7 @@ def run(args):
     try:
         bag = run_demo(args.duration, out, args.storage)
     except KeyboardInterrupt:
-        print(f"rcac demo: interrupted; both nodes stopped; the partial bag is in "
+        print(f"rcac demo: interrupted; both nodes stopped; the bag is closed in "
               f"{os.path.join(out, 'bag')} (rcac inspect reads it)", file=sys.stderr)
         return 130
     except NodeFailed as err:
@@ -209,6 +210,8 @@ def run(args):
               f"{start:.3f} s; the controller's topics, and the metrics, cover the whole run")
     print("Metrics (as rcac experiment):")
     print(format_metrics(result["metrics"]))
+    for line in result["notes"]:
+        print(f"rcac demo: note: {line}")
     print("Wrote:")
     print(f"  bag      {bag}")
     print(f"  metrics  {result['metrics_path']}")

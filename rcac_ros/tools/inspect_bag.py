@@ -356,7 +356,7 @@ def loop_timing(data, eff=None, js=None, tagged=None):
     eff = data.get("/" + topics.EFFORT_COMMANDS) if eff is None else eff
     if js is None or js.count < 2:
         return None
-    send = js.sent is not None and eff is not None and eff.sent is not None
+    send = js.sent is not None and (eff is None or not eff.count or eff.sent is not None)
     js_t = js.sent if send else js.recv
     eff_t = None if eff is None else (eff.sent if send else eff.recv)
     period = 1e-6 * np.diff(js_t).astype(float)

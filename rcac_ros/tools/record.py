@@ -20,6 +20,7 @@ Subscriptions are created before anything else (no numba, the writer after them)
 recorder prints, per topic, when its publisher was matched and its first message arrived.
 """
 
+import bisect
 import datetime
 import functools
 import importlib
@@ -161,6 +162,8 @@ class BagRecorder:
         self.node = Node(node_name, context=context, parameter_overrides=[
             Parameter("use_sim_time", Parameter.Type.BOOL, self.use_sim_time)])
         self._clock = self.node.get_clock()
+        #: (receive time, sim time) ns of the /clock messages, for stamping with ROS time
+        self._clock_recv, self._clock_sim = [], []
         self.topics = recorded_topics(controller_node)
         self._types = dict(self.topics)
         self.counts = {name: 0 for name, _ in self.topics}
@@ -180,8 +183,10 @@ class BagRecorder:
         self._subs = {}
         self._closed = False
         self._writer = None
-        # subscribe first: discovery and matching run while the writer is set up
-        for name, _ in self.topics:
+        # subscribe first: discovery and matching run while the writer is set up. /clock
+        # first: the executor serves ready subscriptions in creation order, so a message is
+        # stamped after the /clock messages received before it are known (--use-sim-time)
+        for name in sorted((n for n, _ in self.topics), key=lambda n: n != topics.CLOCK):
             self._subscribe(name, ReliabilityPolicy.RELIABLE)
         self._writer = BagWriter(self.path, storage, flush_period=flush_period)
 
@@ -211,10 +216,16 @@ class BagRecorder:
             now = time.monotonic() - self.t0
             self.first_at[name] = now
             matched = self.matched_at.setdefault(name, now)
-            self._log(f"rcac record: first message on {name} at {now:.3f} s, "
-                      f"{now - matched:.3f} s after its publisher was discovered")
+            self._log(f"rcac record: first message on {name} at {now:.3f} s (its publisher "
+                      f"matched at {matched:.3f} s)")
         received = info.get("received_timestamp") or time.time_ns()
-        stamp = self._clock.now().nanoseconds if self.use_sim_time else received
+        if name == topics.CLOCK:
+            self.sim_time = clock_seconds(data)
+            self._clock_recv.append(received)
+            self._clock_sim.append(int(round(self.sim_time * 1e9)))
+            if len(self._clock_recv) > 8192:
+                del self._clock_recv[:4096], self._clock_sim[:4096]
+        stamp = self._sim_stamp(received) if self.use_sim_time else received
         seq = info.get("publication_sequence_number") or 0
         self._writer.write(name, stamp, data, info.get("source_timestamp") or received, seq)
         self._writer.tick()
@@ -231,8 +242,15 @@ class BagRecorder:
             elif last is not None and seq > last + 1:
                 self.gaps[name] += seq - last - 1
             self._last_seq[name] = seq
-        if name == topics.CLOCK:
-            self.sim_time = clock_seconds(data)
+
+    def _sim_stamp(self, received):
+        """ROS time when a message was received: the latest /clock received before it (the
+        executor may run the /clock callback after the message's; ros2 bag record stamps
+        with the clock at callback time instead)."""
+        k = bisect.bisect_right(self._clock_recv, received) - 1
+        if k < 0:
+            return self._clock.now().nanoseconds
+        return self._clock_sim[k]
 
     def tick(self):
         """Flush the bag when a flush period has passed (call at least once a second)."""

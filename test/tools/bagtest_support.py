@@ -85,9 +85,10 @@ class Publisher:
     the wall time (ns) each ``k`` was published at.
     """
 
-    def __init__(self, domain, dt=0.002, state_qos_depth=1000, state_best_effort=False):
+    def __init__(self, domain, dt=0.002, state_qos_depth=1000, state_best_effort=False,
+                 state_transient_local=False):
         import rclpy
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
 
@@ -98,7 +99,9 @@ class Publisher:
                               reliability=ReliabilityPolicy.RELIABLE)
         state_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=state_qos_depth,
                                reliability=ReliabilityPolicy.BEST_EFFORT if state_best_effort
-                               else ReliabilityPolicy.RELIABLE)
+                               else ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL
+                               if state_transient_local else DurabilityPolicy.VOLATILE)
         self.clock_pub = self.node.create_publisher(Clock, "/clock", reliable)
         self.state_pub = self.node.create_publisher(JointState, "/joint_states", state_qos)
         self._Clock, self._JointState = Clock, JointState

@@ -77,10 +77,10 @@ def test_late_recorder_records_within_1s_of_discovery(tmp_path, ros_env):  # noq
         rec.stop()
         pub.close()
     out = rec.output()
-    pattern = re.compile(r"first message on (\S+) at ([\d.]+) s, ([\d.]+) s after its "
-                         r"publisher was discovered")
-    firsts = {m.group(1): (float(m.group(2)), float(m.group(3))) for m in
-              pattern.finditer(out)}
+    pattern = re.compile(r"first message on (\S+) at ([\d.]+) s \(its publisher matched at "
+                         r"([\d.]+) s\)")
+    firsts = {m.group(1): (float(m.group(2)), float(m.group(2)) - float(m.group(3)))
+              for m in pattern.finditer(out)}
     assert {"/clock", "/joint_states"} <= set(firsts), out
     for topic in ("/clock", "/joint_states"):
         at, after = firsts[topic]
