@@ -3,6 +3,7 @@ profiles and ``ros_distro: jazzy``, stamps with ``/clock`` under ``--use-sim-tim
 mcap files read back through ``mcap`` + ``mcap-ros2-support`` and through rosbags; ``rcac
 inspect`` prints the header ``ros2 bag info`` prints."""
 
+import json
 import signal
 import time
 
@@ -65,9 +66,13 @@ def test_recorded_qos_distro_and_two_readers(tmp_path, ros_env):  # noqa: F811
         chq = {c.topic: yaml.safe_load(c.metadata["offered_qos_profiles"]) for c in channels}
     assert chq["/joint_states"] == qos["/joint_states"]
 
-    # the ros2 bag info header
-    res = rcac("inspect", str(bag), env=ros_env)
+    # the ros2 bag info header; the loop timing from the publisher's send stamps (every
+    # 2 ms), not from the recorder's bursty receive stamps
+    res = rcac("inspect", str(bag), "--plots", str(tmp_path / "plots"), env=ros_env)
     assert res.returncode == 0, res.stderr
+    metrics = json.loads((tmp_path / "plots" / "metrics.json").read_text())["metrics"]
+    assert metrics["timing_stamps"] == "send"
+    assert 1.5 <= metrics["state_period_p50_ms"] <= 2.5
     for field in ("Files:", "Bag size:", "Storage id:        mcap", "ROS Distro:        jazzy",
                   "Duration:", "Start:", "End:", "Messages:",
                   "Topic information: Topic: ",

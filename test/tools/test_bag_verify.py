@@ -167,3 +167,32 @@ def test_inspect_finds_the_bag_in_a_parent_folder(tmp_path, capsys):
     assert _main(["inspect", str(tmp_path / "run")]) == 2
     line = _err_line(capsys)
     assert "holds 2 bags (bag, bag2)" in line, line
+
+
+def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
+    """efforts.png names the joints, prediction_error.png shows log |E|, and the loop-timing
+    figure says which stamps it comes from (issue 11)."""
+    import matplotlib.figure
+    import numpy as np
+
+    from rcac_ros.tools.inspect_bag import write_plots
+    figures = {}
+
+    def capture(fig, path, **kwargs):
+        figures[os.path.basename(str(path))] = fig
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", capture)
+    t = np.linspace(0.0, 1.0, 50)
+    names = [f"j{k}" for k in range(7)]
+    series = {"effort": (t, np.ones((50, 7))),
+              "prediction_error": (t, np.exp(-5.0 * t) * np.cos(20.0 * t)),
+              "timing": {"period_ms": np.full(49, 2.0), "latency_ms": np.full(49, 0.3),
+                         "unanswered": 0, "clock": "receive"}}
+    write_plots(series, str(tmp_path), names=names)
+    ax = figures["efforts.png"].axes[0]
+    assert [x.get_text() for x in ax.get_legend().get_texts()] == names
+    ax = figures["prediction_error.png"].axes[0]
+    assert ax.get_yscale() == "log"
+    y = ax.get_lines()[0].get_ydata()
+    assert np.allclose(y, np.abs(series["prediction_error"][1]))
+    caption = " ".join(x.get_text() for x in figures["loop_timing.png"].texts)
+    assert "receive stamps" in caption and "cluster near 0 ms" in caption
