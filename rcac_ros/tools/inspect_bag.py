@@ -1,10 +1,13 @@
-"""``rcac inspect``: summarise a bag of the package's topics, compute metrics, plot.
+"""``rcac inspect``: verify and summarise a bag of the package's topics, compute metrics, plot.
 
-The summary lists every topic (type, count, rate from the receive stamps) and the
-bag's duration. The metrics are those of ``rcac experiment`` that the bag allows
-(tracking errors, estimate errors against the model's true parameters,
-prediction error, torques) plus the loop timing seen by the recorder (period
-between joint states, latency from a joint state to the effort that answers it).
+The bag (or the single bag in a folder) is first verified (:func:`bag_io.verify`: CRCs, counts,
+sqlite's integrity check); a damaged or cut bag is one line and exit 2, and ``--recover``
+salvages it (:func:`bag_io.recover`). The summary starts with the header ``ros2 bag info``
+prints, then lists every topic (type, count, rate from the message stamps) and the bag's
+duration. The metrics are those of ``rcac experiment`` that the bag allows (tracking errors,
+estimate errors against the model's true parameters, prediction error, torques) plus the loop
+timing (period between joint states, latency from a joint state to the effort that answers
+it), from the publishers' send stamps when the bag holds them.
 
 Times on the plots are simulated time: a joint state carries it in its header;
 the controller's outputs take the header stamp of the ``desired_state`` published
