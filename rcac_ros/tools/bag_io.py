@@ -315,8 +315,17 @@ def _write_metadata_file(path, meta):
 
 
 # ----------------------------------------------------------------------------- finding
+def _storage_files(path):
+    try:
+        return sorted(f for f in os.listdir(path) if f.endswith((".mcap", ".db3")))
+    except OSError:
+        return []
+
+
 def is_bag(path):
-    return os.path.isfile(os.path.join(path, "metadata.yaml"))
+    """A rosbag2 directory: metadata.yaml, or storage files whose recorder died before
+    writing it (rosbags writes it only at close)."""
+    return os.path.isfile(os.path.join(path, "metadata.yaml")) or bool(_storage_files(path))
 
 
 def find_bag(path):
@@ -349,9 +358,21 @@ def find_bag(path):
 
 
 # ----------------------------------------------------------------------------- verifying
-def read_metadata(path):
-    """``rosbag2_bagfile_information`` of the bag at ``path`` (one-line errors)."""
+def read_metadata(path, allow_missing=False):
+    """``rosbag2_bagfile_information`` of the bag at ``path`` (one-line errors).
+
+    A bag whose storage files have no metadata.yaml (a recorder killed before writing it)
+    raises :class:`CutBagError`, or with ``allow_missing`` gets metadata that only names the
+    files (for :func:`recover`).
+    """
     meta_path = os.path.join(path, "metadata.yaml")
+    files = _storage_files(path)
+    if not os.path.exists(meta_path) and files:
+        if not allow_missing:
+            raise CutBagError(f"bag: {path} has {', '.join(files)} but no metadata.yaml (the "
+                              f"recorder was killed?); run `rcac inspect --recover {path}`")
+        return {"storage_identifier": "mcap" if files[0].endswith(".mcap") else "sqlite3",
+                "relative_file_paths": files, "topics_with_message_count": []}
     try:
         with open(meta_path) as f:
             doc = yaml.safe_load(f)
@@ -645,7 +666,7 @@ def recover(path, out=None):
     Report
         ``counts`` salvaged per topic, ``lost`` what was not.
     """
-    info = read_metadata(path)
+    info = read_metadata(path, allow_missing=True)
     storage = info["storage_identifier"]
     out = os.path.abspath(out or default_recovered_path(path))
     if os.path.exists(out):
@@ -690,15 +711,18 @@ def recover(path, out=None):
             finally:
                 src.close()
             _sqlite_check(os.path.join(out, rel), report, strict=False)
-        meta = dict(info)
-        meta["custom_data"] = dict(meta.get("custom_data") or {}, **{STATE_KEY: "closed"})
-        for t in meta.get("topics_with_message_count") or []:
-            t["message_count"] = report.counts.get(t["topic_metadata"]["name"], 0)
-        meta["message_count"] = report.message_count
+        typestore = _typestore()
+        rows = []
+        for topic, (msgtype, _channel) in report.types.items():
+            t = _Topic(0, topic, msgtype, qos.get(topic, []), typestore.hash_rihs01(msgtype))
+            t.count = report.counts.get(topic, 0)
+            rows.append(t)
+        meta = bag_metadata("sqlite3", "", rows, "closed")["rosbag2_bagfile_information"]
         start = report.start or 0
         dur = (report.end - report.start) if report.start is not None else 0
         meta["starting_time"] = {"nanoseconds_since_epoch": int(start)}
         meta["duration"] = {"nanoseconds": int(dur)}
+        meta["relative_file_paths"] = list(info["relative_file_paths"])
         meta["files"] = [{"path": rel, "starting_time": {"nanoseconds_since_epoch": int(start)},
                           "duration": {"nanoseconds": int(dur)},
                           "message_count": report.message_count}

@@ -196,3 +196,37 @@ def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     assert np.allclose(y, np.abs(series["prediction_error"][1]))
     caption = " ".join(x.get_text() for x in figures["loop_timing.png"].texts)
     assert "receive stamps" in caption and "cluster near 0 ms" in caption
+
+
+def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
+    """The issue's case: a recorder (rosbags) killed mid-run leaves complete 1 MiB chunks, no
+    footer and no metadata.yaml; inspect says to recover, recover salvages the chunks."""
+    import shutil
+
+    import numpy as np
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import get_typestore, Stores
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    t = ts.types
+    src = tmp_path / "live"
+    w = Writer(src, version=9, storage_plugin=StoragePlugin.MCAP)
+    w.open()
+    conn = w.add_connection("/x", "std_msgs/msg/Float64MultiArray", typestore=ts)
+    layout = t["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    for k in range(3000):                      # ~2.3 MB: two complete chunks and a partial one
+        msg = t["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.full(91, float(k)))
+        w.write(conn, 10**18 + k, ts.serialize_cdr(msg, "std_msgs/msg/Float64MultiArray"))
+    w.storage.bio.flush()                      # what the OS has when the process dies
+    bag = tmp_path / "bag"
+    shutil.copytree(src, bag)                  # the files as a kill -9 leaves them
+    w.close()
+    assert not (bag / "metadata.yaml").exists()
+    assert _main(["inspect", str(bag)]) == 2
+    assert f"no metadata.yaml (the recorder was killed?); run `rcac inspect --recover {bag}`" \
+        in _err_line(capsys)
+    report = recover(str(bag))
+    n = report.counts["/x"]
+    assert report.chunks == 2 and 0 < n < 3000
+    data = read_rosbags(report.path)["/x"]
+    assert [m.data[0] for _, m in data] == list(range(n))
+    assert verify(report.path).counts == {"/x": n}
