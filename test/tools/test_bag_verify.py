@@ -230,3 +230,19 @@ def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
     data = read_rosbags(report.path)["/x"]
     assert [m.data[0] for _, m in data] == list(range(n))
     assert verify(report.path).counts == {"/x": n}
+
+
+def test_garbled_record_length_is_one_line(tmp_path, capsys):
+    """A damaged length field (the OverflowError traceback of the issue) is one line too."""
+    bag = tmp_path / "bag"
+    write_bag(bag, "mcap")
+    path = bag_file(str(bag))
+    start, _length = _chunk_offsets(path)[5]
+    raw = bytearray(open(path, "rb").read())
+    raw[start + 1:start + 9] = b"\xff" * 8            # the 6th chunk's record length
+    open(path, "wb").write(bytes(raw))
+    assert _main(["inspect", str(bag)]) == 2
+    line = _err_line(capsys)
+    assert "bag_0.mcap" in line and "corrupt" in line, line
+    report = recover(str(bag))
+    assert report.counts == {"/clock": 1000}             # the five chunks before it
