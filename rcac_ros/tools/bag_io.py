@@ -688,7 +688,8 @@ def recover(path, out=None):
             for rel in info["relative_file_paths"]:
                 problem = _mcap_scan(os.path.join(path, rel), report, copy, strict=False)
                 if problem:
-                    report.lost.append(f"everything after the last complete chunk ({problem})")
+                    report.lost.append(f"everything from the first damaged or cut record on "
+                                       f"({problem})")
             for topic, (msgtype, _channel) in report.types.items():
                 if topic not in writer.topics:
                     writer.add_topic(topic, msgtype, qos.get(topic, []))
