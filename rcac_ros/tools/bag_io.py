@@ -642,6 +642,53 @@ def bag_info(path):
 
 
 # ----------------------------------------------------------------------------- recovering
+def _mcap_salvage_indexed(file_path, report, on_message):
+    """Copy every chunk whose CRC checks, through the summary's chunk index.
+
+    For a file whose footer and summary are intact (damage in the data section): a damaged
+    chunk is skipped, and the chunks after it are kept. Returns False when the summary is
+    unusable (a file cut by a crash), for the linear scan of :func:`_mcap_scan`.
+    """
+    from mcap.reader import SeekingReader
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import breakup_chunk, StreamReader
+
+    name = os.path.basename(file_path)
+    with open(file_path, "rb") as f:
+        try:
+            summary = SeekingReader(f).get_summary()
+        except Exception:  # noqa: BLE001 - no footer, bad summary: the linear scan decides
+            return False
+        if summary is None or not summary.chunk_indexes or not summary.channels:
+            return False
+        schemas, channels = summary.schemas, summary.channels
+        for channel in channels.values():
+            schema = schemas.get(channel.schema_id)
+            report.counts.setdefault(channel.topic, 0)
+            report.types[channel.topic] = (schema.name if schema else "", channel)
+        for ci in summary.chunk_indexes:
+            try:
+                f.seek(ci.chunk_start_offset)
+                record = next(StreamReader(f, skip_magic=True, emit_chunks=True).records)
+                if not isinstance(record, Chunk):
+                    raise ValueError(f"expected a chunk, found {type(record).__name__}")
+                records = breakup_chunk(record, validate_crc=True)
+            except Exception as err:  # noqa: BLE001 - any damage: skip this chunk
+                first = str(err).splitlines()[0] if str(err) else type(err).__name__
+                span = 1e-9 * (ci.message_end_time - ci.message_start_time)
+                report.lost.append(f"the chunk at byte {ci.chunk_start_offset} of {name} "
+                                   f"({span:.3f} s of messages): {first}")
+                continue
+            report.chunks += 1
+            for rec in records:
+                if isinstance(rec, Message) and rec.channel_id in channels:
+                    channel = channels[rec.channel_id]
+                    report.counts[channel.topic] += 1
+                    report.stamp(rec.log_time)
+                    on_message(channel, schemas, rec)
+    return True
+
+
 def default_recovered_path(path):
     return path.rstrip(os.sep) + "_recovered"
 
@@ -686,7 +733,10 @@ def recover(path, out=None):
                              msg.sequence)
 
             for rel in info["relative_file_paths"]:
-                problem = _mcap_scan(os.path.join(path, rel), report, copy, strict=False)
+                file_path = os.path.join(path, rel)
+                if _mcap_salvage_indexed(file_path, report, copy):
+                    continue        # an intact summary: each chunk on its own
+                problem = _mcap_scan(file_path, report, copy, strict=False)
                 if problem:
                     report.lost.append(f"everything from the first damaged or cut record on "
                                        f"({problem})")

@@ -94,11 +94,14 @@ def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
     assert _main(["inspect", str(bag)]) == 2
     line = _err_line(capsys)
     assert "damaged record" in line and "corrupt" in line, line
-    # recovery keeps the three intact chunks before it and says what was lost
+    # the summary is intact: recovery keeps the nine intact chunks, says what was lost
     report = recover(str(bag))
-    assert report.counts == {"/clock": 600}
-    assert any("1400 of the 2000" in item for item in report.lost), report.lost
-    assert len(read_rosbags(report.path)["/clock"]) == 600
+    assert report.counts == {"/clock": 1800}
+    assert any(f"the chunk at byte {start} of bag_0.mcap" in item for item in report.lost)
+    assert any("200 of the 2000" in item for item in report.lost), report.lost
+    ks = [round(m.clock.sec * 500 + m.clock.nanosec / 2e6)
+          for _, m in read_rosbags(report.path)["/clock"]]
+    assert ks == list(range(600)) + list(range(800, 2000))
 
 
 def test_payload_corruption_without_compression_is_caught_by_the_crc(tmp_path, capsys):
@@ -245,4 +248,4 @@ def test_garbled_record_length_is_one_line(tmp_path, capsys):
     line = _err_line(capsys)
     assert "bag_0.mcap" in line and "corrupt" in line, line
     report = recover(str(bag))
-    assert report.counts == {"/clock": 1000}             # the five chunks before it
+    assert report.counts == {"/clock": 1800}             # every chunk but that one
