@@ -138,12 +138,15 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                     next_report = now + progress
             check("before the end of the run")
             wall = time.monotonic() - t_start
-            # drain what is still in flight: the controller's answer to the last state
+            # drain what is still in flight: the last states (the simulator publishes states
+            # 0..steps) and the controller's answers to them
             states = "/" + topics.JOINT_STATES
             answers = f"/{topics.CONTROLLER_NODE}/{topics.DESIRED_STATE[2:]}"
+            last_state = int(round(duration / dt)) * int(round(dt * 1e9))
             drain_end = time.monotonic() + 2.0
             while time.monotonic() < drain_end and not stop \
-                    and recorder.counts[answers] < recorder.counts[states]:
+                    and (recorder.last_state_stamp != last_state
+                         or recorder.counts[answers] < recorder.counts[states]):
                 executor.spin_once(timeout_sec=0.02)
             sim = recorder.sim_time or 0.0
             log(f"rcac demo: {sim:.3f} s simulated in {wall:.1f} s wall "

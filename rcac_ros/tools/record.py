@@ -100,6 +100,13 @@ def clock_seconds(raw):
     return sec + 1e-9 * nsec
 
 
+def header_stamp_ns(raw):
+    """Header stamp (ns) of a CDR-serialised stamped message (``std_msgs/Header`` first)."""
+    endian = "<" if raw[1] == 1 else ">"
+    sec, nsec = struct.unpack_from(endian + "iI", raw, 4)
+    return sec * 1_000_000_000 + nsec
+
+
 class BagRecorder:
     """Subscribe (raw) to the package's topics and write every message into a bag.
 
@@ -176,6 +183,9 @@ class BagRecorder:
         self.last_stamp = None
         #: latest simulated time seen on /clock (s), None before the first message
         self.sim_time = None
+        #: header stamp (ns) of the latest joint state, None before the first
+        self.last_state_stamp = None
+        self._states = "/" + topics.JOINT_STATES
         self._last_seq = {}
         self._multi = set()   # topics seen with several publishers (no gap count)
         self._adapted = set()
@@ -234,6 +244,8 @@ class BagRecorder:
             self.first_stamp = stamp
         if self.last_stamp is None or stamp > self.last_stamp:
             self.last_stamp = stamp
+        if name == self._states:
+            self.last_state_stamp = header_stamp_ns(data)
         if seq and name not in self._multi:
             last = self._last_seq.get(name)
             if last is not None and seq <= last:   # several publishers: numbers interleave
