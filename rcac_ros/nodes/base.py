@@ -1,9 +1,9 @@
 """What the controller and simulator nodes share (they never import each other).
 
 Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
-left behind), diagnostics, throttled warnings, compute-time statistics, the effort
-message's layout, and :func:`run`: the ``main`` of a node (clean start-up refusal with one
-line and exit 2, clean shutdown on SIGINT/SIGTERM).
+left behind), the QoS profiles, diagnostics, on-set parameter checks, throttled warnings,
+compute-time statistics, and :func:`run`: the ``main`` of a node (clean start-up refusal
+with one line and exit 2, clean shutdown on SIGINT/SIGTERM).
 """
 
 import math
@@ -11,8 +11,8 @@ import signal
 import sys
 import time
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 import rclpy
@@ -126,17 +126,13 @@ def _joints(joints, model):
 class RcacNode(Node):
     """The start-up both nodes share: read and check every parameter, or leave nothing behind.
 
-    A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
-    ``_read_parameters(values)`` (raising :class:`ConfigError` naming the parameter),
-    ``diagnostics()`` (a DiagnosticStatus, published every ``diagnostics_period`` s of the
-    steady clock) and ``on_shutdown()``; ``finished`` and ``exit_code`` tell :func:`run`
-    when and how to stop.
-
-    Attributes
-    ----------
-    model : RobotModel
-    joints : tuple of str
-        The joint order of the node's messages.
+    ``RcacNode(name, **kwargs)``: ``kwargs`` go to :class:`rclpy.node.Node` (``context``,
+    ``parameter_overrides``, ...); an invalid parameter raises :class:`ConfigError` naming
+    it. A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
+    ``_read_parameters(values)``, ``diagnostics()`` (a DiagnosticStatus, published every
+    ``diagnostics_period`` s of the steady clock) and ``on_shutdown()``. It finds the robot
+    in ``model``, the joint order of its messages in ``joints``; ``finished`` and
+    ``exit_code`` tell :func:`run` when and how to stop.
     """
 
     #: the node's rows of :mod:`rcac_ros.params`

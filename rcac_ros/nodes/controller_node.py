@@ -35,15 +35,8 @@ from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, Traje
 class ControllerNode(RcacNode):
     """The recursive composite adaptive controller as a ROS 2 node.
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    ConfigError
-        At construction, on an invalid parameter (the message names it).
+    Constructed as :class:`~rcac_ros.nodes.base.RcacNode` (keyword arguments of
+    :class:`rclpy.node.Node`; :class:`ConfigError` naming an invalid parameter).
     """
 
     PARAMETERS = params.CONTROLLER
