@@ -14,6 +14,7 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            Simulator, css_arm)
+from rcac_ros.tools.args import non_negative_float, positive_float, positive_int
 from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 from rcac_ros.tools.progress import Progress
 
@@ -87,7 +88,8 @@ def write_outputs(model, runs, report, out_dir, settings):
 
 
 def add_arguments(parser):
-    parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
+    parser.add_argument("--duration", type=positive_float, default=20.0,
+                        help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (NOTES.md 5)")
@@ -97,9 +99,10 @@ def add_arguments(parser):
                        ("gamma", "prediction-error weight of the composite law"),
                        ("lam", "filter bandwidth lambda, rad/s"),
                        ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=float, default=PAPER_GAINS[name],
+        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
+                            else positive_float, default=PAPER_GAINS[name],
                             help=f"{text} (default {PAPER_GAINS[name]:g})")
-    parser.add_argument("--substeps", type=int, default=1,
+    parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 

@@ -20,6 +20,7 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import positive_int
 
 #: diagnostics values shown in the summary (all are kept in metrics.json)
 DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
@@ -550,7 +551,7 @@ def add_arguments(parser):
     parser.add_argument("--model", default="css_arm",
                         help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
-    parser.add_argument("--link", type=int, default=None,
+    parser.add_argument("--link", type=positive_int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")
     parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
                         help=f"controller node name (default: {topics.CONTROLLER_NODE})")

@@ -16,6 +16,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.launch import init_context, StopFlag
 
 #: recorded topics (relative names are resolved against the controller node) -> message type
@@ -280,7 +281,7 @@ def add_arguments(parser):
                         help="bag directory to create (default: ./rcac_bag_<date>-<time>)")
     parser.add_argument("--storage", choices=STORAGE_CHOICES, default="mcap",
                         help="rosbag2 storage plugin (default: mcap)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until Ctrl-C)")
     parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
                         help="controller node name, for its private topics "
