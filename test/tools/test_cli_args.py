@@ -56,8 +56,8 @@ def assert_one_line(code, lines, command, option):
 
 @pytest.mark.parametrize("command,extra,option,good", NUMERIC_OPTIONS)
 @pytest.mark.parametrize("bad", ["0", "-5", "nan", "inf", "abc"])
-def test_a_non_positive_or_non_numeric_value_stops_at_the_parser(capsys, monkeypatch, command,
-                                                                  extra, option, good, bad):
+def test_a_non_positive_or_non_numeric_value_stops_at_the_parser(
+        capsys, monkeypatch, command, extra, option, good, bad):
     code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, bad])
     assert_one_line(code, lines, command, option)
 
