@@ -1,6 +1,6 @@
 """``rcac experiment``: the paper's Section 4 for the direct and the composite laws.
 
-Both laws run on the CSS arm (Table 1, g = 0, frames of NOTES.md 5) from
+Both laws run on the CSS arm (Table 1, g = 0, frames of doc/design.md §5) from
 ``theta_hat(0) = 0``, with the paper's gains, the plant integrated by RK4 at the
 control period with the torque held. Writes ``metrics.json``,
 ``tracking_errors.png`` (Figure 3) and ``parameter_estimates.png`` (Figure 4).
@@ -92,7 +92,7 @@ def add_arguments(parser):
                         help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
-                        help="reading of the paper's desired motion (NOTES.md 5)")
+                        help="reading of the paper's desired motion (doc/design.md §5)")
     for name, text in (("K_D", "link gain K_Di = K_D I6"),
                        ("Lambda", "Lambda = value * I"),
                        ("P", "adaptation gain P_i = P I13"),

@@ -69,7 +69,7 @@ def _skew(v):
 
 
 def spatial_inertia(mass, com, inertia):
-    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (NOTES.md 2)."""
+    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (doc/design.md §2)."""
     P = _skew(com)
     return np.block([[mass * np.eye(3), -mass * P], [mass * P, inertia - mass * P @ P]])
 
