@@ -143,20 +143,24 @@ def main(argv=None):
                         help="the file whose timings block is rewritten (default README.md)")
     parser.add_argument("--dry-run", action="store_true", help="print the block, write nothing")
     args = parser.parse_args(argv)
-    with open(args.readme, encoding="utf-8") as f:
-        text = f.read()
     try:
-        read_block(text)
+        read_block(_read(args.readme))        # refuse before a long run, not after it
+        block = render(measure(root, args.clean))
+        print(block)
+        if not args.dry_run:
+            text = replace_block(_read(args.readme), read_block(block))   # edits meanwhile kept
+            with open(args.readme, "w", encoding="utf-8") as f:
+                f.write(text)
+            print(f"readme-timings: wrote {args.readme}")
     except BlockError as err:
         print(f"readme_timings: error: {err}", file=sys.stderr)
         return 2
-    block = render(measure(root, args.clean))
-    print(block)
-    if not args.dry_run:
-        with open(args.readme, "w", encoding="utf-8") as f:
-            f.write(replace_block(text, read_block(block)))
-        print(f"readme-timings: wrote {args.readme}")
     return 0
+
+
+def _read(path):
+    with open(path, encoding="utf-8") as f:
+        return f.read()
 
 
 if __name__ == "__main__":
