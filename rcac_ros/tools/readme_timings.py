@@ -10,6 +10,7 @@ The output of both targets is printed as it comes (a long run shows progress).
 """
 
 import argparse
+import codecs
 import datetime
 import os
 import platform
@@ -89,15 +90,25 @@ def pytest_counts(output):
 def timed(command, cwd, env):
     """Run ``command`` in ``cwd``, echoing its output; return (seconds, output, exit code)."""
     print(f"readme-timings: {' '.join(command)} (in {cwd})", flush=True)
-    t0 = time.monotonic()
-    proc = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        print(f"  [{time.monotonic() - t0:6.0f} s] {line}", end="", flush=True)
-    code = proc.wait()
-    return time.monotonic() - t0, "".join(lines), code
+    # through a file, not a pipe: a process the target leaves behind cannot hold the read open
+    decode = codecs.getincrementaldecoder("utf-8")(errors="replace").decode
+    with tempfile.TemporaryFile() as log:
+        t0 = time.monotonic()
+        proc = subprocess.Popen(command, cwd=cwd, env=env, stdout=log, stderr=subprocess.STDOUT)
+        done, pos, text, shown = False, 0, "", 0
+        while not done:
+            done = proc.poll() is not None
+            elapsed = time.monotonic() - t0
+            log.seek(pos)
+            text += decode(log.read(), final=done)
+            pos = log.tell()
+            end = len(text) if done else text.rfind("\n") + 1
+            for line in text[shown:end].splitlines():
+                print(f"  [{elapsed:6.0f} s] {line}", flush=True)
+            shown = max(shown, end)
+            if not done:
+                time.sleep(0.5)
+    return elapsed, text, proc.returncode
 
 
 def measure(root, clean):

@@ -52,3 +52,12 @@ def test_pytest_counts_come_from_the_last_summary_line():
     assert rt.pytest_counts(out) == "212 passed, 3 skipped, 2 warnings"
     assert rt.pytest_counts("212 passed in 3.1s") == "212 passed"
     assert rt.pytest_counts("no summary") is None
+
+
+def test_a_target_is_timed_to_its_own_exit_not_to_its_leftovers(tmp_path, capsys):
+    """A process the target leaves running (here a 5 s sleep) does not hold the timing open."""
+    seconds, output, code = rt.timed(["sh", "-c", "echo one; (sleep 5 &); echo twö; exit 3"],
+                                     str(tmp_path), dict(os.environ))
+    assert (output.splitlines(), code) == (["one", "twö"], 3)
+    assert seconds < 5.0
+    assert "] twö" in capsys.readouterr().out      # echoed as it ran
