@@ -82,9 +82,13 @@ def replace_block(text, fields):
 
 
 def pytest_counts(output):
-    """``'212 passed, 3 skipped'`` from pytest's last summary line; None if there is none."""
+    """``'212 passed, 3 skipped'`` from pytest's last summary line (warnings left out); None
+    if there is none."""
     found = PYTEST_SUMMARY.findall(output)
-    return found[-1].strip().rstrip(",") if found else None
+    if not found:
+        return None
+    parts = [p.strip() for p in found[-1].split(",")]
+    return ", ".join(p for p in parts if p and not p.endswith(("warning", "warnings")))
 
 
 def timed(command, cwd, env):
