@@ -81,3 +81,36 @@ def test_installed_node_refuses_bad_parameter(install):
                               timeout=120)
     assert proc.returncode == 2
     assert "controller: error: P:" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_launch_file_is_installed(install):
+    launch_file = install / "rcac_ros" / "share" / "rcac_ros" / "launch" / "rcac.launch.py"
+    assert launch_file.is_file()
+    compile(launch_file.read_text(), str(launch_file), "exec")     # valid Python
+
+
+def test_launch_description(install, monkeypatch):
+    """The installed launch file: its arguments, two nodes, the optional recorder."""
+    launch = pytest.importorskip(
+        "launch", reason="launch is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
+    if not hasattr(launch, "LaunchDescription"):
+        pytest.skip("the 'launch' that imports is not ROS 2's (PyPI's 'launch' is unrelated)")
+    launch_ros = pytest.importorskip(
+        "launch_ros", reason="launch_ros is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
+    from launch.launch_description_sources import get_launch_description_from_python_launch_file
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(install / "rcac_ros"))
+    share = install / "rcac_ros" / "share" / "rcac_ros"
+    ld = get_launch_description_from_python_launch_file(str(share / "launch" / "rcac.launch.py"))
+    args = {a.name: a for a in ld.get_launch_arguments()}
+    assert set(args) == {"controller_params", "simulator_params", "simulator", "record", "bag",
+                         "use_sim_time"}
+    context = launch.LaunchContext()
+    defaults = {name: launch.utilities.perform_substitutions(context, a.default_value)
+                for name, a in args.items()}
+    assert defaults["controller_params"] == str(share / "config" / "controller.yaml")
+    assert defaults["simulator_params"] == str(share / "config" / "simulator.yaml")
+    assert (defaults["simulator"], defaults["record"]) == ("true", "false")
+    nodes = [e for e in ld.entities if isinstance(e, launch_ros.actions.Node)]
+    assert len(nodes) == 2
+    recorders = [e for e in ld.entities if type(e) is launch.actions.ExecuteProcess]
+    assert len(recorders) == 1 and recorders[0].condition is not None
