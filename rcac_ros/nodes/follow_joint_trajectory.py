@@ -5,7 +5,8 @@ it; where it does not import, :data:`UNAVAILABLE` says why and :func:`create_ser
 in one line and returns ``None`` (the ``~/joint_trajectory`` topic still works).
 
 A goal feeds the controller the same parsed trajectory as the ``~/joint_trajectory`` topic
-(:func:`rcac_ros.nodes.trajectory.parse_trajectory`, followed through the sink's ``follow``).
+(:func:`rcac_ros.nodes.trajectory_msg.parse_trajectory`, followed through the sink's
+``follow``).
 The behaviour is that of ros2_controllers' joint_trajectory_controller (JTC, Jazzy):
 
 * **Goal.** Rejected (the reason is logged) when the sink cannot follow (not active, no
@@ -44,7 +45,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.task import Future
 from trajectory_msgs.msg import JointTrajectoryPoint
 
-from rcac_ros.nodes.trajectory import parse_trajectory, TrajectoryRejected
+from rcac_ros.nodes.trajectory_msg import parse_trajectory, TrajectoryRejected
 
 try:
     from control_msgs.action import FollowJointTrajectory
@@ -181,7 +182,7 @@ class FollowJointTrajectoryServer:
         the arrays given to :meth:`update`); ``refusal()``: ``None`` when it can follow a
         trajectory now, else the reason; ``now_ns()``: the time base of its trajectories;
         ``follow(parsed)``: follow the output of ``parse_trajectory`` as the topic does
-        and return the :class:`~rcac_ros.nodes.trajectory.ActiveTrajectory`; ``hold()``:
+        and return the :class:`~rcac_ros.nodes.trajectory_msg.ActiveTrajectory`; ``hold()``:
         stop and hold the current position. The sink calls :meth:`update` every control
         step.
     name : str

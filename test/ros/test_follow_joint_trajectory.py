@@ -27,7 +27,7 @@ from rclpy.node import Node  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 from rcac_ros.nodes import follow_joint_trajectory as fjt  # noqa: E402
-from rcac_ros.nodes.trajectory import ActiveTrajectory  # noqa: E402
+from rcac_ros.nodes.trajectory_msg import ActiveTrajectory  # noqa: E402
 
 needs_control_msgs = pytest.mark.skipif(
     fjt.FollowJointTrajectory is None,
