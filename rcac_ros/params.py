@@ -157,6 +157,19 @@ CONTROLLER = _robot("controller") + (
           lo=0.0, hi=BIG, strict=True),
     Param("monitor_decimation", "integer", 1, "publish estimates and errors every k-th step",
           lo=1, hi=1_000_000, read_only=False),
+    # the defaults of FollowJointTrajectory goals (JTC's constraints, one value for all joints)
+    Param("constraints.trajectory", "double", 0.0,
+          "FollowJointTrajectory: default path position tolerance, rad (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.goal", "double", 0.0,
+          "FollowJointTrajectory: default goal position tolerance, rad (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.stopped_velocity_tolerance", "double", 0.01,
+          "FollowJointTrajectory: default goal velocity tolerance, rad/s (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.goal_time", "double", 0.0,
+          "FollowJointTrajectory: default goal_time_tolerance, s (0: no time limit)",
+          lo=0.0, hi=BIG),
     _diagnostics_period(),
 )
 

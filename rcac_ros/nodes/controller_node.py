@@ -26,6 +26,7 @@ from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import Percentiles, QOS, RcacNode, run
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
+from rcac_ros.nodes.follow_joint_trajectory import create_server, Tolerances
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
 from rcac_ros.nodes.pacing import DeadlineLoop
@@ -73,9 +74,11 @@ class ControllerNode(RcacNode):
         self._rate_warned = False
         self.loop = None                    # the steady-clock pacing of timer mode
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, QOS)
+        self._fjt = None                    # the FollowJointTrajectory server, if any
         if self.trajectory_source == "topic":
             self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
                                      self._on_trajectory, QOS)
+            self._fjt = create_server(self, _TrajectorySink(self), defaults=self.tolerances)
         if self.mode == "timer" and self.get_parameter("use_sim_time").value:
             self.create_timer(self.h, self._on_tick)        # ROS time: ticks on /clock
         elif self.mode == "timer":
@@ -105,6 +108,10 @@ class ControllerNode(RcacNode):
         self.safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
                                    -self.effort_limit[self._out], self.effort_limit[self._out])
         self.velocity_cutoff = v["velocity_filter_cutoff"]
+        self.tolerances = Tolerances(
+            path_position=v["constraints.trajectory"], goal_position=v["constraints.goal"],
+            stopped_velocity=v["constraints.stopped_velocity_tolerance"],
+            goal_time=v["constraints.goal_time"])
         self.publish_every = v["monitor_decimation"]
         try:
             self.ctrl = RecursiveCompositeController(
@@ -180,7 +187,9 @@ class ControllerNode(RcacNode):
         except TrajectoryRejected as err:
             return self._throttle.warn(f"trajectory {err.kind}", str(err))
         if not self._motion.follow(parsed, self._time_now_ns(), self._q):
-            self._throttle.warn("trajectory early", "no joint state received yet")
+            return self._throttle.warn("trajectory early", "no joint state received yet")
+        if self._fjt is not None:
+            self._fjt.abort("replaced by a ~/joint_trajectory message")
 
     def _time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
@@ -216,6 +225,8 @@ class ControllerNode(RcacNode):
         if self._steps % self.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, q_d, qd_d, qdd_d,
                                    stamp)
+        if self._fjt is not None:
+            self._fjt.update(t_ns, self._q, self._qd, q_d, qd_d, qdd_d)
 
     def _state_is_stale(self):
         if self._last_rx is None:
@@ -283,6 +294,28 @@ class ControllerNode(RcacNode):
         """Publish one zero-effort command (called on SIGINT/SIGTERM) and wait for delivery."""
         self._outputs.zero_effort()
         self.get_logger().info("shutdown: published a zero effort")
+
+
+class _TrajectorySink:
+    """What the FollowJointTrajectory server drives: the controller's desired motion."""
+
+    def __init__(self, node):
+        self._node = node
+        self.joint_names = node.model.joint_names
+
+    def refusal(self):
+        return None if self._node._q is not None else "no joint state received yet"
+
+    def now_ns(self):
+        return self._node._time_now_ns()
+
+    def follow(self, parsed):
+        node = self._node
+        node._motion.follow(parsed, node._time_now_ns(), node._q)
+        return node._motion.active
+
+    def hold(self):
+        self._node._motion.hold(self._node._q)
 
 
 def main(args=None):

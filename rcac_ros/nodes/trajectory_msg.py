@@ -217,3 +217,9 @@ class DesiredMotion:
             return False
         self.active = ActiveTrajectory(parsed, now_ns, start, rate)
         return True
+
+    def hold(self, q):
+        """Stop the trajectory and hold position ``q`` (at rest) from now on."""
+        zero = np.zeros_like(q)
+        self.active = None
+        self._hold = (np.array(q, dtype=float), zero, zero.copy())
