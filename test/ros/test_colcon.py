@@ -91,10 +91,10 @@ def test_launch_file_is_installed(install):
 
 def test_launch_description(install, monkeypatch):
     """The installed launch file: its arguments, two nodes, the optional recorder."""
-    launch = pytest.importorskip(
-        "launch", reason="launch is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
-    if not hasattr(launch, "LaunchDescription"):
-        pytest.skip("the 'launch' that imports is not ROS 2's (PyPI's 'launch' is unrelated)")
+    why = "ROS 2's launch is not installed: not a PyPI wheel (apt: ros-jazzy-launch-ros)"
+    launch = pytest.importorskip("launch", reason=why)
+    if not hasattr(launch, "LaunchDescription"):    # the repository's launch/ folder, or
+        pytest.skip(why)                            # PyPI's unrelated 'launch'
     launch_ros = pytest.importorskip(
         "launch_ros", reason="launch_ros is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
     from launch.launch_description_sources import get_launch_description_from_python_launch_file
