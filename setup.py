@@ -7,7 +7,11 @@ package_name = "rcac_ros"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=find_packages(exclude=["test"]),
+    packages=find_packages(include=["rcac_ros", "rcac_ros.*"]),
+    # the packages sit at the top of the project: said explicitly, an editable install is a
+    # plain .pth (setuptools' "simple layout"), without the "Editable installation"
+    # BuildBackendWarning of its import-hook strategy
+    package_dir={"": "."},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
