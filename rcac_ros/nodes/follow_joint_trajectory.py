@@ -251,10 +251,14 @@ class FollowJointTrajectoryServer:
         parsed, tol = self._check(handle.request)     # cannot fail: _on_goal just passed it
         handle.execute()                               # EXECUTING before any outcome
         active = self._sink.follow(parsed)
-        g = _Goal(handle, tol, active.start_ns, active.times)
+        start_ns = self._sink.now_ns() if active is None else active.start_ns
+        g = _Goal(handle, tol, start_ns, parsed[1])
         self._goal = self._started[bytes(handle.goal_id.uuid)] = g
-        self._log.info(f"FollowJointTrajectory goal accepted: {len(active.times)} points, "
-                       f"{active.times[-1]:.3g} s")
+        if active is None:          # refused after all (cannot happen in one thread)
+            return self._finish(FollowJointTrajectory.Result.INVALID_GOAL,
+                                "the controller could not start the trajectory", hold=False)
+        self._log.info(f"FollowJointTrajectory goal accepted: {len(g.times)} points, "
+                       f"{g.times[-1]:.3g} s")
 
     def _on_cancel(self, handle):
         g = self._goal

@@ -341,73 +341,86 @@ def _arm_goal(q0, start_ns, **tolerances):
     return goal
 
 
-def _closed_loop(via, steps=260, **tolerances):
-    """The controller node (trajectory: topic) in lockstep with the core simulator.
+class Loop:
+    """The controller node (trajectory: topic) in lockstep with the core simulator."""
 
-    The trajectory, stamped to start at step 20, goes through ``via`` ("topic" or
-    "action") at step 5. Returns the simulated positions per step, and the goal's
-    ``(status, result, feedback)`` for the action.
-    """
-    from rclpy.parameter import Parameter
-    from test_nodes_support import PAPER_Q0, Probe
-    from rcac_ros.core.model import css_arm
-    from rcac_ros.core.simulator import Simulator
-    from rcac_ros.nodes.controller_node import ControllerNode
-
-    with ros_context() as (ctx, ex):
+    def __init__(self, ctx, ex):
+        from rclpy.parameter import Parameter
+        from test_nodes_support import PAPER_Q0, Probe
+        from rcac_ros.core.model import css_arm
+        from rcac_ros.core.simulator import Simulator
+        from rcac_ros.nodes.controller_node import ControllerNode
         # no watchdog trip on a slow step: a trip restarts the filters (not deterministic)
-        node = ControllerNode(context=ctx, parameter_overrides=[
+        self.node = ControllerNode(context=ctx, parameter_overrides=[
             Parameter("trajectory", value="topic"), Parameter("state_timeout", value=60.0)])
-        probe = Probe(ctx, record=("efforts",))
-        ex.add_node(node)
-        ex.add_node(probe)
-        assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0)
-        sim = Simulator(css_arm(), dt=H_NS / NS, q0=PAPER_Q0)
-        qs, outcome = [], None
+        self.probe = Probe(ctx, record=("efforts",))
+        self.ex = ex
+        ex.add_node(self.node)
+        ex.add_node(self.probe)
+        assert spin_until(ex, lambda: self.probe.pub_state.get_subscription_count() > 0)
+        self.sim = Simulator(css_arm(), dt=H_NS / NS, q0=PAPER_Q0)
+        self.qs = []
+        self.client = ActionClient(self.probe, fjt.FollowJointTrajectory,
+                                   "/rcac_controller/follow_joint_trajectory")
+        self.feedback = []
 
-        def step(k):
-            label = f"stamp={k * H_NS // NS}.{k * H_NS % NS:09d}"
-            found = []
+    def step(self, k):
+        """Publish state k, wait for its effort, integrate one step."""
+        label = f"stamp={k * H_NS // NS}.{k * H_NS % NS:09d}"
+        found = []
 
-            def answer():
-                found.extend(d for lab, d in probe.efforts[-3:] if label in lab)
-                return bool(found)
-            for _ in range(40):     # re-sent if lost in discovery: a repeat is not stepped
-                probe.state(k * H_NS, sim.q, sim.qd)
-                if spin_until(ex, answer, timeout=0.5):
-                    break
-            assert found, f"no effort for step {k}"
-            qs.append(sim.q.copy())
-            sim.step(found[0])
+        def answer():
+            found.extend(d for lab, d in self.probe.efforts[-3:] if label in lab)
+            return bool(found)
+        for _ in range(40):     # re-sent if lost in discovery: a repeat is not stepped
+            self.probe.state(k * H_NS, self.sim.q, self.sim.qd)
+            if spin_until(self.ex, answer, timeout=0.5):
+                break
+        assert found, f"no effort for step {k}"
+        self.qs.append(self.sim.q.copy())
+        self.sim.step(found[0])
 
+    def send(self, goal):
+        """Send a goal; return its ClientGoalHandle (accepted or not)."""
+        assert spin_until(self.ex, self.client.server_is_ready, 20.0)
+        sent = self.client.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(
+            m.feedback))
+        assert spin_until(self.ex, sent.done, 20.0)
+        return sent.result()
+
+
+def _closed_loop(via, steps=260, **tolerances):
+    """The trajectory, stamped to start at step 20, goes through ``via`` ("topic" or
+    "action") at step 5. Returns the simulated positions per step, the goal's
+    ``(status, result, feedback)`` for the action, and whether the controller holds.
+    """
+    from test_nodes_support import PAPER_Q0
+    with ros_context() as (ctx, ex):
+        loop = Loop(ctx, ex)
+        node, outcome = loop.node, None
         for k in range(5):
-            step(k)
+            loop.step(k)
         goal = _arm_goal(PAPER_Q0, 20 * H_NS, **tolerances)
         if via == "topic":
-            pub = probe.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory",
-                                         10)
+            pub = loop.probe.create_publisher(JointTrajectory,
+                                              "/rcac_controller/joint_trajectory", 10)
             assert spin_until(ex, lambda: pub.get_subscription_count() > 0)
             for _ in range(20):
                 pub.publish(goal.trajectory)
                 if spin_until(ex, lambda: node._motion.active is not None, timeout=1.0):
                     break
         else:
-            client = ActionClient(probe, fjt.FollowJointTrajectory,
-                                  "/rcac_controller/follow_joint_trajectory")
-            assert spin_until(ex, client.server_is_ready, 20.0)
-            feedback = []
-            sent = client.send_goal_async(goal, feedback_callback=lambda m: feedback.append(
-                m.feedback))
-            assert spin_until(ex, sent.done, 20.0) and sent.result().accepted
-            result = sent.result().get_result_async()
+            handle = loop.send(goal)
+            assert handle.accepted
+            result = handle.get_result_async()
         assert node._motion.active is not None
         for k in range(5, steps):
-            step(k)
+            loop.step(k)
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
-            outcome = (result.result().status, result.result().result, feedback)
+            outcome = (result.result().status, result.result().result, loop.feedback)
         held = node._motion.active is None
-    return np.array(qs), outcome, held
+    return np.array(loop.qs), outcome, held
 
 
 @needs_control_msgs
@@ -439,3 +452,28 @@ def test_controller_path_violation_aborts_and_holds():
     assert held
     # held: the arm stops near where it was when aborted (step ~21), far from the goal
     assert np.max(np.abs(qs[-1] - qs[22])) < 1e-3
+
+
+@needs_control_msgs
+def test_controller_deactivate_aborts_the_goal_and_inactive_rejects():
+    from action_msgs.msg import GoalStatus
+    from test_nodes_support import PAPER_Q0
+    with ros_context() as (ctx, ex):
+        loop = Loop(ctx, ex)
+        for k in range(5):
+            loop.step(k)
+        handle = loop.send(_arm_goal(PAPER_Q0, 0, goal_time=0.0))
+        assert handle.accepted
+        result = handle.get_result_async()
+        for k in range(5, 15):
+            loop.step(k)
+        loop.node.trigger_deactivate()
+        assert spin_until(ex, result.done, 20.0)
+        assert result.result().status == GoalStatus.STATUS_ABORTED
+        assert result.result().result.error_code == result.result().result.INVALID_GOAL
+        assert "deactivated" in result.result().result.error_string
+        assert not loop.send(_arm_goal(PAPER_Q0, 0)).accepted     # inactive: rejected
+        loop.node.trigger_activate()
+        assert not loop.send(_arm_goal(PAPER_Q0, 0)).accepted     # no state since: rejected
+        loop.step(15)
+        assert loop.send(_arm_goal(PAPER_Q0, 0)).accepted
