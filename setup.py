@@ -17,6 +17,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/config/layouts", glob("config/layouts/*")),
     ],
     install_requires=["setuptools", "numpy", "numba", "pyyaml", "matplotlib", "rosbags",
                       "yourdfpy"],
