@@ -50,7 +50,7 @@ def read_parameters(node, v):
     node.publish_every = v["monitor_decimation"]
     gains = per_joint_gains(v, _gain_overrides(node), node.model.joint_names)
     node.theta0 = initial_estimates(v["initial_estimates"], node.model)
-    node.link_names = urdf_child_links(node._description or v["robot_description"],
+    node.urdf_links = urdf_child_links(node._description or v["robot_description"],
                                        node.model.joint_names)
     try:
         node.ctrl = RecursiveCompositeController(

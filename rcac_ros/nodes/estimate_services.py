@@ -24,7 +24,7 @@ class EstimateServices:
     ----------
     node : rclpy.node.Node
         The controller: ``node.ctrl`` (the core controller), ``node.model``,
-        ``node.theta0`` (the initial estimates, model order), ``node.link_names`` (or
+        ``node.theta0`` (the initial estimates, model order), ``node.urdf_links`` (or
         ``None``), and the parameter ``estimates_file``.
     """
 
@@ -69,7 +69,7 @@ class EstimateServices:
         try:
             yaml_path, urdf, problems = estimates.save(
                 path, node.ctrl.theta_hat, node.model.joint_names, node.model.name,
-                node.link_names)
+                node.urdf_links)
         except OSError as err:
             response.success = False
             response.message = f"estimates_file: cannot write {path!r} ({err.strerror})"

@@ -13,9 +13,8 @@ on their own in C), so the URDF block reproduces M exactly and C up to that redu
 A link is physically consistent when ``m > 0``, ``I_c`` is positive definite and its
 principal moments satisfy the triangle inequalities ``I1 + I2 >= I3``.
 
-The blocks are in the model's link frame ``i`` (z along the joint axis): for a URDF whose
-joint axes are ``0 0 1`` and whose moving links carry no fixed children, that is the URDF
-link frame.
+With a URDF, the blocks are in its link frames (:func:`urdf_child_links`); otherwise in the
+model's link frames ``i`` (z along the joint axis).
 """
 
 import datetime
@@ -82,7 +81,7 @@ def urdf_path(path):
     return (root if ext in (".yaml", ".yml") else path) + ".inertial.urdf"
 
 
-def save(path, theta, joint_names, model_name="robot", link_names=None):
+def save(path, theta, joint_names, model_name="robot", links=None):
     """Write the estimates as YAML at ``path`` and the consistent links as a URDF fragment.
 
     Parameters
@@ -94,8 +93,11 @@ def save(path, theta, joint_names, model_name="robot", link_names=None):
         ``theta_hat``, in the order of ``joint_names``.
     joint_names : sequence of str
     model_name : str
-    link_names : sequence of str, optional
-        The URDF link moved by each joint (default ``<joint>_link``).
+    links : (names, rotations), optional
+        From a URDF (:func:`urdf_child_links`): the link moved by each joint and the turn
+        ``A`` from the model's frame to that link's; the blocks are then in the URDF link
+        frames (a link's fixed children, merged into it by the model, are included).
+        Default: ``<joint>_link`` in the model's frames (z = joint axis).
 
     Returns
     -------
@@ -103,21 +105,23 @@ def save(path, theta, joint_names, model_name="robot", link_names=None):
         ``problems``: one ``"link L (joint J): reason"`` per inconsistent link.
     """
     theta = np.asarray(theta, dtype=float)
-    links = list(link_names) if link_names else [f"{j}_link" for j in joint_names]
+    names, turns = links if links else ([f"{j}_link" for j in joint_names], None)
     entries, blocks, problems = [], [], []
     for i, joint in enumerate(joint_names):
-        entry = {"joint": str(joint), "link": links[i],
+        entry = {"joint": str(joint), "link": names[i],
                  "theta": [float(v) for v in theta[i]]}
         m, c, I_c, reason = rigid_body(theta[i])
+        if turns is not None:               # model frame (z = axis) -> URDF link frame
+            c, I_c = turns[i] @ c, turns[i] @ I_c @ turns[i].T
         if reason is None:
             entry["inertial"] = {"mass": m, "com": c.tolist(), "inertia": [
                 float(I_c[0, 0]), float(I_c[1, 1]), float(I_c[2, 2]), float(I_c[0, 1]),
                 float(I_c[0, 2]), float(I_c[1, 2])]}
-            blocks.append(f"  <link name={quoteattr(links[i])}>\n"
+            blocks.append(f"  <link name={quoteattr(names[i])}>\n"
                           + inertial_xml(m, c, I_c) + "  </link>\n")
         else:
             entry["inconsistent"] = reason
-            problems.append(f"link {links[i]} (joint {joint}): {reason}")
+            problems.append(f"link {names[i]} (joint {joint}): {reason}")
         entries.append(entry)
     doc = {"format": FORMAT, "model": str(model_name),
            "saved": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -129,8 +133,10 @@ def save(path, theta, joint_names, model_name="robot", link_names=None):
         yaml.safe_dump(doc, f, sort_keys=False, default_flow_style=None, width=1000)
     fragment = urdf_path(path)
     with open(fragment, "w", encoding="utf-8") as f:
-        f.write("<?xml version=\"1.0\"?>\n<!-- rcac_ros estimates as URDF inertials, in each "
-                "joint's frame (z = joint axis). Inconsistent links left out:"
+        frame = "the URDF link frames" if turns is not None else \
+            "each joint's frame (z = joint axis)"
+        f.write("<?xml version=\"1.0\"?>\n<!-- rcac_ros estimates as URDF inertials, in "
+                f"{frame}. Inconsistent links left out:"
                 + "".join(f"\n     {p}" for p in problems).replace("--", "- -")
                 + " -->\n"
                 f"<robot name={quoteattr(str(model_name))}>\n" + "".join(blocks)
@@ -196,14 +202,32 @@ def initial_estimates(spec, model, joint_names=None):
 
 
 def urdf_child_links(urdf, joint_names):
-    """The link each joint moves, read from URDF XML or a URDF file (``None`` if unknown)."""
+    """The link each joint moves and the turn ``A`` from its frame to the model's (z = axis).
+
+    Read from URDF XML or a URDF file; ``None`` if not a URDF naming every joint.
+
+    Returns
+    -------
+    (links, rotations) : list of str, list of ndarray (3, 3)
+    """
+    import types
     import xml.etree.ElementTree as ET
+    from rcac_ros.core.urdf import _axis_rotation
     if not urdf:
         return None
     try:
         root = ET.fromstring(urdf) if urdf.lstrip().startswith("<") else ET.parse(urdf).getroot()
     except (ET.ParseError, OSError):
         return None
-    child = {j.get("name"): j.find("child") for j in root.iter("joint")}
-    links = [child[j].get("link") if child.get(j) is not None else None for j in joint_names]
-    return None if None in links else links
+    joints = {j.get("name"): j for j in root.iter("joint")}
+    if any(joints.get(name) is None or joints[name].find("child") is None
+           for name in joint_names):
+        return None
+    links, rotations = [], []
+    for name in joint_names:
+        axis = joints[name].find("axis")
+        xyz = [float(v) for v in axis.get("xyz", "1 0 0").split()] if axis is not None \
+            else [1.0, 0.0, 0.0]
+        links.append(joints[name].find("child").get("link"))
+        rotations.append(_axis_rotation("URDF", types.SimpleNamespace(name=name, axis=xyz)))
+    return links, rotations

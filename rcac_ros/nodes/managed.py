@@ -57,6 +57,7 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
         self.config_error = None            # why the last configure failed
         self._entities = []                 # (destroy, entity) made by configure
         self._description = None            # URDF XML from description_topic
+        self._at_start = False              # autostart in the constructor: run() says why
         self._rows = {p.name: p for p in self.PARAMETERS}
         self._throttle = Throttle(self.get_logger())
         self._guard_change_state()
@@ -70,9 +71,13 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
             subscribe_description(self, self.description_topic, self._on_description)
             self.get_logger().info(f"unconfigured: waiting for the robot description on "
                                    f"{self.description_topic}")
-        elif self.autostart and not self._start():
-            self.destroy_node()             # leave no half-built node behind
-            raise ConfigError(self.config_error)
+        elif self.autostart:
+            self._at_start = True
+            started = self._start()
+            self._at_start = False
+            if not started:
+                self.destroy_node()         # leave no half-built node behind
+                raise ConfigError(self.config_error)
 
     def _start(self):
         """Configure and activate; ``False`` if configure failed."""
@@ -123,7 +128,8 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
             self._configure(values)
         except RcacError as err:
             self.config_error = str(err)
-            self.get_logger().error(f"configure failed: {err}")
+            if not self._at_start:          # (at start-up, run() prints the one line)
+                self.get_logger().error(f"configure failed: {err}")
             self._destroy_entities()
             return FAILURE
         self.config_error = None

@@ -9,7 +9,8 @@ from conftest import random_chain
 
 from rcac_ros.core.model import css_arm
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.nodes.estimates import initial_estimates, load, rigid_body, save, urdf_path
+from rcac_ros.nodes.estimates import (initial_estimates, load, rigid_body, save,
+                                      urdf_child_links, urdf_path)
 
 URDF_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf")
 with open(URDF_PATH, encoding="utf-8") as _f:
@@ -32,7 +33,7 @@ def test_saved_urdf_inertials_match_the_original_in_pinocchio(tmp_path):
     pin = pytest.importorskip("pinocchio")
     model = model_from_urdf(URDF)
     _, fragment, problems = save(str(tmp_path / "est.yaml"), model.theta(), model.joint_names,
-                                 model.name, link_names=["upper", "fore", "hand"])
+                                 model.name, links=urdf_child_links(URDF, model.joint_names))
     assert problems == []
     blocks = {link.get("name"): link.find("inertial") for link in ET.parse(fragment).getroot()}
     assert sorted(blocks) == ["fore", "hand", "upper"]
