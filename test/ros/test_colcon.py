@@ -28,6 +28,10 @@ def install(tmp_path_factory):
            "--build-base", str(tmp / "build"), "--install-base", str(tmp / "install")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=str(tmp))
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # a quiet build: no Python warning (a setuptools deprecation...) from setup.py, neither
+    # while colcon reads the metadata nor in the build ("--- stderr" on a terminal)
+    assert "--- stderr" not in proc.stdout and "Warning" not in proc.stderr, \
+        proc.stdout + proc.stderr
     return tmp / "install"
 
 
