@@ -20,6 +20,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
     StopFlag
 from rcac_ros.tools.record import BagRecorder, format_counts
@@ -182,7 +183,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
 
 
 def add_arguments(parser):
-    parser.add_argument("--duration", type=float, default=20.0,
+    parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="simulated seconds (default: 20, the paper's experiment)")
     parser.add_argument("--out", "-o", default="rcac_demo",
                         help="output directory: bag/, logs/, figures, metrics.json "

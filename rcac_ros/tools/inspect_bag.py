@@ -23,6 +23,7 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import positive_int
 from rcac_ros.tools.bag_io import (bag_info, default_recovered_path, find_bag, format_recovery,
                                    recover, Report, verify)
 
@@ -666,7 +667,7 @@ def add_arguments(parser):
     parser.add_argument("--model", default="css_arm",
                         help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
-    parser.add_argument("--link", type=int, default=None,
+    parser.add_argument("--link", type=positive_int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")
     parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
                         help=f"controller node name (default: {topics.CONTROLLER_NODE})")

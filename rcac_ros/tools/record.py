@@ -30,6 +30,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.bag_io import BagWriter, FLUSH_PERIOD, qos_dicts, STORAGES
 from rcac_ros.tools.launch import init_context, StopFlag
 
@@ -373,7 +374,7 @@ def add_arguments(parser):
                         help="bag directory to create (default: ./rcac_bag_<date>-<time>)")
     parser.add_argument("--storage", choices=STORAGE_CHOICES, default="mcap",
                         help="rosbag2 storage plugin (default: mcap)")
-    parser.add_argument("--duration", type=float, default=None,
+    parser.add_argument("--duration", type=positive_float, default=None,
                         help="stop after this many seconds (default: until Ctrl-C)")
     parser.add_argument("--use-sim-time", action="store_true",
                         help="stamp messages with ROS time from /clock (as ros2 bag record "
