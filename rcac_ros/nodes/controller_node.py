@@ -31,6 +31,7 @@ from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
 from rcac_ros.nodes.controller_params import read_parameters
 from rcac_ros.nodes.estimate_services import EstimateServices
+from rcac_ros.nodes.follow_joint_trajectory import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
 from rcac_ros.nodes.managed import ManagedNode
@@ -68,9 +69,13 @@ class ControllerNode(ManagedNode):
         sub, timer = self.destroy_subscription, self.destroy_timer
         self.keep(sub, self.create_subscription(JointState, topics.JOINT_STATES,
                                                 self._on_state, QOS))
+        self._fjt = None                    # the FollowJointTrajectory server, if any
         if self.trajectory_source == "topic":
             self.keep(sub, self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
                                                     self._on_trajectory, QOS))
+            self._fjt = create_server(self, _ActionSink(self), defaults=self.tolerances)
+            if self._fjt is not None:
+                self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
         if self.mode == "timer" and self.get_parameter("use_sim_time").value:
             self.keep(timer, self.create_timer(self.h, self._on_tick))  # ticks on /clock
         elif self.mode == "timer":
@@ -111,6 +116,8 @@ class ControllerNode(ManagedNode):
         """One zero effort, then silence (the lifecycle publishers are disabled next)."""
         if self.loop is not None:
             self.loop.stop()
+        if self._fjt is not None:
+            self._fjt.abort("the controller was deactivated")
         self._outputs.zero_effort()
         self.get_logger().info("inactive: one zero effort sent, then silence")
 
@@ -198,14 +205,16 @@ class ControllerNode(ManagedNode):
     def _on_trajectory(self, msg):
         if not msg.points:                  # as JTC: an empty trajectory holds the position
             if not self.hold_position():
-                self._throttle.warn("trajectory early", "no joint state received yet")
-            return
-        try:
-            parsed = parse_trajectory(msg, self.model.joint_names)
-        except TrajectoryRejected as err:
-            return self._throttle.warn(f"trajectory {err.kind}", str(err))
-        if not self.follow(parsed):
-            self._throttle.warn("trajectory early", "no joint state received yet")
+                return self._throttle.warn("trajectory early", "no joint state received yet")
+        else:
+            try:
+                parsed = parse_trajectory(msg, self.model.joint_names)
+            except TrajectoryRejected as err:
+                return self._throttle.warn(f"trajectory {err.kind}", str(err))
+            if not self.follow(parsed):
+                return self._throttle.warn("trajectory early", "no joint state received yet")
+        if self._fjt is not None:
+            self._fjt.abort("replaced by a ~/joint_trajectory message")
 
     def _time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
@@ -241,6 +250,8 @@ class ControllerNode(ManagedNode):
         if self._steps % self.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, self._qd, q_d,
                                    qd_d, qdd_d, tau, stamp)
+        if self._fjt is not None:
+            self._fjt.update(t_ns, self._q, self._qd, q_d, qd_d, qdd_d)
 
     def _state_is_stale(self):
         if self._last_rx is None:
@@ -280,6 +291,28 @@ class ControllerNode(ManagedNode):
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
         return diagnostics(self)
+
+
+class _ActionSink:
+    """What the FollowJointTrajectory server drives: the controller's desired motion."""
+
+    def __init__(self, node):
+        self.node = node
+        self.joint_names = node.model.joint_names
+
+    def refusal(self):
+        if not self.node.running:
+            return "the controller is not active"
+        return None if self.node._q is not None else "no joint state received yet"
+
+    def now_ns(self):
+        return self.node._time_now_ns()
+
+    def follow(self, parsed):
+        return self.node._motion.active if self.node.follow(parsed) else None
+
+    def hold(self):
+        self.node.hold_position()
 
 
 def main(args=None):

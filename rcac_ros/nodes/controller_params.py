@@ -12,6 +12,7 @@ from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import declare
 from rcac_ros.nodes.estimates import initial_estimates, urdf_child_links
+from rcac_ros.nodes.follow_joint_trajectory import Tolerances
 from rcac_ros.nodes.gains import parse_overrides, per_joint_gains
 
 
@@ -42,6 +43,10 @@ def read_parameters(node, v):
     node.safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
                                -node.effort_limit[node._out], node.effort_limit[node._out])
     node.velocity_cutoff = v["velocity_filter_cutoff"]
+    node.tolerances = Tolerances(
+        path_position=v["constraints.trajectory"], goal_position=v["constraints.goal"],
+        stopped_velocity=v["constraints.stopped_velocity_tolerance"],
+        goal_time=v["constraints.goal_time"])
     node.publish_every = v["monitor_decimation"]
     gains = per_joint_gains(v, _gain_overrides(node), node.model.joint_names)
     node.theta0 = initial_estimates(v["initial_estimates"], node.model)
