@@ -34,6 +34,7 @@ import numpy as np
 
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools import campaign as cp
+from rcac_ros.tools.args import non_negative_int, positive_float, positive_int
 
 ACTIONS = ("report", "rerun")
 METRICS = ("rms_tracking_error", "max_tracking_error", "rms_tracking_error_last_5s",
@@ -50,33 +51,6 @@ BENCH_CAMPAIGN = {
 
 
 # --------------------------------------------------------------------------- arguments
-
-def positive_int(text, minimum=1):
-    """argparse type: an integer >= ``minimum``."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < minimum:
-        raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {v}")
-    return v
-
-
-def workers_int(text):
-    """argparse type of ``--workers``: 0 (in this process) or more."""
-    return positive_int(text, minimum=0)
-
-
-def positive_float(text):
-    """argparse type: a finite number > 0."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return v
-
 
 def scheduler_address(text):
     """argparse type of ``--scheduler``: ``tcp://HOST:PORT`` (or another Dask protocol)."""
@@ -102,7 +76,7 @@ def add_arguments(parser):
         rep.add_argument("--plot", default=None, help="PNG (default RESULTS_DIR/report.png)")
         rer = sub.add_parser("rerun", help="rerun one run alone and compare with its row")
         rer.add_argument("results", help="a results directory or its results.parquet")
-        rer.add_argument("index", type=workers_int, help="the run's index")
+        rer.add_argument("index", type=non_negative_int, help="the run's index")
         rer.add_argument("--plot", default=None,
                          help="PNG (default RESULTS_DIR/rerun_INDEX.png)")
         return
@@ -113,7 +87,7 @@ def add_arguments(parser):
                         help="random draws per grid cell (overrides the campaign's)")
     parser.add_argument("--duration", type=positive_float, metavar="S", default=None,
                         help="seconds simulated per run (overrides the scenario's)")
-    parser.add_argument("--workers", type=workers_int, metavar="K", default=None,
+    parser.add_argument("--workers", type=non_negative_int, metavar="K", default=None,
                         help="LocalCluster workers (default: one per core; 0: this process, "
                              "no Dask)")
     parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS", default=None,
