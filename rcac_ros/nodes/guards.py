@@ -222,4 +222,3 @@ class DesiredLimiter:
             self.limited += 1
             qdd_d = np.clip(qdd_d, -self.amax, self.amax)
         return q, qd, qdd_d
-
