@@ -1,4 +1,4 @@
-"""A separate process (``rcac bench --faults`` and the tests) that floods the controller's inputs with huge messages.
+"""A separate process that floods the controller's inputs with huge messages.
 
 ``python failsafe_flood.py SECONDS`` publishes, alternately and as fast as it can, a
 JointState of 1e6 positions (8 MB) and a JointTrajectory of 1e5 points (5.6 MB), until

@@ -183,7 +183,8 @@ class DesiredLimiter:
     Parameters
     ----------
     max_position_step : float or array_like (n,)
-        rad per step (inf: no limit).
+        rad per step (inf: no limit); the desired velocity is bounded by
+        ``max_position_step / h`` too.
     max_velocity_step : float or array_like (n,)
         rad/s per step; the desired acceleration is bounded by ``max_velocity_step / h``.
     h : float
@@ -196,6 +197,7 @@ class DesiredLimiter:
         self.dq = np.broadcast_to(np.asarray(max_position_step, float), (n,)).copy()
         self.dqd = np.broadcast_to(np.asarray(max_velocity_step, float), (n,)).copy()
         self.amax = self.dqd / h
+        self.vmax = self.dq / h     # the position moves at most dq per step
         self.limited = 0            # steps at which a limit acted
         self._q = np.empty(n)
         self._qd = np.empty(n)
@@ -215,7 +217,8 @@ class DesiredLimiter:
         q = np.empty_like(self._q)
         qd = np.empty_like(self._qd)
         c1 = _limit_step(self._q, np.asarray(q_d, float), self.dq, q)
-        c2 = _limit_step(self._qd, np.asarray(qd_d, float), self.dqd, qd)
+        c2 = _limit_step(self._qd, np.clip(qd_d, -self.vmax, self.vmax), self.dqd, qd)
+        c2 |= bool(np.any(np.abs(qd_d) > self.vmax))
         self._q[:] = q
         self._qd[:] = qd
         if c1 or c2:

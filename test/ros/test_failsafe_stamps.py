@@ -88,4 +88,3 @@ def test_state_timeout_is_bounded():
     assert proc.returncode == 2, out
     lines = [ln for ln in out.splitlines() if "error" in ln]
     assert len(lines) == 1 and "state_timeout" in lines[0], out
-
