@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from ._validate import as_array, per_link_matrix, positive_vector, scalar
-from .exceptions import GainError, InputError
+from rcac_ros.errors import GainError, InputError
 from .regressor import bias_row, momentum_row, reference_wrench, regressor_row
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force_T, \
     transform_motion

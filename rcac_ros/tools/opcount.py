@@ -62,27 +62,39 @@ def _counted(arr):
     return out
 
 
+def _counting(kernel):
+    """``kernel`` run on :class:`Counted` copies of its array arguments.
+
+    The results are written back into the caller's arrays, so the controller's state
+    advances as in a plain step.
+    """
+    def run(*args):
+        counted = [_counted(a) if isinstance(a, np.ndarray) else a for a in args]
+        out = kernel(*counted)
+        for a, c in zip(args, counted):
+            if isinstance(a, np.ndarray) and a.flags.writeable:
+                a[...] = c.astype(float)
+        return out
+    return run
+
+
 def _count_in_process(kind, n_links):
-    from rcac_ros.core import RecursiveCompositeController, SlotineLiCompositeController, \
-        css_arm
-    from rcac_ros.core.rcac import rcac_step_kernel
-    from rcac_ros.core.slotine_li import slotine_li_step_kernel
+    from rcac_ros.core import css_arm, rcac, slotine_li
     model = css_arm().repeated(max(1, n_links // 7))
     rng = np.random.default_rng(0)
-    vecs = [_counted(v) for v in rng.normal(size=(5, model.n)) * 0.1]
+    vecs = rng.normal(size=(5, model.n)) * 0.1
+    theta_hat0 = rng.normal(size=(model.n, 13))
+    # the controllers call their kernel by its module name: count through the public step
     if kind == "rcac":
-        c = RecursiveCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))
-        args = [_counted(c._data)]
-        kernel = rcac_step_kernel
+        rcac.rcac_step_kernel = _counting(rcac.rcac_step_kernel)
+        c = rcac.RecursiveCompositeController(model, theta_hat0=theta_hat0)
     else:
-        c = SlotineLiCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))
-        args = [_counted(c._const), _counted(c._scal), _counted(c._theta),
-                _counted(c._filt)]
-        kernel = slotine_li_step_kernel
-    kernel(*args, *vecs)            # the first step initialises the filters: not counted
+        slotine_li.slotine_li_step_kernel = _counting(slotine_li.slotine_li_step_kernel)
+        c = slotine_li.SlotineLiCompositeController(model, theta_hat0=theta_hat0)
+    c.step(*vecs)                   # the first step initialises the filters: not counted
     for k in _COUNTS:
         _COUNTS[k] = 0
-    kernel(*args, *vecs)
+    c.step(*vecs)
     return dict(_COUNTS)
 
 
@@ -96,7 +108,7 @@ def count_step(kind="rcac", n_links=7):
         A multiple of 7 (the CSS arm repeated).
     """
     env = dict(os.environ, NUMBA_DISABLE_JIT="1")
-    out = subprocess.run([sys.executable, "-m", "rcac_ros.core.opcount", kind, str(n_links)],
+    out = subprocess.run([sys.executable, "-m", "rcac_ros.tools.opcount", kind, str(n_links)],
                          env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
