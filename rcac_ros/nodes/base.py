@@ -20,6 +20,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -28,7 +29,9 @@ from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes import paramcheck
 from rcac_ros.nodes.pacing import spin_node_once
+from rcac_ros.nodes.realtime import Realtime
 
 #: reliable, keep-last 10: the control topics (what ros2_control uses)
 QOS = topics.qos()
@@ -152,6 +155,7 @@ class RcacNode(Node):
             self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
             self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
             self._read_parameters(values)
+            self._check_unknown_parameters(values["strict_parameters"])
         except Exception:
             self.destroy_node()     # leave no half-built node (and its rosout logger) behind
             raise
@@ -162,12 +166,31 @@ class RcacNode(Node):
         self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
 
+    def _check_unknown_parameters(self, strict):
+        """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
+        unknown = paramcheck.unknown_parameters(self._parameter_overrides, self._parameters)
+        if unknown:
+            text = paramcheck.describe_unknown(unknown, self.get_name())
+            if strict:
+                raise ConfigError(f"strict_parameters: {text}")
+            self.get_logger().warning(text)
+        files = paramcheck.check_params_files(sys.argv)
+        nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE]
+        for path, section, hint in paramcheck.foreign_sections(files, nodes):
+            self.get_logger().warning(
+                f"{path}: section '{section}' addresses no node of rcac_ros"
+                + (f" (did you mean '{hint}'?)" if hint else ""))
+
     def _check_parameters(self, changed):
         """On-set callback: validate against the table (a subclass applies them post-set)."""
         for p in changed:
+            if p.name == "use_sim_time" and p.value != self.get_parameter(p.name).value:
+                return SetParametersResult(
+                    successful=False, reason="use_sim_time: cannot change at run time (the "
+                    "watchdog and the pacing are set up for one time source): restart the node")
             row = self._rows.get(p.name)
             if row is None:
-                continue                # rclpy's own (use_sim_time, ...)
+                continue                # rclpy's own
             value = p.value
             if row.type.endswith("_array") and value is not None:
                 value = list(value)
@@ -248,6 +271,17 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _realtime(node):
+    """Apply the node's opt-in real-time options to this thread (the control loop's)."""
+    options = getattr(getattr(node, "failsafe", None), "realtime", None)
+    if options is None or not options.any:
+        return None
+    rt = Realtime(options, warn=node.get_logger().warning)
+    if rt.applied:
+        node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
+    return rt
+
+
 def run(node_factory, prog, args=None):
     """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
 
@@ -263,14 +297,20 @@ def run(node_factory, prog, args=None):
     """
     # rclpy's own SIGINT handler would shut the context down before we could publish the
     # final zero effort: handle both signals in Python instead.
-    rclpy.init(args=sys.argv if args is None else args,
-               signal_handler_options=SignalHandlerOptions.NO)
+    args = sys.argv if args is None else args
+    try:
+        paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except (RcacError, _rclpy.RCLError) as err:
+        print(f"{prog}: error: {_first_line(err)}", file=sys.stderr, flush=True)
+        return 2
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)
-    node = None
+    node = rt = None
     code = 0
     try:
         node = node_factory()
+        rt = _realtime(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
@@ -287,6 +327,8 @@ def run(node_factory, prog, args=None):
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if rt is not None:
+            rt.release()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -10,7 +10,14 @@ message. Two timing modes:
   is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
 
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
-``state_timeout`` seconds. Parameters are documented in ``config/controller.yaml``.
+``state_timeout`` seconds of the steady clock (in timer mode on ``/clock``, also while no
+tick has come: a frozen clock). The fail-safe guards (issue 9) are
+:class:`rcac_ros.nodes.failsafe.ControllerGuards`: state stamps through a
+:class:`~rcac_ros.nodes.guards.StampGate` (a restart is followed, a stamp in the future
+refused), size caps checked before deserialising, trajectories parsed in their own thread
+(and, in timer mode, the states too: the loop only ticks) and checked against the model's
+limits, and the desired state rate-limited. Parameters are documented in
+``config/controller.yaml``.
 """
 
 import sys
@@ -18,6 +25,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -26,6 +34,9 @@ from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import Percentiles, QOS, RcacNode, run
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
+from rcac_ros.nodes.failsafe import ControllerGuards
+from rcac_ros.nodes.guards import Rejected, StampGate
+from rcac_ros.nodes.inputs import capped, SideInput
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
 from rcac_ros.nodes.pacing import DeadlineLoop
@@ -60,29 +71,44 @@ class ControllerNode(RcacNode):
         self._velocity = VelocityEstimate(self.velocity_cutoff)
         # state
         self._q = self._qd = None           # latest valid state (model order)
+        self._state = None                  # the same, as one tuple (read by the loop)
         self._last_stamp = None             # ns, of the latest valid state
-        self._last_rx = None                # node-clock ns at the latest valid state
+        self._last_rx = None                # steady-clock ns at the latest valid state
+        self._restart_filters = False       # the loop restarts them at its next step
         self._steps = 0
         self._watchdog = True               # no valid state yet
         self._watchdog_trips = 0
         self._deadline_misses = 0
         self._late_ticks = 0
         self._last_tick = None
+        self._last_tick_steady = None
         self._nonfinite = 0
         self._q_msg = None
         self._rate_warned = False
         self.loop = None                    # the steady-clock pacing of timer mode
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, QOS)
+        fs = self.failsafe
+        self._sides = []                    # inputs served in their own threads
+        if self.mode == "timer":            # the loop only ticks
+            self._sides.append(SideInput(self, JointState, topics.JOINT_STATES, QOS,
+                                         self._on_state, fs.max_state_bytes, "state",
+                                         self._throttle.warn))
+        else:                               # lockstep: the answer is the state's callback
+            self.create_subscription(JointState, topics.JOINT_STATES, capped(
+                JointState, fs.max_state_bytes, "state", self._on_state,
+                self._throttle.warn), QOS, raw=True)
         if self.trajectory_source == "topic":
-            self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
-                                     self._on_trajectory, QOS)
+            self._sides.append(SideInput(
+                self, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_trajectory,
+                fs.max_trajectory_bytes, "trajectory",
+                lambda kind, text: self._throttle.warn(f"trajectory {kind}", text)))
         if self.mode == "timer" and self.get_parameter("use_sim_time").value:
             self.create_timer(self.h, self._on_tick)        # ROS time: ticks on /clock
         elif self.mode == "timer":
             self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
             self.loop.start()
-        else:
-            self.create_timer(min(self.state_timeout / 2.0, 0.01), self._on_watchdog)
+        if self.loop is None:               # lockstep, or timer mode on /clock
+            self.create_timer(min(self.state_timeout / 2.0, 0.01), self._on_watchdog,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
             f"{self.mode} mode, model {self.model.name} (n={n}), trajectory "
@@ -106,6 +132,8 @@ class ControllerNode(RcacNode):
                                    -self.effort_limit[self._out], self.effort_limit[self._out])
         self.velocity_cutoff = v["velocity_filter_cutoff"]
         self.publish_every = v["monitor_decimation"]
+        self.failsafe = ControllerGuards(v, self.model, self.h, self.effort_limit,
+                                         self.get_logger().warning)
         try:
             self.ctrl = RecursiveCompositeController(
                 self.model, K_D=v["K_D"], Lambda=v["Lambda"], P=v["P"], gamma=v["gamma"],
@@ -131,13 +159,23 @@ class ControllerNode(RcacNode):
     def _now_ns(self):
         return self.get_clock().now().nanoseconds
 
+    def _restart(self, stamp):
+        """The state stream restarted (a simulator or driver restart): start over from it."""
+        self.get_logger().warning(
+            f"joint state stamps restarted ({self._last_stamp * 1e-9:.6f} s -> "
+            f"{stamp * 1e-9:.6f} s): filters, velocity estimate and desired motion restart "
+            "from the new state; the estimates are kept")
+        self._velocity.reset()
+        self._motion = DesiredMotion(self.paper, self.paper_q0)
+        self._restart_filters = self._steps > 0
+
     def _on_state(self, msg):
         try:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
             return self._throttle.warn(err.kind, str(err))
         stamp = stamp_ns(msg.header.stamp)
-        now = self._now_ns()
+        now = time.monotonic_ns()           # state silence: on the steady clock, always
         if self.mode == "lockstep" and self._outputs.last_answer is not None \
                 and stamp == self._last_stamp and np.array_equal(q, self._q_msg):
             # the same state again (a simulator re-sending after a lost message at start-up):
@@ -145,41 +183,46 @@ class ControllerNode(RcacNode):
             self._outputs.answer_again()
             self._last_rx = now
             return
-        if self._last_stamp is not None and stamp < self._last_stamp:
-            return self._throttle.warn(
-                "stamp", f"JointState: stamp went backwards ({stamp * 1e-9:.6f} s < "
-                f"{self._last_stamp * 1e-9:.6f} s)")
+        verdict = self.failsafe.gate.check(stamp, now, stale=self._watchdog)
+        if verdict in (StampGate.BACKWARDS, StampGate.FUTURE):
+            return self._throttle.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
+                                       f"after {self._last_stamp * 1e-9:.6f} s")
+        if verdict == StampGate.RESTART and self._last_stamp is not None:
+            self._restart(stamp)
         # velocity: given, or estimated from positions (finite difference, low-pass)
         if qd is None:
             qd = self._velocity.update(q, stamp if stamp > 0 else now)
         else:
             self._velocity.reset()
-        if self.mode == "lockstep" and self._last_stamp is not None and stamp > 0 \
-                and not self._rate_warned:
+        if self.mode == "lockstep" and verdict == StampGate.OK and self._last_stamp is not None \
+                and stamp > 0 and not self._rate_warned:
             gap = (stamp - self._last_stamp) * 1e-9
             if abs(gap - self.h) > 0.01 * self.h:
                 self._rate_warned = True
                 self.get_logger().warning(
                     f"state period {gap * 1e3:.3f} ms differs from h = {self.h * 1e3:.3f} ms "
                     "(set 'rate' to 1/dt of the simulator)")
+        self._state = (q, qd)
         self._q, self._qd, self._q_msg = q, qd, q
         self._last_stamp = stamp
         self._last_rx = now
         if self._watchdog:
             self._watchdog = False
             if self._steps:
-                self.ctrl.restart_filters()     # the gap broke the filters of eqs 21-24
+                self._restart_filters = True    # the gap broke the filters of eqs 21-24
                 self.get_logger().info("watchdog: valid state again, control resumed")
         if self.mode == "lockstep":
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
             self._control(t_ns, msg.header.stamp)
 
     def _on_trajectory(self, msg):
+        now = self._time_now_ns()
         try:
             parsed = parse_trajectory(msg, self.model.joint_names)
-        except TrajectoryRejected as err:
+            self.failsafe.check_goal(parsed, now)
+        except (TrajectoryRejected, Rejected) as err:
             return self._throttle.warn(f"trajectory {err.kind}", str(err))
-        if not self._motion.follow(parsed, self._time_now_ns(), self._q):
+        if not self._motion.follow(parsed, now, self._q):
             self._throttle.warn("trajectory early", "no joint state received yet")
 
     def _time_now_ns(self):
@@ -190,11 +233,16 @@ class ControllerNode(RcacNode):
 
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
-        q_d, qd_d, qdd_d = self._motion.sample(t_ns, self._q)
+        q, qd = self._state                 # one snapshot (timer mode: set by another thread)
+        if self._restart_filters:
+            self._restart_filters = False
+            self.ctrl.restart_filters()
+            self.failsafe.limiter.reset()
+        q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
         try:
-            tau = self.ctrl.step(self._q, self._qd, q_d, qd_d, qdd_d)
+            tau = self.ctrl.step(q, qd, q_d, qd_d, qdd_d)
         except RcacError as err:
             self._throttle.warn("step", str(err))
             tau = None
@@ -214,13 +262,18 @@ class ControllerNode(RcacNode):
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
-            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, q_d, qd_d, qdd_d,
+            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, q_d, qd_d, qdd_d,
                                    stamp)
 
     def _state_is_stale(self):
         if self._last_rx is None:
             return True
-        return self._now_ns() - self._last_rx > self.state_timeout * 1e9
+        return time.monotonic_ns() - self._last_rx > self.state_timeout * 1e9
+
+    def _tick_is_stale(self):
+        """Timer mode on /clock: no tick for ``state_timeout`` (a frozen or absent /clock)."""
+        last = self._last_tick_steady
+        return last is None or time.monotonic_ns() - last > self.state_timeout * 1e9
 
     def _trip(self):
         if not self._watchdog and self._last_rx is not None:
@@ -231,8 +284,8 @@ class ControllerNode(RcacNode):
                 "publishing the safe effort")
 
     def _on_watchdog(self):
-        """Lockstep: a periodic check; publishes the safe effort while the state is stale."""
-        if self._state_is_stale():
+        """Steady clock: the safe effort while no valid state (lockstep) or no tick (/clock)."""
+        if self._state_is_stale() if self.mode == "lockstep" else self._tick_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
 
@@ -243,6 +296,7 @@ class ControllerNode(RcacNode):
                 and now - self._last_tick > 1.5 * self.h * 1e9:
             self._late_ticks += 1           # ROS-time timer (the loop counts its own)
         self._last_tick = now
+        self._last_tick_steady = time.monotonic_ns()
         if self._state_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
@@ -271,6 +325,8 @@ class ControllerNode(RcacNode):
             "watchdog": "tripped" if self._watchdog else "ok",
             "watchdog_trips": self._watchdog_trips,
             "rejected_messages": self._throttle.total,
+            "stamp_restarts": self.failsafe.gate.restarts,
+            "desired_limited": self.failsafe.limiter.limited,
             "non_finite_efforts": self._nonfinite,
             "prediction_error": f"{self.ctrl.E:.6g}",
         }
@@ -279,6 +335,13 @@ class ControllerNode(RcacNode):
         return self.status(level, "control loop", message, values)
 
     # ------------------------------------------------------------------ shutdown
+    def destroy_node(self):
+        """Stop the input threads, then destroy the node."""
+        for side in getattr(self, "_sides", ()):
+            side.close()
+        self._sides = []
+        return super().destroy_node()
+
     def on_shutdown(self):
         """Publish one zero-effort command (called on SIGINT/SIGTERM) and wait for delivery."""
         self._outputs.zero_effort()

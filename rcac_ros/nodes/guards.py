@@ -18,7 +18,7 @@ unit-tested on its own (issue 9):
 from numba import njit
 import numpy as np
 
-from rcac_ros.core.exceptions import InputError
+from rcac_ros.errors import InputError
 
 #: default size caps of the serialised messages, bytes. A 7-joint JointState is ~300 B;
 #: 64 KiB still holds ~1000 named joints. 1 MiB holds ~6000 points of a 7-joint trajectory
@@ -54,7 +54,8 @@ class StampGate:
         watchdog has not tripped.
     """
 
-    OK, RESTART, BACKWARDS, FUTURE = "ok", "restart", "backwards", "future"
+    #: verdicts (the refusals double as the kinds of the throttled warnings)
+    OK, RESTART, BACKWARDS, FUTURE = "ok", "restart", "stamp", "stamp future"
 
     def __init__(self, max_jump=1.0, restart_count=10):
         self.max_jump_ns = round(max_jump * 1e9)

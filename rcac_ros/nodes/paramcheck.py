@@ -12,7 +12,7 @@ import difflib
 
 import yaml
 
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 
 #: parameters every rclpy node declares itself
 BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})

@@ -28,7 +28,7 @@ def test_one_future_stamp_does_not_lock_out():
         feed(probe, [k * H_NS for k in range(20, 60)])
         assert wait(lambda: probe.answered(59 * H_NS), timeout=5.0)
         assert not probe.answered(10 ** 6 * NS)
-        assert wait(lambda: probe.warned("rejected (future)"))
+        assert wait(lambda: probe.warned("rejected (stamp future)"))
 
 
 def test_restart_without_silence_is_accepted_after_a_consistent_run():

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
 
 CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood")
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
@@ -171,8 +171,8 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from rcac_ros.bag import init_context
-    from rcac_ros.demo import Child, child_env, node_command, NodeFailed
+    from rcac_ros.tools.launch import init_context
+    from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed
 
     h = 1.0 / rate
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
@@ -344,7 +344,7 @@ def format_table(results, h):
 
 
 def plot(results, path):
-    from rcac_ros.plots import plt
+    from rcac_ros.tools.plots import plt
     fig, axes = plt.subplots(len(results), 1, figsize=(9, 2.0 * len(results)), sharex=True,
                              squeeze=False)
     for ax, r in zip(axes[:, 0], results):
