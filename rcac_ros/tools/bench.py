@@ -143,12 +143,43 @@ def add_arguments(parser):
                              "each joint state")
     parser.add_argument("--budget", type=float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
+    parser.add_argument("--rt", action="store_true",
+                        help="--ros/--faults: the controller with its real-time options "
+                             "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
+    parser.add_argument("--K_D", type=float, default=None,
+                        help="--ros/--faults: the controller's K_D (default: the bench's)")
+    parser.add_argument("--faults", action="store_true",
+                        help="instead: the closed loop over ROS under faults (drops, jitter, "
+                             "noise, simulator restart, frozen /clock, flood); --duration "
+                             "per case (default 60)")
+    parser.add_argument("--cases", default=None,
+                        help="--faults: comma-separated cases (default: all)")
+    parser.add_argument("--soak", type=float, default=None, metavar="MINUTES",
+                        help="--faults: instead, the nominal case for MINUTES (memory growth, "
+                             "late ticks)")
+    parser.add_argument("--plot", metavar="FILE", help="--faults: tracking errors per case")
+
+
+#: the controller's real-time options of ``--rt``
+RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
+              "realtime.cpu_dma_latency": 0}
 
 
 def run(args):
+    over = dict(RT_OPTIONS) if args.rt else {}
+    if args.K_D is not None:
+        over["K_D"] = float(args.K_D)
+    if args.faults:
+        from rcac_ros.tools.fault_bench import CASES, run_faults
+        from rcac_ros.tools.ros_bench import BENCH_CONTROLLER
+        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+        run_faults(args.duration, cases, dict(BENCH_CONTROLLER, **over), json_path=args.json,
+                   plot_path=args.plot, soak_minutes=args.soak)
+        return 0
     if args.ros:
         from rcac_ros.tools.ros_bench import run_ros_bench
-        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode)
+        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode,
+                               controller_overrides=over)
         return 0 if result else 1
     try:
         import pinocchio  # noqa: F401
