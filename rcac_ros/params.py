@@ -194,6 +194,10 @@ CONTROLLER = _robot("controller") + (
     Param("realtime.cpu_dma_latency", "integer", -1,
           "hold /dev/cpu_dma_latency at this many us while running (0: the shallowest idle "
           "state; best effort); -1: off", lo=-1, hi=100_000),
+    Param("timer.lookahead", "double", None,
+          "timer mode: predict the state this long beyond its age at the tick, from the "
+          "model and the effort being applied (RK4), s; unset: no prediction (the effort "
+          "answers a state up to a period old)", lo=0.0, hi=1.0),
     _strict_parameters(),
 )
 

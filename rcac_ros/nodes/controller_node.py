@@ -37,6 +37,7 @@ from rcac_ros.nodes.controller_outputs import ControllerOutputs
 from rcac_ros.nodes.failsafe import ControllerGuards
 from rcac_ros.nodes.guards import Rejected, StampGate
 from rcac_ros.nodes.inputs import capped, SideInput
+from rcac_ros.nodes.lookahead import StatePredictor
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
 from rcac_ros.nodes.pacing import DeadlineLoop
@@ -134,6 +135,8 @@ class ControllerNode(RcacNode):
         self.publish_every = v["monitor_decimation"]
         self.failsafe = ControllerGuards(v, self.model, self.h, self.effort_limit,
                                          self.get_logger().warning)
+        self._lookahead = None if v["timer.lookahead"] is None or self.mode != "timer" else \
+            StatePredictor(self.model, v["timer.lookahead"])
         try:
             self.ctrl = RecursiveCompositeController(
                 self.model, K_D=v["K_D"], Lambda=v["Lambda"], P=v["P"], gamma=v["gamma"],
@@ -234,6 +237,8 @@ class ControllerNode(RcacNode):
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
         q, qd = self._state                 # one snapshot (timer mode: set by another thread)
+        if self._lookahead is not None:     # timer mode: the state when the effort acts
+            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self._last_rx)
         if self._restart_filters:
             self._restart_filters = False
             self.ctrl.restart_filters()
@@ -260,6 +265,8 @@ class ControllerNode(RcacNode):
             return
         tau = np.clip(tau, -self.effort_limit, self.effort_limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
+        if self._lookahead is not None:
+            self._lookahead.applied = tau
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, q_d, qd_d, qdd_d,

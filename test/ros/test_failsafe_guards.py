@@ -149,3 +149,17 @@ def test_unknown_keys_get_the_nearest_name(tmp_path):
         (str(good), "rcac_controler", "rcac_controller")]
     unknown = unknown_parameters(["K_d", "use_sim_time", "rate", "zzz"], ["K_D", "rate"])
     assert unknown == [("K_d", "K_D"), ("zzz", None)]
+
+
+def test_state_predictor_against_constant_acceleration():
+    """One joint about its axis, torque held: q(T) = q + qd T + tau T^2 / (2 I), exactly."""
+    from rcac_ros.core.model import RobotModel
+    from rcac_ros.nodes.lookahead import StatePredictor
+    model = RobotModel([[0.0, 0.0, 0.0]], [np.eye(3)], [3.0], [[0.0, 0.0, 0.0]],
+                       [np.diag([1.0, 1.0, 2.0])], (0.0, 0.0, 0.0))
+    pred = StatePredictor(model, lookahead=0.002)
+    pred.applied = np.array([5.0])
+    q, qd = pred(np.array([0.3]), np.array([-0.1]), age_ns=1_500_000)
+    T = 0.0035
+    np.testing.assert_allclose(q, 0.3 - 0.1 * T + 5.0 * T ** 2 / 4.0, rtol=1e-12)
+    np.testing.assert_allclose(qd, -0.1 + 5.0 * T / 2.0, rtol=1e-12)
