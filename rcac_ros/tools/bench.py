@@ -157,7 +157,11 @@ def add_arguments(parser):
     parser.add_argument("--soak", type=float, default=None, metavar="MINUTES",
                         help="--faults: instead, the nominal case for MINUTES (memory growth, "
                              "late ticks)")
-    parser.add_argument("--plot", metavar="FILE", help="--faults: tracking errors per case")
+    parser.add_argument("--plot", metavar="FILE",
+                        help="--faults: tracking errors per case; --delay-margin: RMS vs K_D")
+    parser.add_argument("--delay-margin", action="store_true",
+                        help="instead: offline, tracking RMS against K_D with the effort 0-2 "
+                             "periods late (the stable range of timer mode)")
 
 
 #: the controller's real-time options of ``--rt``
@@ -169,6 +173,10 @@ def run(args):
     over = dict(RT_OPTIONS) if args.rt else {}
     if args.K_D is not None:
         over["K_D"] = float(args.K_D)
+    if args.delay_margin:
+        from rcac_ros.tools.delay_margin import run_delay_margin
+        run_delay_margin(plot_path=args.plot)
+        return 0
     if args.faults:
         from rcac_ros.tools.fault_bench import CASES, run_faults
         from rcac_ros.tools.ros_bench import BENCH_CONTROLLER
