@@ -148,6 +148,9 @@ def add_arguments(parser):
                              "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
     parser.add_argument("--K_D", type=float, default=None,
                         help="--ros/--faults: the controller's K_D (default: the bench's)")
+    parser.add_argument("--lookahead", type=float, default=None, metavar="SECONDS",
+                        help="--ros/--faults: the controller's timer.lookahead (state "
+                             "prediction; default: none)")
     parser.add_argument("--faults", action="store_true",
                         help="instead: the closed loop over ROS under faults (drops, jitter, "
                              "noise, simulator restart, frozen /clock, flood); --duration "
@@ -173,6 +176,8 @@ def run(args):
     over = dict(RT_OPTIONS) if args.rt else {}
     if args.K_D is not None:
         over["K_D"] = float(args.K_D)
+    if args.lookahead is not None:
+        over["timer.lookahead"] = float(args.lookahead)
     if args.delay_margin:
         from rcac_ros.tools.delay_margin import run_delay_margin
         run_delay_margin(plot_path=args.plot)
