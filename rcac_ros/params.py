@@ -103,6 +103,10 @@ def _robot(node):
               "gravity in the base frame, m/s^2 (unset: the model's own)", size=3),
         Param("joints", "string_array", None,
               f"joint names, in the order of the {order} (unset: the model's)"),
+        Param("description_topic", "string", "",
+              "take the URDF from this transient-local std_msgs/String topic (e.g. "
+              "/robot_description, as robot_state_publisher offers it) and wait for it; "
+              "empty: 'robot_description' or 'model'"),
     )
 
 
@@ -125,6 +129,9 @@ def _strict_parameters():
 
 #: The controller node's parameters (``config/controller.yaml``).
 CONTROLLER = _robot("controller") + (
+    Param("autostart", "bool", True,
+          "configure and activate at start-up (false: stay unconfigured until "
+          "~/change_state)"),
     Param("mode", "string", "lockstep",
           "timing: 'lockstep' (one step per JointState, simulator) or 'timer' (rate Hz on "
           "the node clock, real arms)", choices=("lockstep", "timer")),
@@ -164,6 +171,12 @@ CONTROLLER = _robot("controller") + (
           lo=0.0, hi=BIG, strict=True),
     Param("monitor_decimation", "integer", 1, "publish estimates and errors every k-th step",
           lo=1, hi=1_000_000, read_only=False),
+    Param("initial_estimates", "string", "zero",
+          "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters) or the "
+          "path of a file written by ~/save_estimates"),
+    Param("estimates_file", "string", "",
+          "~/save_estimates writes the estimates here (YAML), and the physically consistent "
+          "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
     # fail-safe (issue 9): rcac_ros.nodes.guards, rcac_ros.nodes.realtime
     Param("max_state_bytes", "integer", 65_536,
@@ -200,6 +213,17 @@ CONTROLLER = _robot("controller") + (
           "answers a state up to a period old)", lo=0.0, hi=1.0),
     _strict_parameters(),
 )
+
+#: per-joint gain overrides of the controller: ``gains.<joint>.<gain>`` (JTC style)
+GAINS_PREFIX = "gains."
+
+
+def gain_override(name):
+    """The row of a per-joint gain override ``gains.<joint>.<gain>`` (the gain's own range)."""
+    gain = name.rpartition(".")[2]
+    return Param(name, "double", None, f"per-joint override of {gain} (the link moved by "
+                 "that joint for K_D and P)", lo=0.0, hi=BIG, strict=True)
+
 
 #: The simulator node's parameters (``config/simulator.yaml``).
 SIMULATOR = _robot("simulator") + (
@@ -336,6 +360,9 @@ def check_file_params(node, params):
     for name, value in _flatten(params):
         if name in ("use_sim_time", "start_type_description_service"):
             continue
+        if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
+            check(gain_override(name), value)       # the joint is checked at start-up
+            continue
         if name not in known:
             raise ConfigError(f"{name}: the {node} declares no such parameter")
         check(known[name], value)
@@ -389,7 +416,9 @@ def document():
              "doc/parameters.md`; do not edit by hand (a test compares the two).",
              "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
              "decimal point in a YAML file. Settable parameters can be changed with "
-             "`ros2 param set` while the node runs; the others are read once at start-up."]
+             "`ros2 param set` while the node runs; the others are read once at start-up (the "
+             "managed controller: at each configure). The controller also takes per-joint "
+             "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
                   markdown(node)]

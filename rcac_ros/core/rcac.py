@@ -292,6 +292,7 @@ class RecursiveCompositeController:
         self._data[n, :SCAL_LEN] = scal
         self._state = self._data[:n, CONST_COLS:]       # views into the one kernel argument
         self._scal = self._data[n]
+        self.adapting = True
         self.reset(theta_hat0)
 
     @property
@@ -335,6 +336,17 @@ class RecursiveCompositeController:
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
+
+    def set_adaptation(self, enabled):
+        """Freeze (``False``) or resume (``True``) the adaptation of eq 24, keeping ``theta_hat``.
+
+        Frozen, every ``P_i`` acts as zero: ``theta_hat`` stays where it is, the torque of
+        eqs 19-20 uses it, and the filters and ``E`` keep running (``E`` then measures the
+        frozen estimates).
+        """
+        n = self.n
+        self._data[:n, PG0:PG0 + 169] = self.P.reshape(n, 169) if enabled else 0.0
+        self.adapting = bool(enabled)
 
     def set_applied_torque(self, tau):
         """Tell the filter ``y = tau_1^f`` (eq 22) the torque really applied after the last step.

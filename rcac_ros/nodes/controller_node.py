@@ -1,149 +1,172 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
-Thin: message -> arrays -> :class:`rcac_ros.core.rcac.RecursiveCompositeController` ->
-message. Two timing modes:
+A managed node (:class:`~rcac_ros.nodes.managed.ManagedNode`, ``~/get_state``,
+``~/change_state``): configure reads the parameters, the model, the gains (and their
+overrides ``gains.<joint>.<gain>``) and warms the kernels; activate starts the efforts (the
+motion starts again from the next state); deactivate sends one zero effort, then silence;
+``autostart`` (default) does both at start-up. Services ``~/reset_estimates``,
+``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.estimate_services`);
+``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller_state`); doc/nodes.md.
 
-* ``lockstep`` (default): one step per valid JointState, the trajectory time taken
-  from the state's stamp (deterministic with the simulator node);
-* ``timer``: ``rate`` Hz on the latest valid state (real arms). On the steady clock the
-  ticks keep absolute deadlines (:class:`rcac_ros.nodes.pacing.DeadlineLoop`: a late tick
-  is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
-
+Thin: message -> arrays -> :class:`~rcac_ros.core.rcac.RecursiveCompositeController` ->
+message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
+from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
+latest valid state (real arms), on absolute deadlines of the steady clock
+(:class:`~rcac_ros.nodes.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
-``state_timeout`` seconds of the steady clock (in timer mode on ``/clock``, also while no
-tick has come: a frozen clock). The fail-safe guards (issue 9) are
-:class:`rcac_ros.nodes.failsafe.ControllerGuards`: state stamps through a
+``state_timeout`` s of the steady clock (in timer mode on ``/clock``, also while no tick
+comes: a frozen clock). Fail-safe guards (issue 9,
+:class:`~rcac_ros.nodes.failsafe.ControllerGuards`): stamps through a
 :class:`~rcac_ros.nodes.guards.StampGate` (a restart is followed, a stamp in the future
 refused), size caps checked before deserialising, trajectories parsed in their own thread
-(and, in timer mode, the states too: the loop only ticks) and checked against the model's
-limits, and the desired state rate-limited. Parameters are documented in
-``config/controller.yaml``.
+(in timer mode the states too: the loop only ticks) and checked against the model's limits,
+the desired state rate-limited. Parameters: ``config/controller.yaml``, doc/parameters.md.
 """
 
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from rcac_ros import params, topics
-from rcac_ros.core.rcac import RecursiveCompositeController
-from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes.base import Percentiles, QOS, RcacNode, run
+from rcac_ros.errors import RcacError
+from rcac_ros.nodes.base import Percentiles, QOS, run
+from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
+from rcac_ros.nodes.controller_params import read_parameters
+from rcac_ros.nodes.estimate_services import EstimateServices
 from rcac_ros.nodes.failsafe import ControllerGuards
 from rcac_ros.nodes.guards import Rejected, StampGate
 from rcac_ros.nodes.inputs import capped, SideInput
-from rcac_ros.nodes.lookahead import StatePredictor
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
+from rcac_ros.nodes.lookahead import StatePredictor
+from rcac_ros.nodes.managed import ManagedNode
 from rcac_ros.nodes.pacing import DeadlineLoop
 from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, TrajectoryRejected
 
 
-class ControllerNode(RcacNode):
-    """The recursive composite adaptive controller as a ROS 2 node.
+class ControllerNode(ManagedNode):
+    """The recursive composite adaptive controller as a managed ROS 2 node.
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    ConfigError
-        At construction, on an invalid parameter (the message names it).
+    Constructed as :class:`~rcac_ros.nodes.managed.ManagedNode` (keyword arguments of
+    :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
+    parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
     """
 
     PARAMETERS = params.CONTROLLER
 
     def __init__(self, **kwargs):
-        super().__init__(topics.CONTROLLER_NODE, **kwargs)
-        self._stats = Percentiles()
-        n = self.model.n
-        self._warm_up()
-        self._outputs = ControllerOutputs(self, self.joints, self._out,
-                                          tagged=self.mode == "lockstep")
-        self._motion = DesiredMotion(self.paper, self.paper_q0)
-        self._reader = JointStateReader(self.model.joint_names)
-        self._velocity = VelocityEstimate(self.velocity_cutoff)
-        # state
-        self._q = self._qd = None           # latest valid state (model order)
-        self._state = None                  # the same, as one tuple (read by the loop)
-        self._last_stamp = None             # ns, of the latest valid state
-        self._last_rx = None                # steady-clock ns at the latest valid state
-        self._restart_filters = False       # the loop restarts them at its next step
-        self._steps = 0
-        self._watchdog = True               # no valid state yet
-        self._watchdog_trips = 0
-        self._deadline_misses = 0
-        self._late_ticks = 0
-        self._last_tick = None
-        self._last_tick_steady = None
-        self._nonfinite = 0
-        self._q_msg = None
-        self._rate_warned = False
+        self.ctrl = None
         self.loop = None                    # the steady-clock pacing of timer mode
-        fs = self.failsafe
-        self._sides = []                    # inputs served in their own threads
-        if self.mode == "timer":            # the loop only ticks
-            self._sides.append(SideInput(self, JointState, topics.JOINT_STATES, QOS,
-                                         self._on_state, fs.max_state_bytes, "state",
-                                         self._throttle.warn))
+        super().__init__(topics.CONTROLLER_NODE, **kwargs)
+
+    # ------------------------------------------------------------------ lifecycle
+    def _configure(self, values):
+        """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
+        read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
+                                         self.get_logger().warning)
+        self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
+            else StatePredictor(self.model, values["timer.lookahead"])
+        self._stats = Percentiles()
+        self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
+            self, self.joints, self._out, tagged=self.mode == "lockstep"))
+        self._reader = JointStateReader(self.model.joint_names)
+        self._steps = self._watchdog_trips = self._deadline_misses = 0
+        self._late_ticks = self._nonfinite = 0
+        self._rate_warned = False
+        self._reset_motion()
+        sub, timer, fs = self.destroy_subscription, self.destroy_timer, self.failsafe
+        if self.mode == "timer":            # states in their own thread: the loop only ticks
+            self.keep(SideInput.close, SideInput(
+                self, JointState, topics.JOINT_STATES, QOS, self._on_state,
+                fs.max_state_bytes, "state", self._throttle.warn))
         else:                               # lockstep: the answer is the state's callback
-            self.create_subscription(JointState, topics.JOINT_STATES, capped(
-                JointState, fs.max_state_bytes, "state", self._on_state,
-                self._throttle.warn), QOS, raw=True)
-        if self.trajectory_source == "topic":
-            self._sides.append(SideInput(
+            self.keep(sub, self.create_subscription(JointState, topics.JOINT_STATES, capped(
+                JointState, fs.max_state_bytes, "state", self._on_state, self._throttle.warn),
+                QOS, raw=True))
+        if self.trajectory_source == "topic":   # parsed in their own thread
+            self.keep(SideInput.close, SideInput(
                 self, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_trajectory,
                 fs.max_trajectory_bytes, "trajectory",
                 lambda kind, text: self._throttle.warn(f"trajectory {kind}", text)))
         if self.mode == "timer" and self.get_parameter("use_sim_time").value:
-            self.create_timer(self.h, self._on_tick)        # ROS time: ticks on /clock
+            self.keep(timer, self.create_timer(self.h, self._on_tick))  # ticks on /clock
         elif self.mode == "timer":
             self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
-            self.loop.start()
+            self.keep(lambda _: setattr(self, "loop", None), self.loop)
         if self.loop is None:               # lockstep, or timer mode on /clock
-            self.create_timer(min(self.state_timeout / 2.0, 0.01), self._on_watchdog,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.keep(timer, self.create_timer(min(self.state_timeout / 2.0, 0.01),
+                                               self._on_watchdog,
+                                               clock=Clock(clock_type=ClockType.STEADY_TIME)))
+        self.keep(EstimateServices.destroy, EstimateServices(self))
         self.add_post_set_parameters_callback(self._apply_parameters)
+        self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
         self.get_logger().info(
-            f"{self.mode} mode, model {self.model.name} (n={n}), trajectory "
-            f"{self.trajectory_source}, h={self.h * 1e3:g} ms, joints {list(self.joints)}")
+            f"configured: {self.mode} mode, model {self.model.name} (n={self.model.n}), "
+            f"trajectory {self.trajectory_source}, h={self.h * 1e3:g} ms, "
+            f"joints {list(self.joints)}")
+
+    def _reset_motion(self):
+        """A fresh start: the motion, the velocity estimate and the watchdog restart."""
+        self._motion = DesiredMotion(self.paper, self.paper_q0)
+        self._velocity = VelocityEstimate(self.velocity_cutoff)
+        self._q = self._qd = None           # latest valid state (model order)
+        self._state = None                  # the same, as one tuple (read by the loop)
+        self._last_stamp = None             # ns, of the latest valid state
+        self._last_rx = None                # steady-clock ns at the latest valid state
+        self._watchdog = True               # no valid state yet
+        self._last_tick = None
+        self._last_tick_steady = None
+        self._restart_filters = False       # the loop restarts them at its next step
+        self.failsafe.gate.reset()
+        self.failsafe.limiter.reset()
+        self._q_msg = None
+        self._outputs.last_answer = None
+
+    def _activate(self):
+        """Efforts on; the motion starts again from the next valid state."""
+        self._reset_motion()
+        self.ctrl.restart_filters()
+        if self.loop is not None:
+            self.loop.start()
+        self.get_logger().info("active: publishing efforts")
+
+    def _deactivate(self):
+        """One zero effort, then silence (the lifecycle publishers are disabled next)."""
+        if self.loop is not None:
+            self.loop.stop()
+        self._outputs.zero_effort()
+        self.get_logger().info("inactive: one zero effort sent, then silence")
+
+    def on_interrupt(self):
+        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered."""
+        if self.running:
+            self.running = False
+            self._deactivate()
+
+    def follow(self, parsed):
+        """Follow a parsed trajectory (:func:`parse_trajectory`) from the desired state now.
+
+        The entry point of every trajectory source (the topic, an action server). Returns
+        ``False`` (nothing started) before the first joint state or when not active.
+        """
+        if not self.running:
+            return False
+        return self._motion.follow(parsed, self._time_now_ns(), self._q)
+
+    def hold_position(self):
+        """Stop any trajectory and hold the measured position (``False``: no state yet)."""
+        if not self.running or self._q is None:
+            return False
+        self._motion.hold(self._q)
+        return True
 
     # ------------------------------------------------------------------ parameters
-    def _read_parameters(self, v):
-        n = self.model.n
-        self.mode = v["mode"]
-        self.h = 1.0 / v["rate"]
-        self.trajectory_source = v["trajectory"]
-        self.paper = None if v["trajectory"] != "paper" else dict(
-            reading=v["paper.reading"], amplitude=v["paper.amplitude"], period=v["paper.period"])
-        q0 = params.per_joint("paper.q0", v["paper.q0"], n, None)
-        self.paper_q0 = None if q0 is None else q0[self._order]   # joints -> model order
-        self.state_timeout = v["state_timeout"]
-        limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
-        self.effort_limit = (self.model.effort_limit.copy() if limit is None
-                             else limit[self._order])
-        self.safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
-                                   -self.effort_limit[self._out], self.effort_limit[self._out])
-        self.velocity_cutoff = v["velocity_filter_cutoff"]
-        self.publish_every = v["monitor_decimation"]
-        self.failsafe = ControllerGuards(v, self.model, self.h, self.effort_limit,
-                                         self.get_logger().warning)
-        self._lookahead = None if v["timer.lookahead"] is None or self.mode != "timer" else \
-            StatePredictor(self.model, v["timer.lookahead"])
-        try:
-            self.ctrl = RecursiveCompositeController(
-                self.model, K_D=v["K_D"], Lambda=v["Lambda"], P=v["P"], gamma=v["gamma"],
-                lam=v["lambda"], h=self.h)
-        except RcacError as err:
-            raise ConfigError(f"gains: {err}") from None
-
     def _apply_parameters(self, changed):
         """Post-set callback: the run-time parameters take effect."""
         for p in changed:
@@ -151,12 +174,6 @@ class ControllerNode(RcacNode):
                 self.state_timeout = float(p.value)
             elif p.name == "monitor_decimation":
                 self.publish_every = int(p.value)
-
-    def _warm_up(self):
-        """Run the compiled step once so the first real step is not slow, then reset."""
-        z = np.zeros(self.model.n)
-        self.ctrl.step(z, z, z, z, z)
-        self.ctrl.reset()
 
     # ------------------------------------------------------------------ inputs
     def _now_ns(self):
@@ -170,9 +187,12 @@ class ControllerNode(RcacNode):
             "from the new state; the estimates are kept")
         self._velocity.reset()
         self._motion = DesiredMotion(self.paper, self.paper_q0)
+        self.failsafe.limiter.reset()       # the new motion starts at the measured state
         self._restart_filters = self._steps > 0
 
     def _on_state(self, msg):
+        if not self.running:
+            return
         try:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
@@ -219,13 +239,16 @@ class ControllerNode(RcacNode):
             self._control(t_ns, msg.header.stamp)
 
     def _on_trajectory(self, msg):
-        now = self._time_now_ns()
+        if not msg.points:                  # as JTC: an empty trajectory holds the position
+            if not self.hold_position():
+                self._throttle.warn("trajectory early", "no joint state received yet")
+            return
         try:
             parsed = parse_trajectory(msg, self.model.joint_names)
-            self.failsafe.check_goal(parsed, now)
+            self.failsafe.check_goal(parsed, self._time_now_ns())
         except (TrajectoryRejected, Rejected) as err:
             return self._throttle.warn(f"trajectory {err.kind}", str(err))
-        if not self._motion.follow(parsed, now, self._q):
+        if not self.follow(parsed):
             self._throttle.warn("trajectory early", "no joint state received yet")
 
     def _time_now_ns(self):
@@ -237,12 +260,11 @@ class ControllerNode(RcacNode):
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
         q, qd = self._state                 # one snapshot (timer mode: set by another thread)
-        if self._lookahead is not None:     # timer mode: the state when the effort acts
-            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self._last_rx)
         if self._restart_filters:
             self._restart_filters = False
             self.ctrl.restart_filters()
-            self.failsafe.limiter.reset()
+        if self._lookahead is not None:     # timer mode: the state when the effort acts
+            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self._last_rx)
         q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
@@ -269,8 +291,8 @@ class ControllerNode(RcacNode):
             self._lookahead.applied = tau
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
-            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, q_d, qd_d, qdd_d,
-                                   stamp)
+            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
+                                   qd_d, qdd_d, tau, stamp)
 
     def _state_is_stale(self):
         if self._last_rx is None:
@@ -292,12 +314,16 @@ class ControllerNode(RcacNode):
 
     def _on_watchdog(self):
         """Steady clock: the safe effort while no valid state (lockstep) or no tick (/clock)."""
+        if not self.running:
+            return
         if self._state_is_stale() if self.mode == "lockstep" else self._tick_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
 
     def _on_tick(self):
         """Timer mode: one control step on the latest valid state."""
+        if not self.running:
+            return
         now = self._now_ns()
         if self.loop is None and self._last_tick is not None \
                 and now - self._last_tick > 1.5 * self.h * 1e9:
@@ -313,46 +339,7 @@ class ControllerNode(RcacNode):
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
-        count, p50, p99, worst = self._stats.pop()
-        skipped = 0 if self.loop is None else self.loop.skipped
-        level = DiagnosticStatus.OK
-        message = "running"
-        if self._watchdog:
-            level, message = DiagnosticStatus.WARN, "watchdog: safe effort (no valid state)"
-        values = {
-            "mode": self.mode, "steps": self._steps, "steps_in_window": count,
-            "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
-            "compute_time_max_us": f"{worst:.1f}",
-            "compute_time_max_all_us": f"{self._stats.max_all * 1e6:.1f}",
-            "deadline_us": f"{self.h * 1e6:.1f}",
-            "deadline_misses": self._deadline_misses + skipped,
-            "compute_overruns": self._deadline_misses,
-            "late_ticks": self._late_ticks if self.loop is None else self.loop.late,
-            "skipped_ticks": skipped,
-            "watchdog": "tripped" if self._watchdog else "ok",
-            "watchdog_trips": self._watchdog_trips,
-            "rejected_messages": self._throttle.total,
-            "stamp_restarts": self.failsafe.gate.restarts,
-            "desired_limited": self.failsafe.limiter.limited,
-            "non_finite_efforts": self._nonfinite,
-            "prediction_error": f"{self.ctrl.E:.6g}",
-        }
-        for kind, c in sorted(self._throttle.counts.items()):
-            values[f"rejected_{kind.replace(' ', '_')}"] = c
-        return self.status(level, "control loop", message, values)
-
-    # ------------------------------------------------------------------ shutdown
-    def destroy_node(self):
-        """Stop the input threads, then destroy the node."""
-        for side in getattr(self, "_sides", ()):
-            side.close()
-        self._sides = []
-        return super().destroy_node()
-
-    def on_shutdown(self):
-        """Publish one zero-effort command (called on SIGINT/SIGTERM) and wait for delivery."""
-        self._outputs.zero_effort()
-        self.get_logger().info("shutdown: published a zero effort")
+        return diagnostics(self)
 
 
 def main(args=None):

@@ -62,7 +62,7 @@ class SideInput:
             ns = owner.get_namespace().rstrip("/")
             topic = f"{ns}/{owner.get_name()}/{topic[2:]}"
         self.topic = topic
-        self.node = Node(f"{owner.get_name()}_inputs", namespace=owner.get_namespace(),
+        self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,
                          enable_rosout=False)
         self.subscription = self.node.create_subscription(

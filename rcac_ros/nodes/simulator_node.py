@@ -38,15 +38,8 @@ NS = 1_000_000_000
 class SimulatorNode(RcacNode):
     """The arm simulator as a ROS 2 node.
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    ConfigError
-        At construction, on an invalid parameter (the message names it).
+    Constructed as :class:`~rcac_ros.nodes.base.RcacNode` (keyword arguments of
+    :class:`rclpy.node.Node`; :class:`ConfigError` naming an invalid parameter).
     """
 
     PARAMETERS = params.SIMULATOR
@@ -243,7 +236,7 @@ class SimulatorNode(RcacNode):
         return self.status(level, "simulation",
                            "waiting for a controller" if not self.started else "running", values)
 
-    def on_shutdown(self):
+    def on_interrupt(self):
         """Nothing to send on an interrupt: just report."""
         self.get_logger().info(f"interrupted after {self.k} steps")
 

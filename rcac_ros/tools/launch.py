@@ -1,9 +1,10 @@
 """Child node processes and the in-process ROS context of the tools.
 
-The demo, the ROS benchmark and the recorder start the package's nodes as child
-processes (the installed executables, else ``python -m``), each in its own session with its
-output in a log file, on an isolated ``ROS_DOMAIN_ID``; they always stop them, even on
-Ctrl-C. rclpy is imported only inside the functions that need it.
+The demo and the ROS benchmark start the package's nodes as child processes (the installed
+executables, else ``python -m``), each in its own session with its output in a log file, on
+an isolated ``ROS_DOMAIN_ID``, and always stop them, even on Ctrl-C. They and the recorder
+spin their own rclpy context without rclpy's signal handlers (:func:`init_context`,
+:class:`StopFlag`). rclpy is imported only inside the functions that need it.
 """
 
 import os
@@ -134,6 +135,7 @@ class Child:
 
 
 def child_env(domain_id):
+    """The environment of a child node: domain ``domain_id``, localhost discovery, unbuffered."""
     env = os.environ.copy()
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

@@ -100,6 +100,31 @@ def test_no_import_cycle():
     assert not cycles, "import cycles:\n" + "\n".join(cycles)
 
 
+def module_level_imports(name):
+    """The package modules ``name`` imports at module level (not inside a function)."""
+    path = modules()[name]
+    tree = ast.parse(open(path, encoding="utf-8").read(), path)
+    top = ast.Module(body=[n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))],
+                     type_ignores=[])
+    found = set()
+    for node in ast.walk(top):
+        if isinstance(node, ast.ImportFrom):
+            found.add(node.module)
+            found.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+    return found
+
+
+def test_tools_that_must_stay_apart():
+    """bench imports ros_bench only when asked (--ros); ros_bench does not need the demo."""
+    assert "rcac_ros.tools.ros_bench" not in module_level_imports("rcac_ros.tools.bench")
+    assert "rcac_ros.tools.demo" not in graph()["rcac_ros.tools.ros_bench"]
+    # the child processes and the ROS context live in launch, below demo and record
+    for mod in ("rcac_ros.tools.ros_bench", "rcac_ros.tools.record"):
+        assert "rcac_ros.tools.demo" not in graph()[mod]
+
+
 def test_core_never_imports_rclpy():
     mods = modules()
     bad = [f"{m} imports {t}" for m in mods if part(m) == "core"
@@ -139,6 +164,15 @@ def test_light_modules_do_not_load_numba(module):
                                     "rcac_ros.tools.bench", "rcac_ros.params"])
 def test_offline_modules_do_not_load_rclpy(module):
     assert "rclpy" not in loaded_after_import(module)
+
+
+def test_every_folder_of_the_package_is_a_regular_package():
+    """setup.py's find_packages (and so colcon and pip) installs only folders with __init__."""
+    from setuptools import find_packages
+    found = set(find_packages(ROOT, exclude=["test", "test.*"]))
+    folders = {os.path.relpath(os.path.dirname(path), ROOT).replace(os.sep, ".")
+               for path in modules().values()}
+    assert folders <= found, f"missing __init__.py: {sorted(folders - found)}"
 
 
 def test_test_files_have_unique_names():
