@@ -1,6 +1,6 @@
 """A separate process that floods the controller's inputs with huge messages.
 
-``python failsafe_flood.py SECONDS`` publishes, alternately and as fast as it can, a
+``python -m rcac_ros.tools.flood SECONDS`` publishes, alternately and as fast as it can, a
 JointState of 1e6 positions (8 MB) and a JointTrajectory of 1e5 points (5.6 MB), until
 SECONDS have passed; it prints how many it sent.
 """

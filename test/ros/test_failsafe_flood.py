@@ -1,6 +1,5 @@
 """Issue 9.3: a flood of huge messages does not starve the 500 Hz loop (processes over DDS)."""
 
-import os
 import subprocess
 import sys
 import threading
@@ -10,7 +9,7 @@ import numpy as np
 
 from failsafe_harness import controller, PAPER_Q0, ROOT, session, wait
 
-FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "failsafe_flood.py")
+FLOOD = [sys.executable, "-m", "rcac_ros.tools.flood"]     # also ``rcac bench --faults``
 #: the machine's own stalls: a process that does nothing but wake every period (the VM
 #: stalls every process for up to ~100 ms while the flood's 8 MB messages cross DDS)
 SLEEPER = """
@@ -27,7 +26,6 @@ while nxt < end:
 print(" ".join(str(x) for x in t))
 """
 H = 0.002
-EXTRA = [a for a in os.environ.get("FLOOD_EXTRA", "").split(",") if a]
 
 
 def gaps_ms(efforts, t_from, t_to):
@@ -37,7 +35,7 @@ def gaps_ms(efforts, t_from, t_to):
 
 
 def test_flood_of_huge_messages_does_not_starve_the_loop():
-    with session() as probe, controller(probe, "mode:=timer", "trajectory:=topic", *EXTRA):
+    with session() as probe, controller(probe, "mode:=timer", "trajectory:=topic"):
         stop = threading.Event()
 
         def states():                   # a driver at 500 Hz, stamps on the steady clock
@@ -51,7 +49,7 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
         try:
             assert wait(lambda: len(probe.answers()) > 200 or len(probe.efforts) > 1000)
             time.sleep(1.0)
-            flood = subprocess.Popen([sys.executable, FLOOD, "3.0"], stdout=subprocess.PIPE,
+            flood = subprocess.Popen(FLOOD + ["3.0"], stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, cwd=ROOT)
             assert flood.stdout.readline().startswith("flood: start")
             sleeper = subprocess.Popen([sys.executable, "-c", SLEEPER, str(H), "3.0"],
