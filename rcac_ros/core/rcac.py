@@ -1,4 +1,4 @@
-"""The O(n) recursive composite adaptive controller (eqs 18-24, NOTES.md 3-4).
+"""The O(n) recursive composite adaptive controller (eqs 18-24, doc/design.md §3-4).
 
 Per control period ``h``, with ``s_i = V_i - V_ri``:
 

@@ -4,9 +4,9 @@ The controller's ``~/save_estimates`` service writes :func:`save`; its
 ``initial_estimates`` parameter reads :func:`initial_estimates` (``zero``, ``model`` or the
 path of a saved file). Pure: numpy and PyYAML, no rclpy.
 
-From the 13 parameters of one link (eq 13, NOTES.md 2, :data:`PARAMETER_NAMES`) the rigid
+From the 13 parameters of one link (eq 13, doc/design.md §2, :data:`PARAMETER_NAMES`) the rigid
 body is ``m = t1``, centre of mass ``c = (t2, t3, t4) / m`` and the inertia about the frame
-origin ``I_o`` of NOTES.md 2 (the block of the mass matrix M), and by the parallel-axis
+origin ``I_o`` of doc/design.md §2 (the block of the mass matrix M), and by the parallel-axis
 theorem the inertia about the centre of mass ``I_c = I_o - m (|c|^2 I3 - c c^T)``. The
 13 parameters have 3 more degrees of freedom than a rigid body (``m px^2`` ... appear also
 on their own in C), so the URDF block reproduces M exactly and C up to that redundancy.

@@ -13,6 +13,7 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
+from rcac_ros.tools.args import positive_float
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -136,12 +137,12 @@ def add_arguments(parser):
     parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     parser.add_argument("--ros", action="store_true",
                         help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
-    parser.add_argument("--duration", type=float, default=60.0,
+    parser.add_argument("--duration", type=positive_float, default=60.0,
                         help="seconds of the --ros run (default 60)")
     parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
                         help="--ros: the controller on its 500 Hz timer (default) or answering "
                              "each joint state")
-    parser.add_argument("--budget", type=float, default=0.3,
+    parser.add_argument("--budget", type=positive_float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
     parser.add_argument("--rt", action="store_true",
                         help="--ros/--faults: the controller with its real-time options "
