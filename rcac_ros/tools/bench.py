@@ -13,7 +13,7 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import non_negative_float, positive_float
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -147,9 +147,9 @@ def add_arguments(parser):
     parser.add_argument("--rt", action="store_true",
                         help="--ros/--faults: the controller with its real-time options "
                              "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
-    parser.add_argument("--K_D", type=float, default=None,
+    parser.add_argument("--K_D", type=positive_float, default=None,
                         help="--ros/--faults: the controller's K_D (default: the bench's)")
-    parser.add_argument("--lookahead", type=float, default=None, metavar="SECONDS",
+    parser.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
                         help="--ros/--faults: the controller's timer.lookahead (state "
                              "prediction; default: none)")
     parser.add_argument("--faults", action="store_true",
@@ -158,7 +158,7 @@ def add_arguments(parser):
                              "per case (default 60)")
     parser.add_argument("--cases", default=None,
                         help="--faults: comma-separated cases (default: all)")
-    parser.add_argument("--soak", type=float, default=None, metavar="MINUTES",
+    parser.add_argument("--soak", type=positive_float, default=None, metavar="MINUTES",
                         help="--faults: instead, the nominal case for MINUTES (memory growth, "
                              "late ticks)")
     parser.add_argument("--plot", metavar="FILE",
