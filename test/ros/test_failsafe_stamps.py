@@ -12,10 +12,10 @@ def test_simulator_restart_is_followed_after_the_watchdog():
         feed(probe, [t0 + k * H_NS for k in range(1, 50)])
         assert wait(lambda: probe.answered(t0 + 49 * H_NS))
         n = len(probe.watchdog_efforts())
-        assert wait(lambda: len(probe.watchdog_efforts()) > n, timeout=5.0)   # tripped
+        assert wait(lambda: len(probe.watchdog_efforts()) > n, timeout=20.0)   # tripped
         # the simulator restarted: stamps from 0
         feed(probe, [k * H_NS for k in range(50)])
-        assert wait(lambda: probe.answered(49 * H_NS), timeout=5.0)
+        assert wait(lambda: probe.answered(49 * H_NS), timeout=20.0)
         assert probe.answered(0)            # the first after the silence: a restart
         assert wait(lambda: probe.logged("restart"))
 
@@ -26,7 +26,7 @@ def test_one_future_stamp_does_not_lock_out():
         feed(probe, [k * H_NS for k in range(1, 20)])
         probe.state(10 ** 6 * NS)           # one stray state, 11 days ahead
         feed(probe, [k * H_NS for k in range(20, 60)])
-        assert wait(lambda: probe.answered(59 * H_NS), timeout=5.0)
+        assert wait(lambda: probe.answered(59 * H_NS), timeout=20.0)
         assert not probe.answered(10 ** 6 * NS)
         assert wait(lambda: probe.warned("rejected (stamp future)"))
 
@@ -38,7 +38,7 @@ def test_restart_without_silence_is_accepted_after_a_consistent_run():
         first_answer(probe, t0)
         feed(probe, [t0 + k * H_NS for k in range(1, 20)])
         feed(probe, [k * H_NS for k in range(100)])
-        assert wait(lambda: probe.answered(99 * H_NS), timeout=5.0)
+        assert wait(lambda: probe.answered(99 * H_NS), timeout=20.0)
         # the first few are refused (a single old state is not a restart)
         assert not probe.answered(0)
 
