@@ -26,7 +26,8 @@ from rcac_ros.core.model import PAPER_GAINS, PRESETS
 from rcac_ros.errors import ConfigError
 
 #: the ROS parameter types a row may have
-TYPES = ("bool", "integer", "double", "string", "double_array", "string_array")
+TYPES = ("bool", "integer", "double", "string", "double_array", "string_array",
+         "integer_array")
 
 #: upper bound of the "any positive number" ranges
 BIG = 1e12
@@ -120,6 +121,12 @@ def _diagnostics_period():
                  lo=0.0, hi=3600.0, strict=True)
 
 
+def _strict_parameters():
+    return Param("strict_parameters", "bool", False,
+                 "refuse to start when a given parameter is declared by no row of the node "
+                 "(default: a warning naming it, with the nearest name)")
+
+
 #: The controller node's parameters (``config/controller.yaml``).
 CONTROLLER = _robot("controller") + (
     Param("autostart", "bool", True,
@@ -154,8 +161,8 @@ CONTROLLER = _robot("controller") + (
     Param("paper.q0", "double_array", None,
           "start of the paper's motion, rad (unset: the first state received)", per_joint=True),
     Param("state_timeout", "double", 0.02,
-          "watchdog: safe effort after this long without a valid state, s",
-          lo=0.0, hi=BIG, strict=True, read_only=False),
+          "watchdog: safe effort after this long without a valid state (steady clock), s",
+          lo=0.0, hi=1.0, strict=True, read_only=False),
     Param("safe_effort", "double_array", None,
           "effort sent by the watchdog, N m, in joints order (unset: zero)", per_joint=True),
     _effort_limit(),
@@ -184,6 +191,40 @@ CONTROLLER = _robot("controller") + (
           "~/save_estimates writes the estimates here (YAML), and the physically consistent "
           "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
+    # fail-safe (issue 9): rcac_ros.nodes.guards, rcac_ros.nodes.realtime
+    Param("max_state_bytes", "integer", 65_536,
+          "JointStates larger than this (serialised) are refused before deserialising, "
+          "bytes; 0: no cap", lo=0, hi=2 ** 31 - 1),
+    Param("max_trajectory_bytes", "integer", 1_048_576,
+          "JointTrajectories larger than this (serialised) are refused before deserialising, "
+          "bytes; 0: no cap", lo=0, hi=2 ** 31 - 1),
+    Param("stamp.max_jump", "double", 1.0,
+          "a state stamp further ahead of the last accepted one than the steady time elapsed "
+          "plus this is refused, s", lo=0.0, hi=BIG, strict=True),
+    Param("stamp.restart_count", "integer", 10,
+          "this many consecutive consistent states that the last accepted stamp refuses (a "
+          "restart, a clock jump) replace it, even before the watchdog trips", lo=1,
+          hi=1_000_000),
+    Param("desired.max_position_step", "double", 0.01,
+          "the desired position moves at most this much per control period, rad (its "
+          "velocity is bounded by this / h)", lo=0.0, hi=BIG, strict=True),
+    Param("desired.max_velocity_step", "double", 1.0,
+          "the desired velocity changes at most this much per control period, rad/s",
+          lo=0.0, hi=BIG, strict=True),
+    Param("realtime.priority", "integer", 0,
+          "SCHED_FIFO priority of the control thread (best effort, a warning if refused); "
+          "0: off", lo=0, hi=99),
+    Param("realtime.lock_memory", "bool", False, "mlockall the process's memory (best effort)"),
+    Param("realtime.cpus", "integer_array", None,
+          "CPU affinity of the control thread (best effort; unset: any CPU)"),
+    Param("realtime.cpu_dma_latency", "integer", -1,
+          "hold /dev/cpu_dma_latency at this many us while running (0: the shallowest idle "
+          "state; best effort); -1: off", lo=-1, hi=100_000),
+    Param("timer.lookahead", "double", None,
+          "timer mode: predict the state this long beyond its age at the tick, from the "
+          "model and the effort being applied (RK4), s; unset: no prediction (the effort "
+          "answers a state up to a period old)", lo=0.0, hi=1.0),
+    _strict_parameters(),
 )
 
 #: per-joint gain overrides of the controller: ``gains.<joint>.<gain>`` (JTC style)
@@ -229,6 +270,7 @@ SIMULATOR = _robot("simulator") + (
           "fill JointState.velocity (false: positions only)"),
     _effort_limit(),
     _diagnostics_period(),
+    _strict_parameters(),
 )
 
 #: node -> its rows
@@ -252,8 +294,9 @@ def _type_ok(kind, value):
         return isinstance(value, float)
     if kind == "string":
         return isinstance(value, str)
-    element = {"double_array": float, "string_array": str}[kind]
-    return isinstance(value, (list, tuple)) and all(isinstance(v, element) for v in value)
+    element = {"double_array": float, "string_array": str, "integer_array": int}[kind]
+    return isinstance(value, (list, tuple)) and all(
+        isinstance(v, element) and not isinstance(v, bool) for v in value)
 
 
 def check(p, value):

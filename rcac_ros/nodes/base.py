@@ -19,6 +19,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -27,9 +28,11 @@ from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes import paramcheck
 from rcac_ros.nodes.description import wait_for_description
 from rcac_ros.nodes.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.pacing import spin_node_once
+from rcac_ros.nodes.realtime import Realtime
 
 #: reliable, keep-last 10: the control topics (what ros2_control uses)
 QOS = topics.qos()
@@ -159,6 +162,7 @@ class RcacNode(RcacNodeMixin, Node):
             self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
             self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
             self._read_parameters(values)
+            self._check_unknown_parameters(values["strict_parameters"])
         except Exception:
             self.destroy_node()     # leave no half-built node (and its rosout logger) behind
             raise
@@ -229,6 +233,17 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _realtime(node):
+    """Apply the node's opt-in real-time options to this thread (the control loop's)."""
+    options = getattr(getattr(node, "failsafe", None), "realtime", None)
+    if options is None or not options.any:
+        return None
+    rt = Realtime(options, warn=node.get_logger().warning)
+    if rt.applied:
+        node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
+    return rt
+
+
 def run(node_factory, prog, args=None):
     """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
 
@@ -244,14 +259,20 @@ def run(node_factory, prog, args=None):
     """
     # rclpy's own SIGINT handler would shut the context down before we could publish the
     # final zero effort: handle both signals in Python instead.
-    rclpy.init(args=sys.argv if args is None else args,
-               signal_handler_options=SignalHandlerOptions.NO)
+    args = sys.argv if args is None else args
+    try:
+        paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except (RcacError, _rclpy.RCLError) as err:
+        print(f"{prog}: error: {_first_line(err)}", file=sys.stderr, flush=True)
+        return 2
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)
-    node = None
+    node = rt = None
     code = 0
     try:
         node = node_factory()
+        rt = _realtime(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
@@ -268,6 +289,8 @@ def run(node_factory, prog, args=None):
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if rt is not None:
+            rt.release()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

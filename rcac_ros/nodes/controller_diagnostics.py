@@ -24,6 +24,8 @@ def diagnostics(node):
         "watchdog": "tripped" if node._watchdog else "ok",
         "watchdog_trips": node._watchdog_trips,
         "rejected_messages": node._throttle.total,
+        "stamp_restarts": node.failsafe.gate.restarts,
+        "desired_limited": node.failsafe.limiter.limited,
         "non_finite_efforts": node._nonfinite,
         "prediction_error": f"{node.ctrl.E:.6g}",
         "adaptation": "on" if node.ctrl.adapting else "frozen",

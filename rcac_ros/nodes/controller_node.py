@@ -14,13 +14,20 @@ from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz o
 latest valid state (real arms), on absolute deadlines of the steady clock
 (:class:`~rcac_ros.nodes.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
-``state_timeout`` s. Parameters: ``config/controller.yaml``, doc/parameters.md.
+``state_timeout`` s of the steady clock (in timer mode on ``/clock``, also while no tick
+comes: a frozen clock). Fail-safe guards (issue 9,
+:class:`~rcac_ros.nodes.failsafe.ControllerGuards`): stamps through a
+:class:`~rcac_ros.nodes.guards.StampGate` (a restart is followed, a stamp in the future
+refused), size caps checked before deserialising, trajectories parsed in their own thread
+(in timer mode the states too: the loop only ticks) and checked against the model's limits,
+the desired state rate-limited. Parameters: ``config/controller.yaml``, doc/parameters.md.
 """
 
 import sys
 import time
 
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -31,9 +38,13 @@ from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
 from rcac_ros.nodes.controller_params import read_parameters
 from rcac_ros.nodes.estimate_services import EstimateServices
+from rcac_ros.nodes.failsafe import ControllerGuards
 from rcac_ros.nodes.follow_joint_trajectory import create_server, FollowJointTrajectoryServer
+from rcac_ros.nodes.guards import Rejected, StampGate
+from rcac_ros.nodes.inputs import capped, SideInput
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
+from rcac_ros.nodes.lookahead import StatePredictor
 from rcac_ros.nodes.managed import ManagedNode
 from rcac_ros.nodes.pacing import DeadlineLoop
 from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, TrajectoryRejected
@@ -58,6 +69,10 @@ class ControllerNode(ManagedNode):
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
         read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
+                                         self.get_logger().warning)
+        self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
+            else StatePredictor(self.model, values["timer.lookahead"])
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, self._out, tagged=self.mode == "lockstep"))
@@ -66,13 +81,21 @@ class ControllerNode(ManagedNode):
         self._late_ticks = self._nonfinite = 0
         self._rate_warned = False
         self._reset_motion()
-        sub, timer = self.destroy_subscription, self.destroy_timer
-        self.keep(sub, self.create_subscription(JointState, topics.JOINT_STATES,
-                                                self._on_state, QOS))
+        sub, timer, fs = self.destroy_subscription, self.destroy_timer, self.failsafe
+        if self.mode == "timer":            # states in their own thread: the loop only ticks
+            self.keep(SideInput.close, SideInput(
+                self, JointState, topics.JOINT_STATES, QOS, self._on_state,
+                fs.max_state_bytes, "state", self._throttle.warn))
+        else:                               # lockstep: the answer is the state's callback
+            self.keep(sub, self.create_subscription(JointState, topics.JOINT_STATES, capped(
+                JointState, fs.max_state_bytes, "state", self._on_state, self._throttle.warn),
+                QOS, raw=True))
         self._fjt = None                    # the FollowJointTrajectory server, if any
-        if self.trajectory_source == "topic":
-            self.keep(sub, self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
-                                                    self._on_trajectory, QOS))
+        if self.trajectory_source == "topic":   # parsed in their own thread
+            self.keep(SideInput.close, SideInput(
+                self, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_trajectory,
+                fs.max_trajectory_bytes, "trajectory",
+                lambda kind, text: self._throttle.warn(f"trajectory {kind}", text)))
             self._fjt = create_server(self, _ActionSink(self), defaults=self.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
@@ -81,9 +104,10 @@ class ControllerNode(ManagedNode):
         elif self.mode == "timer":
             self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
             self.keep(lambda _: setattr(self, "loop", None), self.loop)
-        else:
+        if self.loop is None:               # lockstep, or timer mode on /clock
             self.keep(timer, self.create_timer(min(self.state_timeout / 2.0, 0.01),
-                                               self._on_watchdog))
+                                               self._on_watchdog,
+                                               clock=Clock(clock_type=ClockType.STEADY_TIME)))
         self.keep(EstimateServices.destroy, EstimateServices(self))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
@@ -97,10 +121,15 @@ class ControllerNode(ManagedNode):
         self._motion = DesiredMotion(self.paper, self.paper_q0)
         self._velocity = VelocityEstimate(self.velocity_cutoff)
         self._q = self._qd = None           # latest valid state (model order)
+        self._state = None                  # the same, as one tuple (read by the loop)
         self._last_stamp = None             # ns, of the latest valid state
-        self._last_rx = None                # node-clock ns at the latest valid state
+        self._last_rx = None                # steady-clock ns at the latest valid state
         self._watchdog = True               # no valid state yet
         self._last_tick = None
+        self._last_tick_steady = None
+        self._restart_filters = False       # the loop restarts them at its next step
+        self.failsafe.gate.reset()
+        self.failsafe.limiter.reset()
         self._q_msg = None
         self._outputs.last_answer = None
 
@@ -157,6 +186,17 @@ class ControllerNode(ManagedNode):
     def _now_ns(self):
         return self.get_clock().now().nanoseconds
 
+    def _restart(self, stamp):
+        """The state stream restarted (a simulator or driver restart): start over from it."""
+        self.get_logger().warning(
+            f"joint state stamps restarted ({self._last_stamp * 1e-9:.6f} s -> "
+            f"{stamp * 1e-9:.6f} s): filters, velocity estimate and desired motion restart "
+            "from the new state; the estimates are kept")
+        self._velocity.reset()
+        self._motion = DesiredMotion(self.paper, self.paper_q0)
+        self.failsafe.limiter.reset()       # the new motion starts at the measured state
+        self._restart_filters = self._steps > 0
+
     def _on_state(self, msg):
         if not self.running:
             return
@@ -165,7 +205,7 @@ class ControllerNode(ManagedNode):
         except StateRejected as err:
             return self._throttle.warn(err.kind, str(err))
         stamp = stamp_ns(msg.header.stamp)
-        now = self._now_ns()
+        now = time.monotonic_ns()           # state silence: on the steady clock, always
         if self.mode == "lockstep" and self._outputs.last_answer is not None \
                 and stamp == self._last_stamp and np.array_equal(q, self._q_msg):
             # the same state again (a simulator re-sending after a lost message at start-up):
@@ -173,30 +213,33 @@ class ControllerNode(ManagedNode):
             self._outputs.answer_again()
             self._last_rx = now
             return
-        if self._last_stamp is not None and stamp < self._last_stamp:
-            return self._throttle.warn(
-                "stamp", f"JointState: stamp went backwards ({stamp * 1e-9:.6f} s < "
-                f"{self._last_stamp * 1e-9:.6f} s)")
+        verdict = self.failsafe.gate.check(stamp, now, stale=self._watchdog)
+        if verdict in (StampGate.BACKWARDS, StampGate.FUTURE):
+            return self._throttle.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
+                                       f"after {self._last_stamp * 1e-9:.6f} s")
+        if verdict == StampGate.RESTART and self._last_stamp is not None:
+            self._restart(stamp)
         # velocity: given, or estimated from positions (finite difference, low-pass)
         if qd is None:
             qd = self._velocity.update(q, stamp if stamp > 0 else now)
         else:
             self._velocity.reset()
-        if self.mode == "lockstep" and self._last_stamp is not None and stamp > 0 \
-                and not self._rate_warned:
+        if self.mode == "lockstep" and verdict == StampGate.OK and self._last_stamp is not None \
+                and stamp > 0 and not self._rate_warned:
             gap = (stamp - self._last_stamp) * 1e-9
             if abs(gap - self.h) > 0.01 * self.h:
                 self._rate_warned = True
                 self.get_logger().warning(
                     f"state period {gap * 1e3:.3f} ms differs from h = {self.h * 1e3:.3f} ms "
                     "(set 'rate' to 1/dt of the simulator)")
+        self._state = (q, qd)
         self._q, self._qd, self._q_msg = q, qd, q
         self._last_stamp = stamp
         self._last_rx = now
         if self._watchdog:
             self._watchdog = False
             if self._steps:
-                self.ctrl.restart_filters()     # the gap broke the filters of eqs 21-24
+                self._restart_filters = True    # the gap broke the filters of eqs 21-24
                 self.get_logger().info("watchdog: valid state again, control resumed")
         if self.mode == "lockstep":
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
@@ -209,7 +252,8 @@ class ControllerNode(ManagedNode):
         else:
             try:
                 parsed = parse_trajectory(msg, self.model.joint_names)
-            except TrajectoryRejected as err:
+                self.failsafe.check_goal(parsed, self._time_now_ns())
+            except (TrajectoryRejected, Rejected) as err:
                 return self._throttle.warn(f"trajectory {err.kind}", str(err))
             if not self.follow(parsed):
                 return self._throttle.warn("trajectory early", "no joint state received yet")
@@ -224,11 +268,17 @@ class ControllerNode(ManagedNode):
 
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
-        q_d, qd_d, qdd_d = self._motion.sample(t_ns, self._q)
+        q, qd = self._state                 # one snapshot (timer mode: set by another thread)
+        if self._restart_filters:
+            self._restart_filters = False
+            self.ctrl.restart_filters()
+        if self._lookahead is not None:     # timer mode: the state when the effort acts
+            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self._last_rx)
+        q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
         try:
-            tau = self.ctrl.step(self._q, self._qd, q_d, qd_d, qdd_d)
+            tau = self.ctrl.step(q, qd, q_d, qd_d, qdd_d)
         except RcacError as err:
             self._throttle.warn("step", str(err))
             tau = None
@@ -246,9 +296,11 @@ class ControllerNode(ManagedNode):
             return
         tau = np.clip(tau, -self.effort_limit, self.effort_limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
+        if self._lookahead is not None:
+            self._lookahead.applied = tau
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
-            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, self._qd, q_d,
+            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp)
         if self._fjt is not None:
             self._fjt.update(t_ns, self._q, self._qd, q_d, qd_d, qdd_d)
@@ -256,7 +308,12 @@ class ControllerNode(ManagedNode):
     def _state_is_stale(self):
         if self._last_rx is None:
             return True
-        return self._now_ns() - self._last_rx > self.state_timeout * 1e9
+        return time.monotonic_ns() - self._last_rx > self.state_timeout * 1e9
+
+    def _tick_is_stale(self):
+        """Timer mode on /clock: no tick for ``state_timeout`` (a frozen or absent /clock)."""
+        last = self._last_tick_steady
+        return last is None or time.monotonic_ns() - last > self.state_timeout * 1e9
 
     def _trip(self):
         if not self._watchdog and self._last_rx is not None:
@@ -267,8 +324,10 @@ class ControllerNode(ManagedNode):
                 "publishing the safe effort")
 
     def _on_watchdog(self):
-        """Lockstep: a periodic check; publishes the safe effort while the state is stale."""
-        if self.running and self._state_is_stale():
+        """Steady clock: the safe effort while no valid state (lockstep) or no tick (/clock)."""
+        if not self.running:
+            return
+        if self._state_is_stale() if self.mode == "lockstep" else self._tick_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
 
@@ -281,6 +340,7 @@ class ControllerNode(ManagedNode):
                 and now - self._last_tick > 1.5 * self.h * 1e9:
             self._late_ticks += 1           # ROS-time timer (the loop counts its own)
         self._last_tick = now
+        self._last_tick_steady = time.monotonic_ns()
         if self._state_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
@@ -307,6 +367,13 @@ class _ActionSink:
 
     def now_ns(self):
         return self.node._time_now_ns()
+
+    def check(self, parsed):
+        """The goal checks of ``~/joint_trajectory`` (limits, an end in the past)."""
+        try:
+            self.node.failsafe.check_goal(parsed, self.now_ns())
+        except Rejected as err:
+            raise TrajectoryRejected(err.kind, str(err)) from None
 
     def follow(self, parsed):
         return self.node._motion.active if self.node.follow(parsed) else None

@@ -2,23 +2,45 @@
 :class:`~rcac_ros.nodes.managed.ManagedNode`) share: on-set checks against the parameter
 table and the periodic diagnostics."""
 
+import sys
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 
-from rcac_ros import params
+from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.nodes import paramcheck
 
 
 class RcacNodeMixin:
     """Parameter checks and diagnostics of both nodes (plain or managed): uses ``_rows``
     (name -> :class:`rcac_ros.params.Param`), ``model``, ``_pub_diag``, ``diagnostics()``."""
 
+    def _check_unknown_parameters(self, strict):
+        """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
+        unknown = paramcheck.unknown_parameters(self._parameter_overrides, self._parameters)
+        if unknown:
+            text = paramcheck.describe_unknown(unknown, self.get_name())
+            if strict:
+                raise ConfigError(f"strict_parameters: {text}")
+            self.get_logger().warning(text)
+        files = paramcheck.check_params_files(sys.argv)
+        nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE]
+        for path, section, hint in paramcheck.foreign_sections(files, nodes):
+            self.get_logger().warning(
+                f"{path}: section '{section}' addresses no node of rcac_ros"
+                + (f" (did you mean '{hint}'?)" if hint else ""))
+
     def _check_parameters(self, changed):
         """On-set callback: validate against the table (a subclass applies them post-set)."""
         for p in changed:
+            if p.name == "use_sim_time" and p.value != self.get_parameter(p.name).value:
+                return SetParametersResult(
+                    successful=False, reason="use_sim_time: cannot change at run time (the "
+                    "watchdog and the pacing are set up for one time source): restart the node")
             row = self._rows.get(p.name)
             if row is None:
-                continue                # rclpy's own (use_sim_time, ...)
+                continue                # rclpy's own
             value = p.value
             if row.type.endswith("_array") and value is not None:
                 value = list(value)

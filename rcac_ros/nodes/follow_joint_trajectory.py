@@ -181,9 +181,11 @@ class FollowJointTrajectoryServer:
         What follows trajectories. It provides ``joint_names`` (model order, the order of
         the arrays given to :meth:`update`); ``refusal()``: ``None`` when it can follow a
         trajectory now, else the reason; ``now_ns()``: the time base of its trajectories;
-        ``follow(parsed)``: follow the output of ``parse_trajectory`` as the topic does
-        and return the :class:`~rcac_ros.nodes.trajectory_msg.ActiveTrajectory`; ``hold()``:
-        stop and hold the current position. The sink calls :meth:`update` every control
+        ``check(parsed)``: raise :class:`TrajectoryRejected` for a goal it must refuse
+        (limits, an end in the past); ``follow(parsed)``: follow the output of
+        ``parse_trajectory`` as the topic does and return the
+        :class:`~rcac_ros.nodes.trajectory_msg.ActiveTrajectory`; ``hold()``: stop and hold
+        the current position. The sink calls :meth:`update` every control
         step.
     name : str
         Action name.
@@ -229,6 +231,7 @@ class FollowJointTrajectoryServer:
             raise GoalRejected("tolerance", "component tolerances: not supported (multi-DOF "
                                "joints only)")
         parsed = parse_trajectory(goal.trajectory, self._joints)
+        self._sink.check(parsed)            # the sink's own goal checks (limits, ...)
         start_ns, times = parsed[0], parsed[1]
         if start_ns is not None:
             end_ns = start_ns + round(times[-1] * _NS)

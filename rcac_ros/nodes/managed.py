@@ -126,6 +126,7 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
             values, self.model, self.joints = declare_parameters(self, self.PARAMETERS,
                                                                  self._description)
             self._configure(values)
+            self._check_unknown_parameters(values["strict_parameters"])
         except RcacError as err:
             self.config_error = str(err)
             if not self._at_start:          # (at start-up, run() prints the one line)

@@ -13,7 +13,7 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import non_negative_float, positive_float
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -144,12 +144,56 @@ def add_arguments(parser):
                              "each joint state")
     parser.add_argument("--budget", type=positive_float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
+    parser.add_argument("--rt", action="store_true",
+                        help="--ros/--faults: the controller with its real-time options "
+                             "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
+    parser.add_argument("--K_D", type=positive_float, default=None,
+                        help="--ros/--faults: the controller's K_D (default: the bench's)")
+    parser.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
+                        help="--ros/--faults: the controller's timer.lookahead (state "
+                             "prediction; default: none)")
+    parser.add_argument("--faults", action="store_true",
+                        help="instead: the closed loop over ROS under faults (drops, jitter, "
+                             "noise, simulator restart, frozen /clock, flood); --duration "
+                             "per case (default 60)")
+    parser.add_argument("--cases", default=None,
+                        help="--faults: comma-separated cases (default: all)")
+    parser.add_argument("--soak", type=positive_float, default=None, metavar="MINUTES",
+                        help="--faults: instead, the nominal case for MINUTES (memory growth, "
+                             "late ticks)")
+    parser.add_argument("--plot", metavar="FILE",
+                        help="--faults: tracking errors per case; --delay-margin: RMS vs K_D")
+    parser.add_argument("--delay-margin", action="store_true",
+                        help="instead: offline, tracking RMS against K_D with the effort 0-2 "
+                             "periods late (the stable range of timer mode)")
+
+
+#: the controller's real-time options of ``--rt``
+RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
+              "realtime.cpu_dma_latency": 0}
 
 
 def run(args):
+    over = dict(RT_OPTIONS) if args.rt else {}
+    if args.K_D is not None:
+        over["K_D"] = float(args.K_D)
+    if args.lookahead is not None:
+        over["timer.lookahead"] = float(args.lookahead)
+    if args.delay_margin:
+        from rcac_ros.tools.delay_margin import run_delay_margin
+        run_delay_margin(plot_path=args.plot)
+        return 0
+    if args.faults:
+        from rcac_ros.tools.fault_bench import CASES, run_faults
+        from rcac_ros.tools.ros_bench import BENCH_CONTROLLER
+        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+        run_faults(args.duration, cases, dict(BENCH_CONTROLLER, **over), json_path=args.json,
+                   plot_path=args.plot, soak_minutes=args.soak)
+        return 0
     if args.ros:
         from rcac_ros.tools.ros_bench import run_ros_bench
-        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode)
+        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode,
+                               controller_overrides=over)
         return 0 if result else 1
     try:
         import pinocchio  # noqa: F401

@@ -45,7 +45,7 @@ def demo_overrides(duration, dt):
     # state_timeout: the controller's watchdog is for a real arm; in lockstep a 20 ms one
     # floods the effort topic while a descheduled simulator is not reading, and its
     # keep-last queue can then lose the real answer (a lockstep miss).
-    controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 2.0}
+    controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 1.0}
     # min_subscribers 2: the simulator starts once the controller and our recorder both
     # subscribe to joint_states, so the bag holds the run from state 0
     simulator = {"mode": "lockstep", "dt": float(dt), "duration": float(duration),

@@ -157,7 +157,7 @@ def test_sigint_publishes_one_zero_effort_and_exits_zero():
         probe = Probe(ctx)
         ex.add_node(probe)
         ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml"),
-                              "state_timeout:=1000.0"))
+                              "state_timeout:=1.0"))
         try:
             assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
                               timeout=60.0)

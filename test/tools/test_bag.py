@@ -273,7 +273,7 @@ def test_record_two_node_lockstep_run(tmp_path, procs):
     duration = 2.0
     rec = _start_recorder(procs, bag)
     # a long watchdog timeout: no safe efforts interleaved with the answers
-    ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=5.0))
+    ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=1.0))
     _wait_controller_matched(rec, ctrl)
     sim = procs.start("simulator", _node("simulator", mode="lockstep", duration=duration,
                                          min_subscribers=2))
@@ -330,7 +330,7 @@ def test_record_two_node_lockstep_run(tmp_path, procs):
 def test_sigint_during_recording_leaves_a_readable_bag(tmp_path, procs):
     bag = tmp_path / "bag"
     rec = _start_recorder(procs, bag)
-    ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=5.0))
+    ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=1.0))
     _wait_controller_matched(rec, ctrl)
     procs.start("simulator", _node("simulator", mode="lockstep", duration=0.0))
     # mid-stream: the recorder reports messages every 5 s

@@ -20,6 +20,8 @@ NUMERIC_OPTIONS = [
     ("experiment", [], "--substeps", "2"),
     ("bench", [], "--duration", "60"),
     ("bench", [], "--budget", "0.3"),
+    ("bench", [], "--K_D", "1e4"),
+    ("bench", [], "--soak", "1"),
     ("demo", [], "--duration", "20"),
     ("record", [], "--duration", "5"),
     ("inspect", ["some_bag"], "--link", "7"),
@@ -33,6 +35,7 @@ NUMERIC_OPTIONS = [
 #: options where 0 is allowed and a negative number is not
 NON_NEGATIVE_OPTIONS = [
     ("experiment", [], "--gamma"),
+    ("bench", [], "--lookahead"),
     ("payload-demo", [], "--gamma"),
     ("payload-demo", [], "--jump"),
     ("payload-demo", [], "--payload-mass"),

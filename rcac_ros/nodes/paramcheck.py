@@ -1,0 +1,114 @@
+"""Parameters that are wrong, not only invalid (issue 9, section 7).
+
+* :func:`check_params_files` reads every ``--params-file`` of the command line before
+  ``rclpy.init`` does, so that a malformed file gives one line naming it (and the CLI
+  exit code 2) instead of an RCLError traceback.
+* :func:`unknown_parameters` names each given key that no parameter declares, with the
+  nearest declared name; :func:`foreign_sections` names the sections of those files
+  that address no node of the package.
+"""
+
+import difflib
+
+import yaml
+
+from rcac_ros.errors import ConfigError
+
+#: parameters every rclpy node declares itself
+BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
+
+
+def params_files(argv):
+    """The paths given to ``--params-file`` in ``argv`` (ROS arguments)."""
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
+
+
+def load_params_file(path):
+    """Parse one parameters file; return ``{node: {name: value}}``.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file, and the line and column of a YAML error, or the first
+        entry that is not ``NODE: {ros__parameters: {...}}``.
+    """
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except OSError as err:
+        raise ConfigError(f"params file {path}: {err.strerror}") from None
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" line {mark.line + 1} column {mark.column + 1}:" if mark else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ConfigError(f"params file {path}:{where} malformed YAML ({problem})") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"params file {path}: expected a mapping of node names, got "
+                          f"{type(data).__name__}")
+    out = {}
+    for node, section in data.items():
+        params = section.get("ros__parameters") if isinstance(section, dict) else None
+        if not isinstance(params, dict):
+            raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
+                              "holding a mapping")
+        out[str(node)] = dict(_flatten(params))
+    return out
+
+
+def _flatten(params, prefix=""):
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            yield from _flatten(value, name + ".")
+        else:
+            yield name, value
+
+
+def check_params_files(argv):
+    """Load every ``--params-file`` of ``argv``; return ``{path: {node: params}}``."""
+    return {path: load_params_file(path) for path in params_files(argv)}
+
+
+def nearest(name, candidates):
+    """The candidate nearest to ``name`` (case-insensitive), or ``None``."""
+    lower = {c.lower(): c for c in candidates}
+    hit = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=0.6)
+    return lower[hit[0]] if hit else None
+
+
+def unknown_parameters(given, declared):
+    """Given names that no parameter declares, each with the nearest declared name.
+
+    Returns
+    -------
+    list of (str, str or None)
+    """
+    known = set(declared) | BUILTIN
+    return [(name, nearest(name, known)) for name in sorted(set(given) - known)]
+
+
+def describe_unknown(unknown, node):
+    """One line listing the unknown keys and their suggestions."""
+    parts = [f"'{name}'" + (f" (did you mean '{hint}'?)" if hint else "")
+             for name, hint in unknown]
+    return f"{node}: no parameter declares {', '.join(parts)}"
+
+
+def foreign_sections(files, nodes):
+    """Sections of the parameter files that match none of ``nodes`` (nor ``/**``).
+
+    Returns
+    -------
+    list of (str, str, str or None)
+        ``(path, section, nearest node name)``.
+    """
+    out = []
+    for path, sections in files.items():
+        for section in sections:
+            name = section.strip("/").split("/")[-1]
+            if section.strip("/") == "**" or name in nodes or name == "**":
+                continue
+            out.append((path, section, nearest(name, nodes)))
+    return out

@@ -1,0 +1,126 @@
+"""Opt-in real-time options of a node process, each best-effort (issue 9, section 8).
+
+* ``SCHED_FIFO`` priority of the calling thread (the control loop's);
+* ``mlockall`` of the current and future pages (no page fault in the loop);
+* CPU affinity of the calling thread;
+* a hold on ``/dev/cpu_dma_latency``: while the file stays open with a value written, the
+  kernel keeps the CPUs out of deep idle states, which cuts the wake-up tail of a timer
+  (the PM QoS interface, Documentation/power/pm_qos_interface.rst).
+
+Each option that the process is not permitted to use (no ``CAP_SYS_NICE``, a memlock
+limit, no such device) gives one warning and the node runs on without it.
+"""
+
+import ctypes
+import ctypes.util
+import os
+import struct
+
+MCL_CURRENT = 1
+MCL_FUTURE = 2
+DMA_LATENCY = "/dev/cpu_dma_latency"
+
+
+class RealtimeOptions:
+    """What to ask for; the defaults ask for nothing.
+
+    Parameters
+    ----------
+    priority : int
+        SCHED_FIFO priority 1-99 of the control thread; 0: leave the scheduler alone.
+    lock_memory : bool
+        ``mlockall(MCL_CURRENT | MCL_FUTURE)``.
+    cpus : sequence of int
+        CPUs the control thread may run on; empty: any.
+    dma_latency_us : int
+        Hold ``/dev/cpu_dma_latency`` at this many microseconds (0: the shallowest idle
+        state); negative: no hold.
+    """
+
+    def __init__(self, priority=0, lock_memory=False, cpus=(), dma_latency_us=-1):
+        self.priority = int(priority)
+        self.lock_memory = bool(lock_memory)
+        self.cpus = tuple(int(c) for c in cpus)
+        self.dma_latency_us = int(dma_latency_us)
+
+    @property
+    def any(self):
+        """Whether any option is asked for."""
+        return bool(self.priority or self.lock_memory or self.cpus
+                    or self.dma_latency_us >= 0)
+
+
+class Realtime:
+    """Apply :class:`RealtimeOptions` to the calling thread; :meth:`release` undoes the hold.
+
+    Attributes
+    ----------
+    applied : list of str
+        The options in force.
+    warnings : list of str
+        One line per option that could not be applied (also passed to ``warn``).
+    """
+
+    def __init__(self, options, warn=None):
+        self.options = options
+        self.applied = []
+        self.warnings = []
+        self._warn = warn
+        self._dma = None
+        if options.cpus:
+            self._try("cpu_affinity", self._affinity)
+        if options.lock_memory:
+            self._try("mlockall", self._mlockall)
+        if options.priority:
+            self._try("sched_fifo", self._fifo)
+        if options.dma_latency_us >= 0:
+            self._try("cpu_dma_latency", self._dma_hold)
+
+    def _try(self, name, action):
+        try:
+            self.applied.append(f"{name} ({action()})")
+        except (OSError, ValueError) as err:
+            text = f"real-time option {name} not applied: {err}; running without it"
+            self.warnings.append(text)
+            if self._warn is not None:
+                self._warn(text)
+
+    def _affinity(self):
+        os.sched_setaffinity(0, self.options.cpus)
+        return f"CPUs {sorted(os.sched_getaffinity(0))}"
+
+    def _mlockall(self):
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            errno = ctypes.get_errno()
+            raise OSError(errno, f"mlockall: {os.strerror(errno)} (raise RLIMIT_MEMLOCK, "
+                          "ulimit -l)")
+        return "current and future pages"
+
+    def _fifo(self):
+        prio = self.options.priority
+        top = os.sched_get_priority_max(os.SCHED_FIFO)
+        if not 1 <= prio <= top:
+            raise ValueError(f"priority {prio} outside 1..{top}")
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+        except PermissionError as err:
+            raise OSError(err.errno, "SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit "
+                          "(/etc/security/limits.conf)") from None
+        return f"priority {prio}"
+
+    def _dma_hold(self):
+        fd = os.open(DMA_LATENCY, os.O_WRONLY)
+        try:
+            os.write(fd, struct.pack("i", self.options.dma_latency_us))
+        except OSError:
+            os.close(fd)
+            raise
+        self._dma = fd
+        return f"{self.options.dma_latency_us} us"
+
+    def release(self):
+        """Close the ``cpu_dma_latency`` hold (the kernel drops the request on close)."""
+        if self._dma is not None:
+            os.close(self._dma)
+            self._dma = None

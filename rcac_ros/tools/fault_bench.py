@@ -1,0 +1,392 @@
+"""The fault benchmark behind ``rcac bench --faults`` (issue 9, section 9).
+
+The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
+processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go
+through a relay in this process (``/sim/joint_states`` -> ``/joint_states``), which
+injects the faults of the wires; the others come from outside:
+
+============  ===================================================================
+nominal       no fault (the reference: the relay is in the loop in every case)
+drops         10 % of the joint states dropped at random
+jitter        each state delayed by 0-2 ms (+-1 ms around the mean), order kept
+noise         the simulator's measurement noise (1e-4 rad, 1e-3 rad/s)
+restart       the simulator process killed at mid-run and started again (stamps
+              and state from 0: the arm back at q0)
+frozen_clock  the controller on ``use_sim_time``; ``/clock`` stops for a third of
+              the run while the states go on
+flood         a third process publishes 8 MB JointStates and 5.6 MB trajectories
+              for a third of the run
+============  ===================================================================
+
+Per case it reports the tracking RMS (the controller's ``~/tracking_error``, norm over
+the joints) against nominal, the longest gap between efforts (sender's stamps), whether
+the estimates stayed finite and bounded, and whether control recovered (the last fifth
+of the run tracks within 3x nominal; after the restart, the time to the first
+non-watchdog effort). ``--soak MINUTES`` runs the nominal case that long and reports the
+controller's memory growth (RSS) and late ticks.
+"""
+
+import json
+import os
+import queue
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+from rcac_ros.errors import ConfigError
+
+CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood")
+GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
+         "memory_growth": 0.05}
+FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "flood.py")
+BOUND = 1e6                 # |theta_hat| above this: not bounded
+
+
+class Relay:
+    """Forward the simulator's states and clock, with drops, jitter and a clock freeze."""
+
+    def __init__(self, node, h, seed=0):
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                         reliability=ReliabilityPolicy.RELIABLE)
+        self.drop = 0.0
+        self.jitter = 0.0           # s: each message delayed by U(0, jitter)
+        self.freeze_clock = False
+        self.first_state_after = None    # (steady ns threshold, first state ns after it)
+        self.forwarded = 0
+        self.dropped = 0
+        self._rng = np.random.default_rng(seed)
+        self._queue = queue.Queue()
+        self._pub_state = node.create_publisher(JointState, "/joint_states", qos)
+        self._pub_clock = node.create_publisher(Clock, "/clock", qos)
+        self._subs = [node.create_subscription(JointState, "/sim/joint_states", self._on_state,
+                                               qos, raw=True),
+                      node.create_subscription(Clock, "/sim/clock", self._on_clock, qos,
+                                               raw=True)]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        self._release = 0
+
+    def _on_state(self, data):
+        now = time.monotonic_ns()
+        if self.first_state_after is not None and self.first_state_after[1] is None \
+                and now > self.first_state_after[0]:
+            self.first_state_after = (self.first_state_after[0], now)
+        if self.drop and self._rng.random() < self.drop:
+            self.dropped += 1
+            return
+        delay = round(self._rng.uniform(0.0, self.jitter) * 1e9) if self.jitter else 0
+        self._release = max(self._release, now + delay)     # order kept
+        self._queue.put((self._release, data))
+
+    def _on_clock(self, data):
+        if not self.freeze_clock:
+            self._pub_clock.publish(bytes(data))
+
+    def _run(self):
+        while not self._stop.is_set():
+            try:
+                release, data = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            wait = release - time.monotonic_ns()
+            if wait > 0:
+                time.sleep(wait * 1e-9)
+            self._pub_state.publish(bytes(data))
+            self.forwarded += 1
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(2.0)
+
+
+class Probe:
+    """Efforts (sender's stamps), tracking errors, estimates and diagnostics."""
+
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from std_msgs.msg import Float64MultiArray
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                         reliability=ReliabilityPolicy.RELIABLE)
+        self.recording = False
+        self.efforts = []           # (source ns, receive steady ns, watchdog)
+        self.tracking = []          # (receive steady ns, |q - q_d|)
+        self.theta_max = 0.0
+        self.theta_finite = True
+        self.diagnostics = {}
+        self.subs = [
+            node.create_subscription(Float64MultiArray, "/effort_controller/commands",
+                                     self._on_effort, qos, raw=True),
+            node.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+                                     self._on_tracking, qos),
+            node.create_subscription(Float64MultiArray, "/rcac_controller/parameter_estimates",
+                                     self._on_theta, qos),
+            node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos)]
+
+    def _on_effort(self, data, info):
+        if self.recording:
+            self.efforts.append((info["source_timestamp"], time.monotonic_ns(),
+                                 b"watchdog" in bytes(data[:96])))
+
+    def _on_tracking(self, msg):
+        if self.recording:
+            self.tracking.append((time.monotonic_ns(), float(np.linalg.norm(msg.data))))
+
+    def _on_theta(self, msg):
+        if self.recording:
+            theta = np.asarray(msg.data)
+            self.theta_finite &= bool(np.all(np.isfinite(theta)))
+            if theta.size and np.all(np.isfinite(theta)):
+                self.theta_max = max(self.theta_max, float(np.max(np.abs(theta))))
+
+    def _on_diag(self, msg):
+        for status in msg.status:
+            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+
+def rss_kb(pid):
+    """Resident set size of a process, kB (``/proc``), or ``None``."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1])
+    except OSError:
+        return None
+    return None
+
+
+def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
+             verbose=True):
+    """Run one case; return its figures (see the module docstring)."""
+    import domain_coordinator
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from rcac_ros.tools.launch import init_context
+    from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed
+
+    h = 1.0 / rate
+    log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
+    os.makedirs(log_dir, exist_ok=True)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    ctrl_over = dict(controller, mode="timer", rate=float(rate), monitor_decimation=10)
+    if case == "frozen_clock":
+        ctrl_over["use_sim_time"] = True
+    sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
+    if case == "noise":
+        sim_over.update(position_noise=1e-4, velocity_noise=1e-3)
+    remap = ["-r", "joint_states:=/sim/joint_states", "-r", "/clock:=/sim/clock"]
+    children, ctx, executor, flood, relay = [], None, None, None, None
+    out = {"case": case}
+    with domain_coordinator.domain_id() as domain:
+        env = child_env(domain)
+        try:
+            ctx = init_context(domain)
+            executor = SingleThreadedExecutor(context=ctx)
+            node = Node("rcac_fault_bench", context=ctx)
+            executor.add_node(node)
+            relay = Relay(node, h)
+            probe = Probe(node)
+
+            def sim_child(tag=""):
+                return Child("simulator", node_command("simulator", overrides=sim_over) + remap,
+                             env, os.path.join(log_dir, f"{case}_simulator{tag}.log"))
+            ctrl = Child("controller", node_command("controller", overrides=ctrl_over), env,
+                         os.path.join(log_dir, f"{case}_controller.log"))
+            children += [ctrl, sim_child()]
+
+            def spin_for(seconds, cond=None, what="running"):
+                end = time.monotonic() + seconds
+                while time.monotonic() < end:
+                    if cond is not None and cond():
+                        return True
+                    if not ctrl.alive():
+                        raise NodeFailed(f"the controller exited ({ctrl.returncode}) {what}:"
+                                         f"\n{ctrl.tail()}")
+                    executor.spin_once(timeout_sec=0.005)
+                return cond is None
+
+            if not spin_for(60.0, lambda: all(s.get_publisher_count() for s in probe.subs[:2])
+                            and relay.forwarded > 0, "while starting"):
+                raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
+            spin_for(warmup)
+            probe.recording = True
+            t0 = time.monotonic_ns()
+            relay.drop = 0.1 if case == "drops" else 0.0
+            relay.jitter = 0.002 if case == "jitter" else 0.0
+            third = duration / 3.0
+            rss = [(0.0, rss_kb(ctrl.proc.pid))]
+            if case == "restart":
+                spin_for(duration / 2.0)
+                children[1].stop()
+                spin_for(0.5)
+                relay.first_state_after = (time.monotonic_ns(), None)
+                t_restart = time.monotonic_ns()
+                children[1] = sim_child("_restarted")
+                spin_for(duration / 2.0 - 0.5)
+            elif case in ("frozen_clock", "flood"):
+                spin_for(third)
+                if case == "frozen_clock":
+                    relay.freeze_clock = True
+                else:
+                    flood = subprocess.Popen([sys.executable, FLOOD, str(third)], env=env,
+                                             stdout=subprocess.DEVNULL,
+                                             stderr=subprocess.DEVNULL)
+                spin_for(third)
+                relay.freeze_clock = False
+                spin_for(duration - 2 * third)
+            else:
+                step = 10.0 if soak else duration
+                while (time.monotonic_ns() - t0) * 1e-9 < duration:
+                    spin_for(min(step, duration - (time.monotonic_ns() - t0) * 1e-9))
+                    rss.append(((time.monotonic_ns() - t0) * 1e-9, rss_kb(ctrl.proc.pid)))
+                    if soak and verbose:
+                        print(f"  soak {rss[-1][0] / 60:5.1f} min: controller RSS "
+                              f"{rss[-1][1]} kB", flush=True)
+            probe.recording = False
+            t1 = time.monotonic_ns()
+            spin_for(1.2)           # one more diagnostics message
+        finally:
+            if flood is not None:
+                flood.kill()
+                flood.wait()
+            if relay is not None:
+                relay.close()
+            for c in reversed(children):
+                c.stop()
+            if executor is not None:
+                executor.shutdown()
+            if ctx is not None:
+                ctx.try_shutdown()
+    src = np.array([e[0] for e in probe.efforts], dtype=np.int64)
+    gaps = np.diff(src) * 1e-6 if src.size > 1 else np.array([np.inf])
+    track = np.array([e for e in probe.tracking]).reshape(-1, 2)
+    out.update(window_s=(t1 - t0) * 1e-9, efforts=int(src.size),
+               watchdog_efforts=int(sum(e[2] for e in probe.efforts)),
+               longest_gap_ms=float(gaps.max()), gaps_over_2h=int(np.sum(gaps > 2e3 * h)),
+               tracking_rms=float(np.sqrt(np.mean(track[:, 1] ** 2))) if track.size else None,
+               theta_bounded=bool(probe.theta_finite and probe.theta_max < BOUND),
+               theta_max=probe.theta_max, dropped=relay.dropped)
+    tail = track[track[:, 0] > t1 - 0.2 * (t1 - t0)] if track.size else track
+    out["tracking_rms_last_fifth"] = float(np.sqrt(np.mean(tail[:, 1] ** 2))) \
+        if tail.size else None
+    out["tracking_t_s"] = ((track[:, 0] - t0) * 1e-9).tolist() if track.size else []
+    out["tracking"] = track[:, 1].tolist() if track.size else []
+    if case == "restart":
+        first = relay.first_state_after[1]
+        resumed = [e[1] for e in probe.efforts if not e[2] and first is not None
+                   and e[1] > first]
+        out["restart_recovery_s"] = (resumed[0] - first) * 1e-9 if resumed else None
+        out["restart_at_s"] = (t_restart - t0) * 1e-9
+    diag = probe.diagnostics.get("rcac_controller: control loop", {})
+    for key in ("late_ticks", "skipped_ticks", "watchdog_trips", "rejected_messages",
+                "stamp_restarts"):
+        if key in diag:
+            out[f"controller_{key}"] = diag[key]
+    good = [kb for _, kb in rss if kb]
+    if len(good) > 2:
+        base = good[1] if soak else good[0]       # soak: after the first 10 s
+        out["rss_kb"] = good
+        out["memory_growth"] = (good[-1] - base) / base
+    return out
+
+
+def judge(results):
+    """Add the verdicts against nominal and the goals."""
+    nominal = next((r for r in results if r["case"] == "nominal"), None)
+    ref = nominal["tracking_rms"] if nominal else None
+    for r in results:
+        r["tracking_ratio"] = r["tracking_rms"] / ref if ref and r["tracking_rms"] else None
+        last = r["tracking_rms_last_fifth"]
+        r["recovered"] = bool(ref and last is not None and last <= GOALS["tracking_ratio"] * ref)
+        if r["case"] == "restart":
+            rec = r.get("restart_recovery_s")
+            r["recovered"] &= rec is not None and rec <= GOALS["restart_recovery_s"]
+    return results
+
+
+def format_table(results, h):
+    head = (f"{'case':<13} {'track RMS (rad)':>15} {'x nominal':>9} {'longest gap':>11} "
+            f"{'gaps>2h':>7} {'theta ok':>8} {'recovered':>9}  notes")
+    lines = [head, "-" * len(head)]
+    for r in results:
+        ratio = "-" if r["tracking_ratio"] is None else f"{r['tracking_ratio']:.2f}"
+        rms = "-" if r["tracking_rms"] is None else f"{r['tracking_rms']:.3g}"
+        notes = []
+        if r["case"] == "restart":
+            rec = r.get("restart_recovery_s")
+            notes.append("control back after " + ("never" if rec is None else f"{rec:.3f} s"))
+        if r.get("dropped"):
+            notes.append(f"{r['dropped']} states dropped")
+        if r.get("watchdog_efforts"):
+            notes.append(f"{r['watchdog_efforts']} safe efforts")
+        if "memory_growth" in r:
+            notes.append(f"RSS growth {100 * r['memory_growth']:.1f} %")
+        if "controller_late_ticks" in r:
+            notes.append(f"late/skipped ticks {r['controller_late_ticks']}/"
+                         f"{r.get('controller_skipped_ticks', '-')}")
+        lines.append(f"{r['case']:<13} {rms:>15} {ratio:>9} {r['longest_gap_ms']:>8.1f} ms "
+                     f"{r['gaps_over_2h']:>7} {'yes' if r['theta_bounded'] else 'NO':>8} "
+                     f"{'yes' if r['recovered'] else 'NO':>9}  {'; '.join(notes)}")
+    lines.append(f"goals: tracking <= {GOALS['tracking_ratio']:g}x nominal (drops, jitter, "
+                 f"noise); control back within {GOALS['restart_recovery_s']:g} s of a restart; "
+                 f"no gap > {GOALS['gap_periods'] * h * 1e3:g} ms")
+    return "\n".join(lines)
+
+
+def plot(results, path):
+    from rcac_ros.tools.plots import plt
+    fig, axes = plt.subplots(len(results), 1, figsize=(9, 2.0 * len(results)), sharex=True,
+                             squeeze=False)
+    for ax, r in zip(axes[:, 0], results):
+        ax.semilogy(r["tracking_t_s"], np.maximum(r["tracking"], 1e-12), lw=0.7)
+        ax.set_ylabel("|q - q_d| (rad)", fontsize=7)
+        ax.set_title(r["case"], fontsize=8, loc="left")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plot_path=None,
+               soak_minutes=None, verbose=True):
+    """Run the cases (or the soak), print the table, return the results."""
+    if not duration > 3.0:
+        raise ConfigError(f"duration: must be > 3 s, got {duration}")
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        raise ConfigError(f"cases: unknown {unknown} (known: {', '.join(CASES)})")
+    controller = dict(controller or {})
+    results = []
+    if soak_minutes:
+        cases, duration = ("nominal",), soak_minutes * 60.0
+    for case in cases:
+        if verbose:
+            print(f"rcac bench --faults: {case} ({duration:g} s)", flush=True)
+        results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
+                                verbose=verbose))
+        if verbose:
+            r = results[-1]
+            print(f"  tracking RMS {r['tracking_rms']}, longest gap {r['longest_gap_ms']:.1f} "
+                  f"ms", flush=True)
+    judge(results)
+    if verbose:
+        print(format_table(results, 0.002), flush=True)
+    if json_path:
+        with open(json_path, "w", encoding="utf-8") as f:
+            json.dump(results, f, indent=1)
+    if plot_path:
+        plot(results, plot_path)
+        if verbose:
+            print(f"wrote {plot_path}")
+    return results
