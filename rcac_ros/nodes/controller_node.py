@@ -232,6 +232,10 @@ class ControllerNode(ManagedNode):
                 self.get_logger().warning(
                     f"state period {gap * 1e3:.3f} ms differs from h = {self.h * 1e3:.3f} ms "
                     "(set 'rate' to 1/dt of the simulator)")
+        # lockstep: the state right after the last one answered means no step was lost (the
+        # watchdog's tagged safe effort is not applied by a lockstep simulator): keep the filters
+        unbroken = self.mode == "lockstep" and self._last_stamp is not None \
+            and 0 < stamp - self._last_stamp <= 1.5 * self.h * 1e9
         self._state = (q, qd)
         self._q, self._qd, self._q_msg = q, qd, q
         self._last_stamp = stamp
@@ -239,7 +243,7 @@ class ControllerNode(ManagedNode):
         if self._watchdog:
             self._watchdog = False
             if self._steps:
-                self._restart_filters = True    # the gap broke the filters of eqs 21-24
+                self._restart_filters |= not unbroken   # a gap broke the filters of eqs 21-24
                 self.get_logger().info("watchdog: valid state again, control resumed")
         if self.mode == "lockstep":
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
