@@ -53,6 +53,8 @@ class SimulatorNode(RcacNode):
         self.k = 0
         self.misses = 0
         self.late = 0
+        self.repeated = 0                  # extra answers to the re-sent first state
+        self._resent_ns = None             # stamp of the state re-sent (answered more than once)
         self.ignored_watchdog = 0
         self.started = False
         self._waiting_since = None
@@ -191,7 +193,10 @@ class SimulatorNode(RcacNode):
             self.ignored_watchdog += 1
             return
         if tag is not None and tag[1] != self._pending_ns:
-            self.late += 1                 # an answer to an earlier state (after a timeout)
+            if tag[1] == self._resent_ns:
+                self.repeated += 1         # the answer to the copy of a state sent twice
+            else:
+                self.late += 1             # an answer to an earlier state (after a timeout)
             return
         self._tau = tau
         self._advance()
@@ -204,10 +209,12 @@ class SimulatorNode(RcacNode):
             # the first state can be lost while discovery is still settling on the controller's
             # side: re-send it (the controller answers a repeated state without stepping again)
             self._resent += 1
+            self._resent_ns = self._pending_ns
             self._pub_state.publish(self._last_state)
             return
         if waited > self.lockstep_timeout:
             self.misses += 1
+            self._resent_ns = None         # an answer to it from now on is late
             self._throttle.warn("lockstep miss", f"no effort for state {self.k} within "
                                 f"{self.lockstep_timeout:g} s: holding the previous effort")
             self._advance()
@@ -231,6 +238,7 @@ class SimulatorNode(RcacNode):
             "steps_per_second": f"{self.k / wall:.1f}" if wall > 0 else "nan",
             "real_time_factor": f"{self.k * self.dt / wall:.3f}" if wall > 0 else "nan",
             "lockstep_misses": self.misses, "late_efforts": self.late,
+            "repeated_answers": self.repeated,
             "ignored_watchdog_efforts": self.ignored_watchdog,
             "rejected_messages": self._throttle.total, **pacing,
         }

@@ -108,6 +108,29 @@ def test_bad_efforts_rejected_timeout_holds_previous_and_late_answer_ignored():
         np.testing.assert_allclose(probe.states[-1].position, ref.q, atol=1e-12)
 
 
+def test_a_second_answer_to_the_resent_first_state_is_not_late():
+    """State 0 unanswered for 50 ms is sent again; both copies answered: one step, not late."""
+    tau0 = np.linspace(-20.0, 20.0, 7)
+    ref = Simulator(css_arm(), dt=0.002, q0=PAPER_Q0)
+    with ros_context() as (ctx, ex):
+        node, probe, _ = make(ctx, ex)
+        assert spin_until(ex, lambda: len(probe.states) >= 2)      # the copy of state 0
+        assert all(stamp_of(m) == 0 for m in probe.states)
+        for _ in range(2):                  # a controller answers each copy
+            probe.pub_effort.publish(effort(tau0, tag(0)))
+        ref.step(tau0)
+        assert spin_until(ex, lambda: node.repeated == 1)
+        assert spin_until(ex, lambda: stamp_of(probe.states[-1]) == DT_NS)
+        assert [stamp_of(m) for m in probe.states].count(DT_NS) == 1
+        np.testing.assert_allclose(probe.states[-1].position, ref.q, rtol=0, atol=1e-12)
+        assert node.k == 1 and node.late == 0 and node.misses == 0
+        probe.pub_effort.publish(effort(tau0, tag(1)))
+        assert spin_until(ex, lambda: stamp_of(probe.states[-1]) == 2 * DT_NS)
+        probe.pub_effort.publish(effort(tau0, tag(1)))     # state 1 was sent once: late
+        assert spin_until(ex, lambda: node.late == 1)
+        assert node.repeated == 1 and node.k == 2
+
+
 def test_duration_finishes_and_noise_is_added():
     with ros_context() as (ctx, ex):
         node, probe, _ = make(ctx, ex, duration=0.01, position_noise=0.01, noise_seed=7)
