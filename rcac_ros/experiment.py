@@ -26,14 +26,15 @@ def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=N
     Returns
     -------
     dict
-        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T,).
+        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T, m):
+        the prediction error of each channel.
     """
     h = controller.h
     steps = int(round(duration / h)) + 1
     n = model.n
     out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
                tau=np.empty((steps, n)), theta_hat=np.empty((steps, n, 13)),
-               E=np.empty(steps))
+               E=np.empty((steps, np.size(controller.E))))
     sim = Simulator(model, dt=h, q0=q0, substeps=substeps)
     with Progress(steps, progress or "", enabled=progress is not None) as bar:
         for k in range(steps):
@@ -61,7 +62,7 @@ def metrics(run, theta_true, last_seconds=5.0):
         "parameter_error_norm_start": float(np.linalg.norm(err[0])),
         "parameter_error_norm_end": float(np.linalg.norm(err[-1])),
         f"link{theta_true.shape[0]}_parameter_error_norm_end": float(np.linalg.norm(err[-1, -1])),
-        "final_abs_prediction_error": float(abs(run["E"][-1])),
+        "final_abs_prediction_error": float(np.max(np.abs(run["E"][-1]))),
         "max_abs_torque": float(np.max(np.abs(run["tau"]))),
     }
 

@@ -62,23 +62,28 @@ def _counted(arr):
     return out
 
 
+#: kind -> the controller's class name and keyword arguments
+KINDS = {
+    "rcac": ("RecursiveCompositeController", {}),
+    "rcac_power": ("RecursiveCompositeController", {"channels": [1, "power"]}),
+    "rcac_all": ("RecursiveCompositeController", {"channels": "all"}),
+    "rcac_all_explicit": ("RecursiveCompositeController",
+                          {"channels": "all", "update": "explicit"}),
+    "rcac_least_squares": ("RecursiveCompositeController",
+                           {"adaptation": "least_squares", "forgetting": 0.5}),
+    "slotine_li": ("SlotineLiCompositeController", {}),
+}
+
+
 def _count_in_process(kind, n_links):
-    from rcac_ros.core import RecursiveCompositeController, SlotineLiCompositeController, \
-        css_arm
-    from rcac_ros.core.rcac import rcac_step_kernel
-    from rcac_ros.core.slotine_li import slotine_li_step_kernel
-    model = css_arm().repeated(max(1, n_links // 7))
+    import rcac_ros.core as core
+    model = core.css_arm().repeated(max(1, n_links // 7))
     rng = np.random.default_rng(0)
     vecs = [_counted(v) for v in rng.normal(size=(5, model.n)) * 0.1]
-    if kind == "rcac":
-        c = RecursiveCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))
-        args = [_counted(c._data)]
-        kernel = rcac_step_kernel
-    else:
-        c = SlotineLiCompositeController(model, theta_hat0=rng.normal(size=(model.n, 13)))
-        args = [_counted(c._const), _counted(c._scal), _counted(c._theta),
-                _counted(c._filt)]
-        kernel = slotine_li_step_kernel
+    cls, kwargs = KINDS[kind]
+    c = getattr(core, cls)(model, theta_hat0=rng.normal(size=(model.n, 13)), **kwargs)
+    kernel, arrays = c.kernel_arguments()
+    args = [_counted(a) for a in arrays]
     kernel(*args, *vecs)            # the first step initialises the filters: not counted
     for k in _COUNTS:
         _COUNTS[k] = 0
@@ -91,7 +96,8 @@ def count_step(kind="rcac", n_links=7):
 
     Parameters
     ----------
-    kind : {"rcac", "slotine_li"}
+    kind : str
+        A key of :data:`KINDS`.
     n_links : int
         A multiple of 7 (the CSS arm repeated).
     """

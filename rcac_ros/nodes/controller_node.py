@@ -384,7 +384,7 @@ class ControllerNode(RcacNode):
         theta = self.ctrl.theta_hat
         self._pub_theta.publish(Float64MultiArray(layout=self._theta_layout,
                                                   data=theta.ravel().tolist()))
-        self._pub_e.publish(Float64(data=float(self.ctrl.E)))
+        self._pub_e.publish(Float64(data=float(self.ctrl.E[0])))
         err = (self._q - q_d)[self._out]
         self._pub_track.publish(Float64MultiArray(layout=self._joint_layout,
                                                   data=err.tolist()))
@@ -453,7 +453,7 @@ class ControllerNode(RcacNode):
             "watchdog_trips": self._watchdog_trips,
             "rejected_messages": self._throttle.total,
             "non_finite_efforts": self._nonfinite,
-            "prediction_error": f"{self.ctrl.E:.6g}",
+            "prediction_error": f"{self.ctrl.E[0]:.6g}",
         }
         for kind, c in sorted(self._throttle.counts.items()):
             values[f"rejected_{kind.replace(' ', '_')}"] = c

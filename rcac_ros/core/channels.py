@@ -1,0 +1,201 @@
+"""Prediction channels: which filtered torques the composite law predicts (NOTES.md 4).
+
+A channel is a fixed weighted combination ``c^T tau`` of the joint torques. It is predicted
+by one recursion over the links, with ``a_j`` the channel's axis seen in frame j:
+
+    a_j = T_j a_j-1 + c_j z6,   adot_j = Tdot_j a_j-1 + T_j adot_j-1
+    c^T tau = sum_j a_j^T F*_j = sum_j [d/dt(phi_j) + psi_j] theta_j
+    phi_j = a_j^T Ym_j(V_j),   psi_j = -adot_j^T Ym_j(V_j) + a_j^T Yc_j(V_j)
+
+- **joint k** (``c = e_k``): ``a_j = 0`` for j < k, ``a_k = z6``; ``k = 1`` is the paper's.
+- **power** (``c = qd``, varying): ``qd^T tau = sum_j V_j^T F*_j
+  = d/dt(1/2 sum_j V_j^T M_j V_j) + sum_j V_j^T G_j`` (the energy model: no accelerations),
+  so ``phi_j = 1/2 V_j^T Ym_j(V_j)`` and ``psi_j = V_j^T G_j`` as a row in theta_j.
+
+Each channel is filtered by ``lambda / (p + lambda)`` (eq 22-23): ``W_cj = lambda (phi_cj -
+phi_cj^f) + psi_cj^f``, ``y_c`` = the applied ``c^T tau`` filtered, ``E_c = sum_j W_cj
+theta_hat_j - y_c``.
+
+Discretisation of ``y``: for a joint channel the torque is held over the period, so the
+zero-order hold is exact. For the power channel the integrand ``qd^T tau`` varies within
+the period; its exact integral is ``tau^T (q_k - q_k-1)`` and ``y`` filters that mean
+power with a zero-order hold. The error of that hold, accumulated through the filter, is
+about ``lambda h^2 / 12`` times the rate of change of the power (second order in h);
+``phi`` and ``psi`` (first-order hold on the samples) add another O(h^2) term.
+"""
+
+import numpy as np
+from numba import njit
+
+from ._packing import (CH_A, CH_AD, CH_JOINT, CH_Y, I_FB0, I_FE, I_H, PHF, PHP, POWER, PSF,
+                       PSP, QPREV, TAU, WR)
+from .exceptions import GainError
+from .regressor import bias_row, momentum_row
+from .spatial import propagate
+
+#: The value of ``channels`` that gives every joint.
+ALL = "all"
+
+
+def parse_channels(value, n):
+    """Validate ``channels``: ``[1]``, ``"all"``, ``"power"``, ``"1,power"`` or a list of those.
+
+    Parameters
+    ----------
+    value : int, str or sequence of int/str
+        Joint numbers are 1-based; ``"power"`` is the energy channel; ``"all"`` is 1..n.
+    n : int
+        Number of joints.
+
+    Returns
+    -------
+    tuple
+        The channels in order, each an ``int`` in 1..n or ``"power"``.
+
+    Raises
+    ------
+    GainError
+        One line naming ``channels`` and the bad entry.
+    """
+    items = value.split(",") if isinstance(value, str) else value
+    if isinstance(items, (int, np.integer)):
+        items = [items]
+    try:
+        items = list(items)
+    except TypeError:
+        raise GainError(f"channels: expected joint numbers, 'power' or 'all', got {value!r}") \
+            from None
+    out = []
+    for item in items:
+        if isinstance(item, str):
+            word = item.strip().lower()
+            if word == ALL:
+                out.extend(range(1, n + 1))
+                continue
+            if word == "power":
+                out.append("power")
+                continue
+            if not word.lstrip("+").isdigit():
+                raise GainError(f"channels: {item!r} is not a joint number (1..{n}), "
+                                f"'power' or 'all'")
+            item = int(word)
+        if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, np.integer)):
+            raise GainError(f"channels: {item!r} is not a joint number (1..{n}), 'power' or 'all'")
+        if not 1 <= item <= n:
+            raise GainError(f"channels: joint {item} is out of range 1..{n}")
+        out.append(int(item))
+    if not out:
+        raise GainError("channels: empty (give at least one joint number, 'power' or 'all')")
+    dup = sorted({str(c) for c in out if out.count(c) > 1})
+    if dup:
+        raise GainError(f"channels: listed twice: {', '.join(dup)}")
+    return tuple(out)
+
+
+def channel_codes(channels):
+    """The ``CH_JOINT`` codes of parsed channels: 0-based joints, :data:`POWER` for power."""
+    return np.array([POWER if c == "power" else c - 1 for c in channels], dtype=float)
+
+
+def first_link(code):
+    """The first link (0-based) whose W row a channel can make non-zero."""
+    return 0 if code == POWER else int(code)
+
+
+@njit(cache=True)
+def channel_axis(ch, i, C, px, py, pz, qd):
+    """Propagate a joint channel's ``a_j``, ``adot_j`` to link i; False if it has not begun.
+
+    ``a_k = z6``, ``adot_k = 0`` at the channel's joint k, then ``a_j = T_j a_j-1``,
+    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (NOTES.md 4).
+    """
+    k = int(ch[CH_JOINT])
+    if i < k:
+        return False
+    if i == k:
+        for r in range(6):
+            ch[CH_A + r] = 0.0
+            ch[CH_AD + r] = 0.0
+        ch[CH_A + 5] = 1.0
+        return True
+    A = (ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4], ch[CH_A + 5])
+    Ad = (ch[CH_AD], ch[CH_AD + 1], ch[CH_AD + 2], ch[CH_AD + 3], ch[CH_AD + 4], ch[CH_AD + 5])
+    A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
+    for r in range(6):
+        ch[CH_A + r] = A[r]
+        ch[CH_AD + r] = Ad[r]
+    return True
+
+
+@njit(cache=True)
+def joint_rows(ch, V, g, phi, psi, tmp):
+    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22)."""
+    vx, vy, vz, wx, wy, wz = V
+    momentum_row(phi, ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4],
+                 ch[CH_A + 5], vx, vy, vz, wx, wy, wz)
+    momentum_row(tmp, ch[CH_AD], ch[CH_AD + 1], ch[CH_AD + 2], ch[CH_AD + 3], ch[CH_AD + 4],
+                 ch[CH_AD + 5], vx, vy, vz, wx, wy, wz)
+    bias_row(psi, ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4],
+             ch[CH_A + 5], vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
+    for c in range(13):
+        psi[c] = psi[c] - tmp[c]
+
+
+@njit(cache=True)
+def power_rows(V, g, phi, psi):
+    """The energy channel: ``phi_j = 1/2 V_j^T Ym(V_j)``, ``psi_j = V_j^T G_j`` as rows.
+
+    ``V^T G = -(m v.g + w.(h x g)) = -m v.g + h.(w x g)`` (G of NOTES.md 2).
+    """
+    vx, vy, vz, wx, wy, wz = V
+    momentum_row(phi, vx, vy, vz, wx, wy, wz, vx, vy, vz, wx, wy, wz)
+    for c in range(13):
+        phi[c] *= 0.5
+        psi[c] = 0.0
+    gx, gy, gz = g
+    psi[0] = -(vx * gx + vy * gy + vz * gz)
+    psi[1] = wy * gz - wz * gy
+    psi[2] = wz * gx - wx * gz
+    psi[3] = wx * gy - wy * gx
+
+
+@njit(cache=True)
+def filter_rows(f, phi, psi, first, fe, fb0, fb1, lam, theta, E):
+    """Filter one link's rows (eq 23) and return ``E + W_cj theta_hat_j``.
+
+    ``phi^f`` and ``psi^f`` use a first-order hold on the samples; they start at ``phi(0)``
+    and 0 so that E is exact from the first step. Writes ``W_cj`` into ``f[WR:WR+13]``.
+    """
+    for c in range(13):
+        if first:
+            f[PHF + c] = phi[c]
+            f[PSF + c] = 0.0
+        else:
+            f[PHF + c] = fe * f[PHF + c] + fb0 * f[PHP + c] + fb1 * (phi[c] - f[PHP + c])
+            f[PSF + c] = fe * f[PSF + c] + fb0 * f[PSP + c] + fb1 * (psi[c] - f[PSP + c])
+        f[PHP + c] = phi[c]
+        f[PSP + c] = psi[c]
+        w = lam * (phi[c] - f[PHF + c]) + f[PSF + c]
+        f[WR + c] = w
+        E += w * theta[c]
+    return E
+
+
+@njit(cache=True)
+def filtered_output(ch, state, scal, q, first):
+    """``y_c``: the applied ``c^T tau`` of the last period through the filter (zero-order hold).
+
+    A joint channel's torque was held, so its hold is exact; the power channel holds the
+    period's mean power ``tau^T (q - q_prev) / h``, whose integral is exact.
+    """
+    if first:
+        return 0.0
+    k = int(ch[CH_JOINT])
+    if k >= 0:
+        u = state[k, TAU]
+    else:
+        u = 0.0
+        for j in range(q.shape[0]):
+            u += state[j, TAU] * (q[j] - state[j, QPREV])
+        u /= scal[I_H]
+    return scal[I_FE] * ch[CH_Y] + scal[I_FB0] * u
