@@ -16,12 +16,19 @@ Each channel is filtered by ``lambda / (p + lambda)`` (eq 22-23): ``W_cj = lambd
 phi_cj^f) + psi_cj^f``, ``y_c`` = the applied ``c^T tau`` filtered, ``E_c = sum_j W_cj
 theta_hat_j - y_c``.
 
-Discretisation of ``y``: for a joint channel the torque is held over the period, so the
-zero-order hold is exact. For the power channel the integrand ``qd^T tau`` varies within
-the period; its exact integral is ``tau^T (q_k - q_k-1)`` and ``y`` filters that mean
-power with a zero-order hold. The error of that hold, accumulated through the filter, is
-about ``lambda h^2 / 12`` times the rate of change of the power (second order in h);
-``phi`` and ``psi`` (first-order hold on the samples) add another O(h^2) term.
+Discretisation and its error (with the true parameters, E_c measures only this):
+
+- ``y``: a joint channel's torque is held over the period, so its zero-order hold is
+  exact. The power channel's integrand ``qd^T tau`` varies within the period; its exact
+  integral is ``tau^T (q_k - q_k-1)``, and ``y`` filters that mean power with a zero-order
+  hold, an error of about ``lambda h^2 / 12`` times the power's rate of change.
+- ``phi^f``, ``psi^f``: a first-order hold on the samples, exact when ``phi theta`` and
+  ``psi theta`` are linear within a period, O(h^2) otherwise. For a first joint whose
+  axis is fixed and parallel to gravity (the CSS arm's joint 1), ``sum_j psi_j theta_j = 0``
+  and ``sum_j phi_j theta_j`` (the angular momentum about the axis) has the held torque as
+  its rate: E is then at rounding level (3e-13 of max |y| on the paper's motion).
+  Every other channel has the O(h^2) error: on the paper's motion at h = 2 ms, at most
+  2e-6 of max |y_c| (joints 2-7 and power, measured; halving h divides it by 4).
 """
 
 import numpy as np
