@@ -27,6 +27,8 @@ Discretisation and its error (with the true parameters, E_c measures only this):
   axis is fixed and parallel to gravity (the CSS arm's joint 1), ``sum_j psi_j theta_j = 0``
   and ``sum_j phi_j theta_j`` (the angular momentum about the axis) has the held torque as
   its rate: E is then at rounding level (3e-13 of max |y| on the paper's motion).
+  Without gravity the power channel is exact too (``psi = 0``; the mean-power hold of y
+  and the first-order hold of the kinetic energy ``phi theta`` are the same interpolation).
   Every other channel has the O(h^2) error: on the paper's motion at h = 2 ms, at most
   2e-6 of max |y_c| (joints 2-7 and power, measured; halving h divides it by 4).
 """

@@ -116,7 +116,10 @@ def test_every_channel_is_exact_with_the_true_parameters(gravity):
     assert np.all(ymax > 1.0), ymax
     assert coarse[0] < 1e-11, coarse                      # 3e-13 measured
     assert np.all(coarse < 1e-5), coarse                  # 2e-6 at most, measured
-    assert np.all(coarse[1:] / fine[1:] > 3.5), coarse / fine
+    # each channel: at rounding level, or second order (power without gravity is exact: the
+    # mean-power hold and the first-order hold of the kinetic energy are one interpolation)
+    assert np.all((coarse < 1e-11) | (coarse / fine > 3.5)), (coarse, coarse / fine)
+    assert (coarse[7] < 1e-11) == (gravity[2] == 0.0)
 
 
 def test_power_channel_alone_detects_a_wrong_model():
