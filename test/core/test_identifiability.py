@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeController, Simulator, css_arm,
-                           link_regressor, theta_from_inertia)
+from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeController, Simulator,
+                           css_arm, link_regressor, theta_from_inertia)
 from rcac_ros.core.identifiability import Excitation, consistency, inertia_about_com
 from rcac_ros.core.model import PAPER_Q0, rpy_matrix
 
