@@ -17,6 +17,7 @@ SUBCOMMANDS = {
     "inspect": ("rcac_ros.inspect_bag", "summarise a bag and plot what it holds"),
     "demo": ("rcac_ros.demo", "simulator + controller over ROS 2, bag, summary and plots"),
     "payload-demo": ("rcac_ros.payload_demo", "panda with an unknown 2 kg payload attached"),
+    "compare": ("rcac_ros.compare", "every adaptive law on the paper's run and the payload demo"),
 }
 
 

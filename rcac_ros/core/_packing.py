@@ -33,7 +33,8 @@ KD0 = 13            #: K_Di, 6x6 row-major (eq 19b)
 PG0 = 49            #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain
 TLO = 218           #: lower bounds of theta_i (13): projection
 THI = 231           #: upper bounds of theta_i (13)
-CONST_COLS = 244
+PMAX = 244          #: k_0 of link i: the bound on trace(P_i) (least squares)
+CONST_COLS = 245
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
 TH = 0              #: theta_hat_i (13)
@@ -59,7 +60,7 @@ I_P_DIAG = 12       #: 1 if every P_i is diagonal
 I_IMPLICIT = 13     #: 1: implicit Euler in the prediction-error term, 0: explicit
 I_ADAPT = 14        #: ADAPT_GRADIENT, ADAPT_LS or ADAPT_LS_PREDICTION
 I_FORGET = 15       #: lambda_0 of the bounded-gain forgetting, 1/s
-I_PMAX = 16         #: k_0: bound on trace(P_i)
+I_SPARE = 16        #: unused
 I_DZ_S = 17         #: dead zone on max |qd - qd_r| (0: none)
 I_DZ_E = 18         #: dead zone on |E_c| (0: none)
 I_PROJECT = 19      #: 1: clip theta_hat to [TLO, THI] after each step

@@ -40,8 +40,8 @@ from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
                        CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
                        I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_G, I_GAMMA, I_H, I_IMPLICIT,
-                       I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PMAX, I_PROJECT, I_TRACKING, I_Y,
-                       LAM, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
+                       I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
+                       LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
                        new_data)
 from ._validate import as_array, scalar
 from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_rows,
@@ -239,7 +239,7 @@ def implicit_solve(chan, filt, state, R, scal):
 
 
 @njit(cache=True)
-def update_least_squares(chan, filt, state, scal, rows):
+def update_least_squares(chan, filt, const, state, scal, rows):
     """The least-squares gain of each link: Potter's update with the active channels'
     rows, then bounded-gain forgetting (:mod:`rcac_ros.core.least_squares`)."""
     h = scal[I_H]
@@ -249,7 +249,7 @@ def update_least_squares(chan, filt, state, scal, rows):
         for c in range(chan.shape[0]):
             if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c]):
                 potter_update(S, filt[c, i, WR:WR + 13], h, f, Sf)
-        bounded_gain_forgetting(S, h, scal[I_FORGET], scal[I_PMAX])
+        bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
 
 @njit(cache=True)
@@ -329,7 +329,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
             for k in range(13):
                 state[i, TH + k] = R[i, k]
     if scal[I_ADAPT] != ADAPT_GRADIENT:
-        update_least_squares(chan, filt, state, scal, rows)
+        update_least_squares(chan, filt, const, state, scal, rows)
     if scal[I_PROJECT] != 0.0:
         project(const, state)
     for i in range(n):
@@ -373,7 +373,7 @@ class RecursiveCompositeController:
     forgetting : float
         ``lambda_0`` of the bounded-gain forgetting, 1/s (least squares).
     P_max : float, optional
-        ``k_0``: bound on ``trace(P_i)`` (default: the largest ``trace(P_i(0))``).
+        ``k_0``: bound on every ``trace(P_i)`` (default: each link's ``trace(P_i(0))``).
     dead_zone_s, dead_zone_E : float
         No adaptation of the tracking term while ``max_j |qd_j - qd_rj| <= dead_zone_s``, and
         none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
@@ -424,9 +424,8 @@ class RecursiveCompositeController:
         scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
         scal[I_ADAPT] = ADAPTATIONS[adaptation]
         scal[I_FORGET] = scalar(forgetting, "forgetting", GainError, minimum=0.0)
-        traces = np.trace(self.P, axis1=1, axis2=2)
-        scal[I_PMAX] = traces.max() if P_max is None else scalar(P_max, "P_max", GainError,
-                                                                 minimum=0.0, strict=True)
+        self._const[:, PMAX] = np.trace(self.P, axis1=1, axis2=2) if P_max is None else \
+            scalar(P_max, "P_max", GainError, minimum=0.0, strict=True)
         scal[I_DZ_S] = scalar(dead_zone_s, "dead_zone_s", GainError, minimum=0.0)
         scal[I_DZ_E] = scalar(dead_zone_E, "dead_zone_E", GainError, minimum=0.0)
         self.theta_min, self.theta_max = self._bounds(theta_bounds)
