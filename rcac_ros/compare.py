@@ -234,9 +234,12 @@ def plot(series, report, out_dir):
         for law, r in runs.items():
             t = r["t"]
             err = np.minimum(np.linalg.norm(r["e"], axis=1), 1e3)
+            if r["diverged_at"] is not None:      # its estimates would swamp the axes
+                law = f"{law} (diverged at {r['diverged_at']:.2f} s)"
+            else:
+                axes[1].semilogy(t, r["theta_error"], lw=0.9, label=law)
+                axes[2].plot(t, r["mass_last"], lw=0.9, label=law)
             axes[0].semilogy(t, err + 1e-12, lw=0.7, label=law)
-            axes[1].semilogy(t, np.minimum(r["theta_error"], 1e6), lw=0.9, label=law)
-            axes[2].plot(t, r["mass_last"], lw=0.9, label=law)
             axes[3].semilogy(t, np.minimum(r["E"], 1e12) + 1e-16, lw=0.6, label=law)
         truth = next(iter(report[name].values())).get("mass_last_true")
         for ax, title in zip(axes, ("|q - q_d| (rad)", "||theta_hat - theta|| (all links)",
