@@ -91,8 +91,8 @@ def payload_scenario():
 SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
 
 
-def make_controller(scenario, law):
-    kind, extra = LAWS[law]
+def make_controller(scenario, law, laws=None):
+    kind, extra = (laws or LAWS)[law]
     kwargs = dict(scenario.gains, **extra)
     if kind == "slotine_li":
         return SlotineLiCompositeController(scenario.model, **kwargs)
@@ -182,16 +182,15 @@ def compare(scenarios=("paper", "payload"), laws=tuple(LAWS), duration=20.0, pro
             extra_channels=None):
     """Run every law on every scenario: ``{scenario: {law: metrics}}`` and the time series."""
     report, series = {}, {}
+    table = {law: LAWS[law] for law in laws}
+    if extra_channels is not None:
+        key = "channels=" + ",".join(str(c) for c in extra_channels)
+        table[key] = ("rcac", dict(channels=list(extra_channels)))
     for name in scenarios:
         scenario = SCENARIOS[name]()
-        law_names = list(laws)
-        if extra_channels is not None:
-            key = "channels=" + ",".join(str(c) for c in extra_channels)
-            LAWS[key] = ("rcac", dict(channels=list(extra_channels)))
-            law_names.append(key)
         report[name], series[name] = {}, {}
-        for law in law_names:
-            ctrl = make_controller(scenario, law)
+        for law in table:
+            ctrl = make_controller(scenario, law, table)
             label = f"{name}: {law:>20s}" if progress else None
             run = run_law(scenario, ctrl, duration, progress=label)
             report[name][law] = metrics(run, scenario)
@@ -275,7 +274,7 @@ def positive_float(text):
 def channel_list(text):
     """argparse type: ``1,power`` (joint numbers, ``power``, ``all``); ranges checked later."""
     try:
-        return parse_channels(text, 10 ** 6)
+        return parse_channels(text, None)
     except RcacError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 
@@ -311,7 +310,7 @@ def run(args):
     settings = dict(duration=args.duration, ls_forgetting=LS_FORGETTING,
                     laws={k: {"controller": LAWS[k][0],
                               "options": {o: str(v) for o, v in LAWS[k][1].items()}}
-                          for k in next(iter(report.values()))})
+                          for k in next(iter(report.values())) if k in LAWS})
     with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=settings), f, indent=2)
     table = markdown(report)

@@ -67,15 +67,19 @@ def metrics(run, theta_true, last_seconds=5.0):
     }
 
 
-def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True):
-    """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics."""
+def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True,
+                   channels=(1,)):
+    """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics.
+
+    ``channels``: the composite law's prediction channels (default the paper's, joint 1).
+    """
     model = css_arm()
     g = dict(PAPER_GAINS, **(gains or {}))
     q0 = np.array(PAPER_Q0)
     trajectory = PaperTrajectory(q0, reading=reading)
     runs, report = {}, {}
     for law, gamma in (("direct", 0.0), ("composite", g["gamma"])):
-        ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma))
+        ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma), channels=channels)
         t0 = time.perf_counter()
         runs[law] = simulate(model, ctrl, trajectory, q0, duration, substeps,
                              progress=f"{law:>9s}" if progress else None)
@@ -100,6 +104,7 @@ def write_outputs(model, runs, report, out_dir, settings):
 
 
 def add_arguments(parser):
+    from rcac_ros.compare import channel_list
     parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
@@ -114,6 +119,9 @@ def add_arguments(parser):
                             help=f"{text} (default {default:g})")
     parser.add_argument("--substeps", type=int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
+    parser.add_argument("--channels", type=channel_list, default=(1,),
+                        help="prediction channels of the composite law, e.g. 1,power or all "
+                             "(default 1, the paper's)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -121,8 +129,9 @@ def run(args):
     gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
                  h=args.h)
     model, runs, report = run_experiment(args.duration, args.trajectory, gains, args.substeps,
-                                         progress=not args.quiet)
+                                         progress=not args.quiet, channels=args.channels)
     settings = dict(gains, duration=args.duration, trajectory=args.trajectory,
+                    channels=[str(c) for c in args.channels],
                     substeps=args.substeps, model="css_arm", q0=list(PAPER_Q0))
     write_outputs(model, runs, report, args.out, settings)
     keys = [k for k in report["direct"] if k != "wall_time_s"]

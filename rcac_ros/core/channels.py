@@ -53,8 +53,8 @@ def parse_channels(value, n):
     ----------
     value : int, str or sequence of int/str
         Joint numbers are 1-based; ``"power"`` is the energy channel; ``"all"`` is 1..n.
-    n : int
-        Number of joints.
+    n : int or None
+        Number of joints; None checks the syntax only (``"all"`` stays ``"all"``).
 
     Returns
     -------
@@ -74,24 +74,24 @@ def parse_channels(value, n):
     except TypeError:
         raise GainError(f"channels: expected joint numbers, 'power' or 'all', got {value!r}") \
             from None
+    joints = "joint number" if n is None else f"joint number (1..{n})"
     out = []
     for item in items:
         if isinstance(item, str):
             word = item.strip().lower()
             if word == ALL:
-                out.extend(range(1, n + 1))
+                out.extend([ALL] if n is None else range(1, n + 1))
                 continue
             if word == "power":
                 out.append("power")
                 continue
             if not word.lstrip("+").isdigit():
-                raise GainError(f"channels: {item!r} is not a joint number (1..{n}), "
-                                f"'power' or 'all'")
+                raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
             item = int(word)
         if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, np.integer)):
-            raise GainError(f"channels: {item!r} is not a joint number (1..{n}), 'power' or 'all'")
-        if not 1 <= item <= n:
-            raise GainError(f"channels: joint {item} is out of range 1..{n}")
+            raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
+        if item < 1 or (n is not None and item > n):
+            raise GainError(f"channels: joint {item} is out of range 1..{n or 'n'}")
         out.append(int(item))
     if not out:
         raise GainError("channels: empty (give at least one joint number, 'power' or 'all')")
