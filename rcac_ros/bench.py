@@ -4,6 +4,10 @@ Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
 median over blocks of the mean time per call (µs), measured in one run on this
 machine; the ratios are what the targets are about. The operation count is
 exact (:mod:`rcac_ros.core.opcount`).
+
+Besides the paper's law (channels ``[1]``) the table times the recursive law with the
+channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with the
+least-squares gain (channels ``[1]``), against n.
 """
 
 import json
@@ -15,6 +19,14 @@ from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCom
                            css_arm)
 
 SIZES = (7, 14, 28, 56, 112, 224)
+
+#: column -> options of the recursive law timed besides the paper's default
+VARIANTS = {
+    "power_us": dict(channels=[1, "power"]),
+    "all_us": dict(channels="all"),
+    "all_explicit_us": dict(channels="all", update="explicit"),
+    "least_squares_us": dict(adaptation="least_squares", forgetting=1.0),
+}
 
 
 def median_us(fn, budget_s=0.3, blocks=7):
@@ -57,6 +69,10 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
     ctrl = RecursiveCompositeController(model, theta_hat0=model.theta())
     row = {"model": label, "n": model.n,
            "controller_us": median_us(lambda: ctrl.step(q, qd, q_d, qd_d, qdd_d), budget_s)}
+    for key, kwargs in VARIANTS.items():
+        c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+        row[key] = median_us(lambda: c.step(q, qd, q_d, qd_d, qdd_d), budget_s,
+                             blocks=3 if model.n > 100 else 7)
     rnea = _pin_rnea(model)
     row["pin_rnea_us"] = None if rnea is None else median_us(lambda: rnea(q, qd, qdd_d), budget_s)
     if baseline:
@@ -107,6 +123,12 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
     if 56 in by_n and by_n[56]["slotine_li_us"]:
         ratios["slotine_li_over_controller_n56"] = (by_n[56]["slotine_li_us"]
                                                     / by_n[56]["controller_us"])
+        ratios["all_over_slotine_li_n56"] = by_n[56]["all_us"] / by_n[56]["slotine_li_us"]
+        ratios["all_explicit_over_slotine_li_n56"] = (by_n[56]["all_explicit_us"]
+                                                      / by_n[56]["slotine_li_us"])
+    if 7 in by_n:
+        for key in VARIANTS:
+            ratios[f"{key[:-3]}_over_paper_n7"] = by_n[7][key] / by_n[7]["controller_us"]
     for r in rows:
         if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
             ratio = r["controller_us"] / r["pin_rnea_us"]
@@ -122,6 +144,16 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
             "slotine_li_n7": count_step("slotine_li", 7),
             "paper_per_link": {"mul": 606, "add": 501},
         }
+        # the all-channel law: a n^2 + b n + c multiplications, fitted on n = 7, 14, 21
+        counts = {k: count_step("rcac_all", k) for k in (7, 14, 21)}
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            result["operations"][f"{kind}_n7"] = count_step(kind, 7)
+        ns = np.array([7.0, 14.0, 21.0])
+        mul = np.array([counts[k]["mul"] + counts[k]["div"] for k in (7, 14, 21)])
+        a, b, c = np.linalg.solve(np.vander(ns, 3), mul)
+        result["operations"]["rcac_all"] = {str(k): v for k, v in counts.items()}
+        result["operations"]["rcac_all_mul_fit"] = {"n2": a, "n": b, "1": c,
+                                                    "wang_n2": 7730}
     return result
 
 
@@ -129,7 +161,8 @@ def _format_row(r):
     def f(v):
         return f"{v:12.2f}" if v is not None else f"{'-':>12s}"
     return (f"{r['model']:>10s} {r['n']:5d} {f(r['controller_us'])} {f(r['pin_rnea_us'])} "
-            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}")
+            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}"
+            + "".join(f(r[k]) for k in VARIANTS))
 
 
 def add_arguments(parser):
@@ -155,9 +188,11 @@ def run(args):
     except ImportError:
         print("pinocchio (pip package 'pin') is not installed: the pin.rnea column is skipped")
     print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
-          f"{'SlotineLi us':>12s} {'sim step us':>12s}")
+          f"{'SlotineLi us':>12s} {'sim step us':>12s}"
+          + "".join(f"{k[:-3] + ' us':>12s}" for k in VARIANTS))
     result = run_bench(budget_s=args.budget)
-    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20):")
+    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
+          "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
     ops = result.get("operations")
@@ -165,6 +200,12 @@ def run(args):
         print(f"\noperations per step (counted): n=7 {ops['rcac_n7']}; per link "
               f"{ops['rcac_per_link_mul']:.0f} mul + {ops['rcac_per_link_add']:.0f} add "
               f"(paper: 606 mul + 501 add); Slotine-Li n=7 {ops['slotine_li_n7']}")
+        fit = ops["rcac_all_mul_fit"]
+        print(f"channels='all': {fit['n2']:.0f} n^2 + {fit['n']:.0f} n + {fit['1']:.0f} "
+              f"multiplications (Wang's O(n^2) law, as the paper cites: 7730 n^2); "
+              f"n=7 {ops['rcac_all']['7']}")
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            print(f"{kind} n=7: {ops[kind + '_n7']}")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(result, f, indent=2)

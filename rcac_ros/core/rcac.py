@@ -211,8 +211,8 @@ def implicit_solve(chan, filt, state, R, scal):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    A = np.empty((na, na))
-    z = np.empty(na)
+    A = np.empty((na, na), R.dtype)
+    z = np.empty(na, R.dtype)
     for a in range(na):
         ca = active[a]
         sa = channel_start(chan[ca])
