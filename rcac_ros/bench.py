@@ -45,6 +45,63 @@ def median_us(fn, budget_s=0.3, blocks=7):
     return float(np.median(samples))
 
 
+def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
+    """Median over blocks of ``time(fa) / time(fb)``, the two timed alternately.
+
+    On a shared machine the load changes between cells; timed side by side, block by
+    block, the ratio is far steadier than the ratio of two medians.
+    """
+    fa(), fb()
+    t0 = time.perf_counter()
+    fa()
+    fb()
+    once = max(time.perf_counter() - t0, 1e-7)
+    reps = max(1, int(budget_s / blocks / once))
+    ratios = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fa()
+        ta = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fb()
+        ratios.append(ta / (time.perf_counter() - t0))
+    return float(np.median(ratios))
+
+
+def goal_ratios(budget_s=1.0):
+    """The issue's cost goals, each measured side by side (:func:`interleaved_ratio`)."""
+    rng = np.random.default_rng(0)
+    out = {}
+    for n in (7, 56):
+        model = css_arm().repeated(n // 7)
+        args = tuple(rng.normal(size=(5, n)) * 0.1)
+        paper = RecursiveCompositeController(model, theta_hat0=model.theta())
+        every = RecursiveCompositeController(model, theta_hat0=model.theta(), channels="all")
+        if n == 7:
+            rnea = _pin_rnea(model)
+            if rnea is not None:
+                out["paper_over_pin_rnea_n7"] = interleaved_ratio(
+                    lambda: paper.step(*args), lambda: rnea(args[0], args[1], args[4]), budget_s)
+            out["all_over_paper_n7"] = interleaved_ratio(lambda: every.step(*args),
+                                                         lambda: paper.step(*args), budget_s)
+            for key, kwargs in VARIANTS.items():
+                if key != "all_us":
+                    c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+                    out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
+                        lambda: c.step(*args), lambda: paper.step(*args), budget_s)
+        else:
+            sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
+            out["all_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: every.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+            expl = RecursiveCompositeController(model, theta_hat0=model.theta(),
+                                                channels="all", update="explicit")
+            out["all_explicit_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: expl.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+    return out
+
+
 def _pin_rnea(model):
     try:
         import pinocchio as pin
@@ -133,7 +190,7 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
         if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
             ratio = r["controller_us"] / r["pin_rnea_us"]
             ratios[f"controller_over_pin_rnea_{r['model']}"] = ratio
-    result = {"rows": rows, "ratios": ratios}
+    result = {"rows": rows, "ratios": ratios, "goals": goal_ratios()}
     if ops:
         from rcac_ros.core.opcount import count_step
         c7, c14 = count_step("rcac", 7), count_step("rcac", 14)
@@ -195,6 +252,10 @@ def run(args):
           "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
+    print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2 "
+          "at n = 7; all/SlotineLi <= 0.1 at n = 56):")
+    for k, v in result["goals"].items():
+        print(f"  {k:40s} {v:8.3f}")
     ops = result.get("operations")
     if ops:
         print(f"\noperations per step (counted): n=7 {ops['rcac_n7']}; per link "

@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._packing import I_ERR, KD0, LAM, PG0
+from ._packing import I_ERR, KD0, LAM, PG0, TH, UR, WR
 from .exceptions import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
@@ -79,31 +79,34 @@ def feedback_wrench(row, Fs, s, kd_diag, F):
 
 
 @njit(cache=True)
-def gain_step(row, p_diag, theta, grad, h, out):
-    """``out = theta - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part)."""
+def gain_step(row, p_diag, st, grad, h, R, i):
+    """``R_i = theta_hat_i - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part).
+
+    ``st`` is link i's state row (``theta_hat_i`` at ``TH``).
+    """
     if p_diag:
         for a in range(13):
-            out[a] = theta[a] - h * row[PG0 + 14 * a] * grad[a]
+            R[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]
     else:
         for a in range(13):
             acc = 0.0
             for c in range(13):
                 acc += row[PG0 + 13 * a + c] * grad[c]
-            out[a] = theta[a] - h * acc
+            R[i, a] = st[TH + a] - h * acc
 
 
 @njit(cache=True)
-def gain_apply(row, p_diag, x, out):
-    """``out = P_i x`` with the fixed gain ``P_i``."""
+def gain_apply(row, p_diag, filt, c, i):
+    """``U_ci = P_i W_ci^T`` with the fixed gain ``P_i``."""
     if p_diag:
         for a in range(13):
-            out[a] = row[PG0 + 14 * a] * x[a]
+            filt[c, i, UR + a] = row[PG0 + 14 * a] * filt[c, i, WR + a]
     else:
         for a in range(13):
             acc = 0.0
-            for c in range(13):
-                acc += row[PG0 + 13 * a + c] * x[c]
-            out[a] = acc
+            for k in range(13):
+                acc += row[PG0 + 13 * a + k] * filt[c, i, WR + k]
+            filt[c, i, UR + a] = acc
 
 
 @njit(cache=True)

@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from ._packing import (CH_A, CH_AD, CH_JOINT, CH_Y, I_FB0, I_FE, I_H, PHF, PHP, POWER, PSF,
-                       PSP, QPREV, TAU, WR)
+                       PSP, QPREV, TAU, TH, WR)
 from .exceptions import GainError
 from .regressor import bias_row, momentum_row
 from .spatial import propagate
@@ -112,42 +112,45 @@ def first_link(code):
 
 
 @njit(cache=True)
-def channel_axis(ch, i, C, px, py, pz, qd):
-    """Propagate a joint channel's ``a_j``, ``adot_j`` to link i; False if it has not begun.
+def channel_axis(chan, c, i, C, px, py, pz, qd):
+    """Propagate joint channel c's ``a_j``, ``adot_j`` to link i; False if it has not begun.
 
     ``a_k = z6``, ``adot_k = 0`` at the channel's joint k, then ``a_j = T_j a_j-1``,
     ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (NOTES.md 4).
     """
-    k = int(ch[CH_JOINT])
+    k = int(chan[c, CH_JOINT])
     if i < k:
         return False
     if i == k:
         for r in range(6):
-            ch[CH_A + r] = 0.0
-            ch[CH_AD + r] = 0.0
-        ch[CH_A + 5] = 1.0
+            chan[c, CH_A + r] = 0.0
+            chan[c, CH_AD + r] = 0.0
+        chan[c, CH_A + 5] = 1.0
         return True
-    A = (ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4], ch[CH_A + 5])
-    Ad = (ch[CH_AD], ch[CH_AD + 1], ch[CH_AD + 2], ch[CH_AD + 3], ch[CH_AD + 4], ch[CH_AD + 5])
+    A = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2], chan[c, CH_A + 3],
+         chan[c, CH_A + 4], chan[c, CH_A + 5])
+    Ad = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2], chan[c, CH_AD + 3],
+          chan[c, CH_AD + 4], chan[c, CH_AD + 5])
     A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
     for r in range(6):
-        ch[CH_A + r] = A[r]
-        ch[CH_AD + r] = Ad[r]
+        chan[c, CH_A + r] = A[r]
+        chan[c, CH_AD + r] = Ad[r]
     return True
 
 
 @njit(cache=True)
-def joint_rows(ch, V, g, phi, psi, tmp):
+def joint_rows(chan, c, V, g, phi, psi, tmp):
     """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22)."""
     vx, vy, vz, wx, wy, wz = V
-    momentum_row(phi, ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4],
-                 ch[CH_A + 5], vx, vy, vz, wx, wy, wz)
-    momentum_row(tmp, ch[CH_AD], ch[CH_AD + 1], ch[CH_AD + 2], ch[CH_AD + 3], ch[CH_AD + 4],
-                 ch[CH_AD + 5], vx, vy, vz, wx, wy, wz)
-    bias_row(psi, ch[CH_A], ch[CH_A + 1], ch[CH_A + 2], ch[CH_A + 3], ch[CH_A + 4],
-             ch[CH_A + 5], vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
-    for c in range(13):
-        psi[c] = psi[c] - tmp[c]
+    a0, a1, a2, a3, a4, a5 = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2],
+                              chan[c, CH_A + 3], chan[c, CH_A + 4], chan[c, CH_A + 5])
+    b0, b1, b2, b3, b4, b5 = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
+                              chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+    momentum_row(phi, a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz)
+    momentum_row(tmp, b0, b1, b2, b3, b4, b5, vx, vy, vz, wx, wy, wz)
+    bias_row(psi, a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
+    for k in range(13):
+        psi[k] = psi[k] - tmp[k]
 
 
 @njit(cache=True)
@@ -158,9 +161,9 @@ def power_rows(V, g, phi, psi):
     """
     vx, vy, vz, wx, wy, wz = V
     momentum_row(phi, vx, vy, vz, wx, wy, wz, vx, vy, vz, wx, wy, wz)
-    for c in range(13):
-        phi[c] *= 0.5
-        psi[c] = 0.0
+    for k in range(13):
+        phi[k] *= 0.5
+        psi[k] = 0.0
     gx, gy, gz = g
     psi[0] = -(vx * gx + vy * gy + vz * gz)
     psi[1] = wy * gz - wz * gy
@@ -169,29 +172,33 @@ def power_rows(V, g, phi, psi):
 
 
 @njit(cache=True)
-def filter_rows(f, phi, psi, first, fe, fb0, fb1, lam, theta, E):
-    """Filter one link's rows (eq 23) and return ``E + W_cj theta_hat_j``.
+def filter_rows(filt, c, i, phi, psi, first, coef, st, E):
+    """Filter link i's rows of channel c (eq 23) and return ``E + W_ci theta_hat_i``.
 
+    ``coef`` = (exp(-lambda h), b0, b1, lambda); ``st`` is link i's state row.
     ``phi^f`` and ``psi^f`` use a first-order hold on the samples; they start at ``phi(0)``
-    and 0 so that E is exact from the first step. Writes ``W_cj`` into ``f[WR:WR+13]``.
+    and 0 so that E is exact from the first step. Writes ``W_ci``.
     """
-    for c in range(13):
+    fe, fb0, fb1, lam = coef
+    for k in range(13):
         if first:
-            f[PHF + c] = phi[c]
-            f[PSF + c] = 0.0
+            filt[c, i, PHF + k] = phi[k]
+            filt[c, i, PSF + k] = 0.0
         else:
-            f[PHF + c] = fe * f[PHF + c] + fb0 * f[PHP + c] + fb1 * (phi[c] - f[PHP + c])
-            f[PSF + c] = fe * f[PSF + c] + fb0 * f[PSP + c] + fb1 * (psi[c] - f[PSP + c])
-        f[PHP + c] = phi[c]
-        f[PSP + c] = psi[c]
-        w = lam * (phi[c] - f[PHF + c]) + f[PSF + c]
-        f[WR + c] = w
-        E += w * theta[c]
+            php = filt[c, i, PHP + k]
+            psp = filt[c, i, PSP + k]
+            filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (phi[k] - php)
+            filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (psi[k] - psp)
+        filt[c, i, PHP + k] = phi[k]
+        filt[c, i, PSP + k] = psi[k]
+        w = lam * (phi[k] - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
+        filt[c, i, WR + k] = w
+        E += w * st[TH + k]
     return E
 
 
 @njit(cache=True)
-def filtered_output(ch, state, scal, q, first):
+def filtered_output(chan, c, state, scal, q, first):
     """``y_c``: the applied ``c^T tau`` of the last period through the filter (zero-order hold).
 
     A joint channel's torque was held, so its hold is exact; the power channel holds the
@@ -199,7 +206,7 @@ def filtered_output(ch, state, scal, q, first):
     """
     if first:
         return 0.0
-    k = int(ch[CH_JOINT])
+    k = int(chan[c, CH_JOINT])
     if k >= 0:
         u = state[k, TAU]
     else:
@@ -207,4 +214,4 @@ def filtered_output(ch, state, scal, q, first):
         for j in range(q.shape[0]):
             u += state[j, TAU] * (q[j] - state[j, QPREV])
         u /= scal[I_H]
-    return scal[I_FE] * ch[CH_Y] + scal[I_FB0] * u
+    return scal[I_FE] * chan[c, CH_Y] + scal[I_FB0] * u

@@ -33,17 +33,17 @@ def initial_factor(P):
 
 
 @njit(cache=True)
-def apply_factored(S, x, out, t):
-    """``out = S S^T x`` for the row-major 13x13 factor ``S`` (``t``: 13 scratch)."""
+def apply_factored(S, o, x, out, t):
+    """``out = S S^T x`` for the row-major 13x13 factor ``S[o:o+169]`` (``t``: 13 scratch)."""
     for c in range(13):
         acc = 0.0
         for r in range(13):
-            acc += S[13 * r + c] * x[r]
+            acc += S[o + 13 * r + c] * x[r]
         t[c] = acc
     for r in range(13):
         acc = 0.0
         for c in range(13):
-            acc += S[13 * r + c] * t[c]
+            acc += S[o + 13 * r + c] * t[c]
         out[r] = acc
 
 

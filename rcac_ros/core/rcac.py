@@ -60,34 +60,30 @@ ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
 
 
 @njit(cache=True)
-def channel_start(ch):
-    """The first link (0-based) a channel reaches."""
-    return 0 if ch[CH_JOINT] == POWER else int(ch[CH_JOINT])
+def channel_start(chan, c):
+    """The first link (0-based) channel c reaches."""
+    return 0 if chan[c, CH_JOINT] == POWER else int(chan[c, CH_JOINT])
 
 
 @njit(cache=True)
 def start_channels(chan, state, scal, q, first):
     """Each ``y_c`` for this step (the filtered applied output), ``E_c`` reset to 0."""
     for c in range(chan.shape[0]):
-        ch = chan[c]
-        ch[CH_Y] = filtered_output(ch, state, scal, q, first)
-        ch[CH_E] = 0.0
+        chan[c, CH_Y] = filtered_output(chan, c, state, scal, q, first)
+        chan[c, CH_E] = 0.0
 
 
 @njit(cache=True)
-def predict_link(chan, filt, i, C, row, qd, V, g, theta, scal, first, rows):
+def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, phi, psi, tmp):
     """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
-    phi, psi, tmp = rows[0], rows[1], rows[2]
-    fe, fb0, fb1, lam = scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM]
     for c in range(chan.shape[0]):
-        ch = chan[c]
-        if ch[CH_JOINT] == POWER:
+        if chan[c, CH_JOINT] == POWER:
             power_rows(V, g, phi, psi)
-        elif channel_axis(ch, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
-            joint_rows(ch, V, g, phi, psi, tmp)
+        elif channel_axis(chan, c, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
+            joint_rows(chan, c, V, g, phi, psi, tmp)
         else:
             continue
-        ch[CH_E] = filter_rows(filt[c, i], phi, psi, first, fe, fb0, fb1, lam, theta, ch[CH_E])
+        chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
 
 
 @njit(cache=True)
@@ -95,9 +91,8 @@ def close_channels(chan, scal):
     """``E_c -= y_c`` and the dead zone on E: a channel adapts only if ``|E_c| > dz``."""
     dz = scal[I_DZ_E]
     for c in range(chan.shape[0]):
-        ch = chan[c]
-        ch[CH_E] -= ch[CH_Y]
-        ch[CH_ACTIVE] = 1.0 if dz <= 0.0 or abs(ch[CH_E]) > dz else 0.0
+        chan[c, CH_E] -= chan[c, CH_Y]
+        chan[c, CH_ACTIVE] = 1.0 if dz <= 0.0 or abs(chan[c, CH_E]) > dz else 0.0
     scal[I_E] = chan[0, CH_E]
     scal[I_Y] = chan[0, CH_Y]
 
@@ -119,59 +114,57 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
     """Add the prediction term to ``grad``: ``- gamma W_ci^T y_c`` (implicit: the rest is
     solved) or ``+ gamma W_ci^T E_c`` (explicit), over the active channels."""
     for c in range(chan.shape[0]):
-        ch = chan[c]
-        if ch[CH_ACTIVE] == 0.0 or i < channel_start(ch):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
             continue
-        w = filt[c, i]
         if implicit:
-            y = ch[CH_Y]
+            y = chan[c, CH_Y]
             for k in range(13):
-                grad[k] -= gamma * w[WR + k] * y
+                grad[k] -= gamma * filt[c, i, WR + k] * y
         else:
-            e = ch[CH_E]
+            e = chan[c, CH_E]
             for k in range(13):
-                grad[k] += gamma * w[WR + k] * e
+                grad[k] += gamma * filt[c, i, WR + k] * e
 
 
 @njit(cache=True)
-def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, rows):
+def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
     """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + prediction part)``,
     and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares)."""
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     mode = scal[I_ADAPT]
     p_diag = scal[I_P_DIAG] != 0.0
-    theta = st[TH:TH + 13]
-    S = st[SQ:SQ + 169]
-    grad, t, Pg = rows[3], rows[4], rows[5]
     for k in range(13):
-        grad[k] = G[k] if tracking else 0.0
-    if mode == ADAPT_LS_PREDICTION:     # fixed P on the tracking term, least squares on E
-        gain_step(row, p_diag, theta, grad, h, R)
+        grad[k] = G[i, k] if tracking else 0.0
+    if mode == ADAPT_GRADIENT:
+        prediction_gradient(chan, filt, i, grad, gamma, implicit)
+        gain_step(row, p_diag, st, grad, h, R, i)
+    elif mode == ADAPT_LS:
+        prediction_gradient(chan, filt, i, grad, gamma, implicit)
+        apply_factored(st, SQ, grad, Pg, t)
+        for k in range(13):
+            R[i, k] = st[TH + k] - h * Pg[k]
+    else:                               # fixed P on the tracking term, least squares on E
+        gain_step(row, p_diag, st, grad, h, R, i)
         for k in range(13):
             grad[k] = 0.0
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        apply_factored(S, grad, Pg, t)
+        apply_factored(st, SQ, grad, Pg, t)
         for k in range(13):
-            R[k] -= h * Pg[k]
-    else:
-        prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        if mode == ADAPT_GRADIENT:
-            gain_step(row, p_diag, theta, grad, h, R)
-        else:
-            apply_factored(S, grad, Pg, t)
-            for k in range(13):
-                R[k] = theta[k] - h * Pg[k]
+            R[i, k] -= h * Pg[k]
     if not implicit:
         return
     for c in range(chan.shape[0]):
-        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c]):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
             continue
-        f = filt[c, i]
         if mode == ADAPT_GRADIENT:
-            gain_apply(row, p_diag, f[WR:WR + 13], f[UR:UR + 13])
+            gain_apply(row, p_diag, filt, c, i)
         else:
-            apply_factored(S, f[WR:WR + 13], f[UR:UR + 13], t)
+            for k in range(13):
+                grad[k] = filt[c, i, WR + k]
+            apply_factored(st, SQ, grad, Pg, t)
+            for k in range(13):
+                filt[c, i, UR + k] = Pg[k]
 
 
 @njit(cache=True)
@@ -190,64 +183,71 @@ def implicit_solve(chan, filt, state, R, scal):
             na += 1
     if na == 1:
         c = active[0]
+        c0 = channel_start(chan, c)
         WR_ = 0.0
         WU = 0.0
-        for i in range(channel_start(chan[c]), n):
-            f = filt[c, i]
+        for i in range(c0, n):
             for k in range(13):
-                WR_ += f[WR + k] * R[i, k]
-                WU += f[WR + k] * f[UR + k]
+                WR_ += filt[c, i, WR + k] * R[i, k]
+                WU += filt[c, i, WR + k] * filt[c, i, UR + k]
         kc = scal[I_H] * scal[I_GAMMA] * WR_ / (1.0 + scal[I_H] * scal[I_GAMMA] * WU)
         for i in range(n):
             for k in range(13):
-                state[i, TH + k] = R[i, k]
-        for i in range(channel_start(chan[c]), n):
-            f = filt[c, i]
-            for k in range(13):
-                state[i, TH + k] = R[i, k] - kc * f[UR + k]
+                state[i, TH + k] = R[i, k] if i < c0 else R[i, k] - kc * filt[c, i, UR + k]
         return
     for i in range(n):
         for k in range(13):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    A = np.empty((na, na), R.dtype)
-    z = np.empty(na, R.dtype)
+    # link by link (the m rows of W_i and U_i are at hand), lower triangle only: A is
+    # symmetric and the Cholesky factorisation reads no more
+    start = np.empty(na, np.int64)
     for a in range(na):
-        ca = active[a]
-        sa = channel_start(chan[ca])
-        acc = 0.0
-        for i in range(sa, n):
+        start[a] = channel_start(chan, active[a])
+    A = np.zeros((na, na), R.dtype)
+    z = np.zeros(na, R.dtype)
+    for i in range(n):
+        for a in range(na):
+            if i < start[a]:
+                continue
+            ca = active[a]
+            acc = z[a]
             for k in range(13):
                 acc += filt[ca, i, WR + k] * R[i, k]
-        z[a] = acc
-        for b in range(na):
-            cb = active[b]
-            acc = 0.0
-            for i in range(max(sa, channel_start(chan[cb])), n):
+            z[a] = acc
+            for b in range(a + 1):
+                if i < start[b]:
+                    continue
+                cb = active[b]
+                acc = A[a, b]
                 for k in range(13):
                     acc += filt[ca, i, WR + k] * filt[cb, i, UR + k]
-            A[a, b] = hg * acc
+                A[a, b] = acc
+    for a in range(na):
+        for b in range(a + 1):
+            A[a, b] *= hg
         A[a, a] += 1.0
     cholesky_solve(A, z)
-    for a in range(na):
-        ca = active[a]
-        za = hg * z[a]
-        for i in range(channel_start(chan[ca]), n):
+    for i in range(n):
+        for a in range(na):
+            if i < start[a]:
+                continue
+            za = hg * z[a]
+            ca = active[a]
             for k in range(13):
                 state[i, TH + k] -= za * filt[ca, i, UR + k]
 
 
 @njit(cache=True)
-def update_least_squares(chan, filt, const, state, scal, rows):
+def update_least_squares(chan, filt, const, state, scal, f, Sf):
     """The least-squares gain of each link: Potter's update with the active channels'
     rows, then bounded-gain forgetting (:mod:`rcac_ros.core.least_squares`)."""
     h = scal[I_H]
-    f, Sf = rows[4], rows[5]
     for i in range(state.shape[0]):
         S = state[i, SQ:SQ + 169]
         for c in range(chan.shape[0]):
-            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c]):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan, c):
                 potter_update(S, filt[c, i, WR:WR + 13], h, f, Sf)
         bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
@@ -279,8 +279,12 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
     R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
-    rows = work[41 * n:41 * n + 78].reshape((6, 13))
+    phi, psi, tmp = work[41 * n:41 * n + 13], work[41 * n + 13:41 * n + 26], \
+        work[41 * n + 26:41 * n + 39]
+    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
+        work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
     start_channels(chan, state, scal, q, first)
@@ -306,7 +310,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
         regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
                       dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                       wx, wy, wz, gx, gy, gz)
-        predict_link(chan, filt, i, C, row, qd[i], V, g, st[TH:TH + 13], scal, first, rows)
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, phi, psi, tmp)
     close_channels(chan, scal)
     tracking = tracking_active(const, scal, q, qd, q_d, qd_d)
     scal[I_TRACKING] = 1.0 if tracking else 0.0
@@ -321,7 +325,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
                 C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
         feedback_wrench(row, Fs[i], st[S0:S0 + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
         tau[i] = F[5]                                                              # eq 20
-        adapt_link(row, st, chan, filt, i, G[i], scal, tracking, R[i], rows)
+        adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
     if scal[I_IMPLICIT] != 0.0:
         implicit_solve(chan, filt, state, R, scal)
     else:
@@ -329,7 +333,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
             for k in range(13):
                 state[i, TH + k] = R[i, k]
     if scal[I_ADAPT] != ADAPT_GRADIENT:
-        update_least_squares(chan, filt, const, state, scal, rows)
+        update_least_squares(chan, filt, const, state, scal, grad, Pg)
     if scal[I_PROJECT] != 0.0:
         project(const, state)
     for i in range(n):
