@@ -39,7 +39,7 @@ from numba import njit
 from ._packing import (CH_A, CH_AD, CH_JOINT, CH_Y, I_FB0, I_FE, I_H, PHF, PHP, POWER, PSF,
                        PSP, QPREV, TAU, TH, WR)
 from .exceptions import GainError
-from .regressor import bias_row, momentum_row
+from .regressor import bias_terms, momentum_terms
 from .spatial import propagate
 
 #: The value of ``channels`` that gives every joint.
@@ -116,7 +116,7 @@ def channel_axis(chan, c, i, C, px, py, pz, qd):
     """Propagate joint channel c's ``a_j``, ``adot_j`` to link i; False if it has not begun.
 
     ``a_k = z6``, ``adot_k = 0`` at the channel's joint k, then ``a_j = T_j a_j-1``,
-    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (NOTES.md 4).
+    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (NOTES.md 4). Kept in ``chan[c]``.
     """
     k = int(chan[c, CH_JOINT])
     if i < k:
@@ -139,59 +139,63 @@ def channel_axis(chan, c, i, C, px, py, pz, qd):
 
 
 @njit(cache=True)
-def joint_rows(chan, c, V, g, phi, psi, tmp):
-    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22)."""
+def joint_terms(chan, c, V, g):
+    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22),
+    as two 13-tuples."""
     vx, vy, vz, wx, wy, wz = V
     a0, a1, a2, a3, a4, a5 = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2],
                               chan[c, CH_A + 3], chan[c, CH_A + 4], chan[c, CH_A + 5])
     b0, b1, b2, b3, b4, b5 = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
                               chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
-    momentum_row(phi, a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz)
-    momentum_row(tmp, b0, b1, b2, b3, b4, b5, vx, vy, vz, wx, wy, wz)
-    bias_row(psi, a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
-    for k in range(13):
-        psi[k] = psi[k] - tmp[k]
+    phi = momentum_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz)
+    d = momentum_terms(b0, b1, b2, b3, b4, b5, vx, vy, vz, wx, wy, wz)
+    b = bias_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
+    psi = (b[0] - d[0], b[1] - d[1], b[2] - d[2], b[3] - d[3], b[4] - d[4], b[5] - d[5],
+           b[6] - d[6], b[7] - d[7], b[8] - d[8], b[9] - d[9], b[10] - d[10], b[11] - d[11],
+           b[12] - d[12])
+    return phi, psi
 
 
 @njit(cache=True)
-def power_rows(V, g, phi, psi):
-    """The energy channel: ``phi_j = 1/2 V_j^T Ym(V_j)``, ``psi_j = V_j^T G_j`` as rows.
+def power_terms(V, g):
+    """The energy channel: ``phi_j = 1/2 V_j^T Ym(V_j)``, ``psi_j = V_j^T G_j`` (13-tuples).
 
     ``V^T G = -(m v.g + w.(h x g)) = -m v.g + h.(w x g)`` (G of NOTES.md 2).
     """
     vx, vy, vz, wx, wy, wz = V
-    momentum_row(phi, vx, vy, vz, wx, wy, wz, vx, vy, vz, wx, wy, wz)
-    for k in range(13):
-        phi[k] *= 0.5
-        psi[k] = 0.0
     gx, gy, gz = g
-    psi[0] = -(vx * gx + vy * gy + vz * gz)
-    psi[1] = wy * gz - wz * gy
-    psi[2] = wz * gx - wx * gz
-    psi[3] = wx * gy - wy * gx
+    t = momentum_terms(vx, vy, vz, wx, wy, wz, vx, vy, vz, wx, wy, wz)
+    phi = (0.5 * t[0], 0.5 * t[1], 0.5 * t[2], 0.5 * t[3], 0.5 * t[4], 0.5 * t[5],
+           0.5 * t[6], 0.5 * t[7], 0.5 * t[8], 0.5 * t[9], 0.5 * t[10], 0.5 * t[11],
+           0.5 * t[12])
+    psi = (-(vx * gx + vy * gy + vz * gz), wy * gz - wz * gy, wz * gx - wx * gz,
+           wx * gy - wy * gx, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return phi, psi
 
 
 @njit(cache=True)
 def filter_rows(filt, c, i, phi, psi, first, coef, st, E):
     """Filter link i's rows of channel c (eq 23) and return ``E + W_ci theta_hat_i``.
 
-    ``coef`` = (exp(-lambda h), b0, b1, lambda); ``st`` is link i's state row.
-    ``phi^f`` and ``psi^f`` use a first-order hold on the samples; they start at ``phi(0)``
-    and 0 so that E is exact from the first step. Writes ``W_ci``.
+    ``phi``, ``psi`` are 13-tuples, ``coef`` = (exp(-lambda h), b0, b1, lambda), ``st``
+    link i's state row. ``phi^f`` and ``psi^f`` use a first-order hold on the samples; they
+    start at ``phi(0)`` and 0 so that E is exact from the first step. Writes ``W_ci``.
     """
     fe, fb0, fb1, lam = coef
     for k in range(13):
+        ph = phi[k]
+        ps = psi[k]
         if first:
-            filt[c, i, PHF + k] = phi[k]
+            filt[c, i, PHF + k] = ph
             filt[c, i, PSF + k] = 0.0
         else:
             php = filt[c, i, PHP + k]
             psp = filt[c, i, PSP + k]
-            filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (phi[k] - php)
-            filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (psi[k] - psp)
-        filt[c, i, PHP + k] = phi[k]
-        filt[c, i, PSP + k] = psi[k]
-        w = lam * (phi[k] - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
+            filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (ph - php)
+            filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
+        filt[c, i, PHP + k] = ph
+        filt[c, i, PSP + k] = ps
+        w = lam * (ph - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
         filt[c, i, WR + k] = w
         E += w * st[TH + k]
     return E

@@ -44,8 +44,8 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE,
                        LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
                        new_data)
 from ._validate import as_array, scalar
-from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_rows,
-                       parse_channels, power_rows)
+from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_terms,
+                       parse_channels, power_terms)
 from .exceptions import GainError
 from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
                             potter_update)
@@ -74,13 +74,13 @@ def start_channels(chan, state, scal, q, first):
 
 
 @njit(cache=True)
-def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, phi, psi, tmp):
+def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
     """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
     for c in range(chan.shape[0]):
         if chan[c, CH_JOINT] == POWER:
-            power_rows(V, g, phi, psi)
+            phi, psi = power_terms(V, g)
         elif channel_axis(chan, c, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
-            joint_rows(chan, c, V, g, phi, psi, tmp)
+            phi, psi = joint_terms(chan, c, V, g)
         else:
             continue
         chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
@@ -279,8 +279,6 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
     R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
-    phi, psi, tmp = work[41 * n:41 * n + 13], work[41 * n + 13:41 * n + 26], \
-        work[41 * n + 26:41 * n + 39]
     grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
         work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
@@ -310,7 +308,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
         regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
                       dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                       wx, wy, wz, gx, gy, gz)
-        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, phi, psi, tmp)
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first)
     close_channels(chan, scal)
     tracking = tracking_active(const, scal, q, qd, q_d, qd_d)
     scal[I_TRACKING] = 1.0 if tracking else 0.0
