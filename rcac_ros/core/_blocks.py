@@ -45,7 +45,7 @@ def input_error(scal, n, values):
     return InputError(f"{name}: contains NaN or Inf")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
     """Link i's ``V_i`` (eq 9), ``V_ri``, ``Vdot_ri`` (eq 18) and gravity from link i-1's.
 
@@ -62,7 +62,7 @@ def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
     return (vx, vy, vz, wx, wy, wz + qd), Vr, Vdr, rotate(C, i, g[0], g[1], g[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def feedback_wrench(row, Fs, s, kd_diag, F):
     """Eq 19b's link terms, added to ``F`` (6, in place): ``Y_ri theta_hat_i + K_Di (V_ri - V_i)``.
 
@@ -78,7 +78,7 @@ def feedback_wrench(row, Fs, s, kd_diag, F):
         F[r] += acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gain_step(row, p_diag, st, grad, h, R, i):
     """``R_i = theta_hat_i - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part).
 
@@ -95,7 +95,7 @@ def gain_step(row, p_diag, st, grad, h, R, i):
             R[i, a] = st[TH + a] - h * acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def gain_apply(row, p_diag, filt, c, i):
     """``U_ci = P_i W_ci^T`` with the fixed gain ``P_i``."""
     if p_diag:

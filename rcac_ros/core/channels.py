@@ -111,7 +111,7 @@ def first_link(code):
     return 0 if code == POWER else int(code)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def channel_axis(chan, c, i, C, px, py, pz, qd):
     """Propagate joint channel c's ``a_j``, ``adot_j`` to link i; False if it has not begun.
 
@@ -138,7 +138,7 @@ def channel_axis(chan, c, i, C, px, py, pz, qd):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def joint_terms(chan, c, V, g):
     """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22),
     as two 13-tuples."""
@@ -156,7 +156,7 @@ def joint_terms(chan, c, V, g):
     return phi, psi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def power_terms(V, g):
     """The energy channel: ``phi_j = 1/2 V_j^T Ym(V_j)``, ``psi_j = V_j^T G_j`` (13-tuples).
 
@@ -173,7 +173,7 @@ def power_terms(V, g):
     return phi, psi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def filter_rows(filt, c, i, phi, psi, first, coef, st, E):
     """Filter link i's rows of channel c (eq 23) and return ``E + W_ci theta_hat_i``.
 
@@ -201,7 +201,7 @@ def filter_rows(filt, c, i, phi, psi, first, coef, st, E):
     return E
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def filtered_output(chan, c, state, scal, q, first):
     """``y_c``: the applied ``c^T tau`` of the last period through the filter (zero-order hold).
 

@@ -59,13 +59,13 @@ ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def channel_start(chan, c):
     """The first link (0-based) channel c reaches."""
     return 0 if chan[c, CH_JOINT] == POWER else int(chan[c, CH_JOINT])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def start_channels(chan, state, scal, q, first):
     """Each ``y_c`` for this step (the filtered applied output), ``E_c`` reset to 0."""
     for c in range(chan.shape[0]):
@@ -73,7 +73,7 @@ def start_channels(chan, state, scal, q, first):
         chan[c, CH_E] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
     """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
     for c in range(chan.shape[0]):
@@ -86,7 +86,7 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
         chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def close_channels(chan, scal):
     """``E_c -= y_c`` and the dead zone on E: a channel adapts only if ``|E_c| > dz``."""
     dz = scal[I_DZ_E]
@@ -97,7 +97,7 @@ def close_channels(chan, scal):
     scal[I_Y] = chan[0, CH_Y]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def tracking_active(const, scal, q, qd, q_d, qd_d):
     """The dead zone on s: the tracking term adapts only if ``max |qd - qd_r| > dz``."""
     dz = scal[I_DZ_S]
@@ -109,7 +109,7 @@ def tracking_active(const, scal, q, qd, q_d, qd_d):
     return worst > dz
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def prediction_gradient(chan, filt, i, grad, gamma, implicit):
     """Add the prediction term to ``grad``: ``- gamma W_ci^T y_c`` (implicit: the rest is
     solved) or ``+ gamma W_ci^T E_c`` (explicit), over the active channels."""
@@ -126,7 +126,7 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
                 grad[k] += gamma * filt[c, i, WR + k] * e
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
     """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + prediction part)``,
     and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares)."""
@@ -167,7 +167,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
                 filt[c, i, UR + k] = Pg[k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def implicit_solve(chan, filt, state, R, scal):
     """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
 
@@ -239,7 +239,7 @@ def implicit_solve(chan, filt, state, R, scal):
                 state[i, TH + k] -= za * filt[ca, i, UR + k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def update_least_squares(chan, filt, const, state, scal, f, Sf):
     """The least-squares gain of each link: Potter's update with the active channels'
     rows, then bounded-gain forgetting (:mod:`rcac_ros.core.least_squares`)."""
@@ -252,7 +252,7 @@ def update_least_squares(chan, filt, const, state, scal, f, Sf):
         bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def project(const, state):
     """Projection: ``theta_hat_i`` clipped to ``[theta_min_i, theta_max_i]``."""
     for i in range(state.shape[0]):
