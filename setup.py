@@ -13,7 +13,6 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
     ],
-    package_data={package_name: ["data/*.yaml"]},
     install_requires=["setuptools", "numpy", "numba", "pyyaml", "matplotlib", "rosbags",
                       "yourdfpy"],
     zip_safe=True,
@@ -24,7 +23,7 @@ setup(
     extras_require={"test": ["pytest"]},
     entry_points={
         "console_scripts": [
-            "rcac = rcac_ros.cli:main",
+            "rcac = rcac_ros.tools.cli:main",
             "controller = rcac_ros.nodes.controller_node:main",
             "simulator = rcac_ros.nodes.simulator_node:main",
         ],

@@ -1,9 +1,9 @@
 """The ROS interface contract shared by the nodes, the recorder, the inspector and the demo.
 
-Topic names are relative, so they follow the node namespace and remappings.
+Names, quality of service and the lockstep tag of an effort message, in one place.
+Topic names are relative, so they follow the node namespace and remappings. This module
+imports neither rclpy nor numba at import time: the bag inspector uses it offline.
 """
-
-from rcac_ros.core.model import PARAMETER_NAMES
 
 CONTROLLER_NODE = "rcac_controller"
 SIMULATOR_NODE = "rcac_simulator"
@@ -28,9 +28,53 @@ DIAGNOSTICS = "/diagnostics"
 #: rosgraph_msgs/Clock, published by the simulator
 CLOCK = "/clock"
 
-PARAMETER_LABELS = PARAMETER_NAMES
+# ------------------------------------------------------------------ quality of service
+#: keep-last depth of the control topics: reliable, keep-last 10, what ros2_control uses
+#: (ROS_NOTES "QoS")
+DEPTH = 10
+#: the same, keep-last 1000, for the topics a recorder or a test reads (2 s at 500 Hz): a slow
+#: subscriber catches up instead of losing samples. Depth does not affect QoS compatibility.
+MONITOR_DEPTH = 1000
 
 
-def controller_topic(name):
-    """Absolute name of a controller-private topic (``~/x`` -> ``/rcac_controller/x``)."""
-    return f"/{CONTROLLER_NODE}/{name[2:]}" if name.startswith("~/") else f"/{name}"
+def qos(depth=DEPTH, reliable=True):
+    """A keep-last ``rclpy.qos.QoSProfile`` (rclpy is imported only when this is called)."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable
+                      else ReliabilityPolicy.BEST_EFFORT)
+
+
+# ------------------------------------------------------------------ effort tag
+#: label of the single dimension of an effort message; in lockstep the controller appends
+#: ``" stamp=SEC.NANOSEC"`` (the stamp of the state it answers) or ``" watchdog"``.
+#: Consumers that ignore the layout (ros2_control) are unaffected.
+EFFORT_LABEL = "joint"
+_STAMP = " stamp="
+_WATCHDOG = " watchdog"
+
+
+def effort_label(stamp=None, watchdog=False):
+    """The label of an effort message's dimension.
+
+    ``stamp`` (a builtin_interfaces/Time) tags the effort as the answer to that state;
+    ``watchdog`` tags a safe effort sent because no state arrived.
+    """
+    if watchdog:
+        return EFFORT_LABEL + _WATCHDOG
+    if stamp is not None:
+        return f"{EFFORT_LABEL}{_STAMP}{stamp.sec}.{stamp.nanosec:09d}"
+    return EFFORT_LABEL
+
+
+def effort_tag(label):
+    """Read an effort label: ``("stamp", ns)``, ``("watchdog", None)`` or ``None`` (untagged)."""
+    if label.endswith(_WATCHDOG):
+        return ("watchdog", None)
+    if _STAMP in label:
+        sec, _, nsec = label.split(_STAMP, 1)[1].partition(".")
+        try:
+            return ("stamp", int(sec) * 1_000_000_000 + int(nsec))
+        except ValueError:
+            return None
+    return None

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from ._packing import I_ERR, KD0, LAM, PG0, TH, UR, WR
-from .exceptions import InputError
+from rcac_ros.errors import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
 INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from ._validate import per_link_matrix, positive_vector, scalar
-from .exceptions import GainError
+from rcac_ros.errors import GainError
 from .spatial import P0, RF0
 
 # ---- per-link constants: data[i, :CONST_COLS] ----------------------------------------------

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .exceptions import InputError
+from rcac_ros.errors import InputError
 
 
 def as_array(value, shape, name, exc=InputError):

@@ -14,7 +14,7 @@ from numba import njit
 from ._validate import joint_vectors
 from .crba import congruence_to_parent, spatial_inertia
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T, \
+from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T, \
     transform_motion, z_cross_rate
 
 
@@ -95,4 +95,4 @@ def forward_dynamics(model, q, qd, tau):
         If a vector has the wrong length or holds NaN/Inf.
     """
     q, qd, tau = joint_vectors(model.n, q=q, qd=qd, tau=tau)
-    return aba_kernel(model_rows(model), model.gravity, q, qd, tau)
+    return aba_kernel(model.packed, model.gravity, q, qd, tau)

@@ -38,7 +38,7 @@ from numba import njit
 
 from ._packing import (CH_A, CH_AD, CH_JOINT, CH_Y, I_FB0, I_FE, I_H, PHF, PHP, POWER, PSF,
                        PSP, QPREV, TAU, TH, WR)
-from .exceptions import GainError
+from rcac_ros.errors import GainError
 from .regressor import bias_terms, momentum_terms
 from .spatial import propagate
 

@@ -4,7 +4,7 @@ import numpy as np
 from numba import njit
 
 from ._validate import joint_vectors
-from .spatial import P0, RF0, TH0, joint_rotation, model_rows, transform_force_T
+from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T
 
 
 @njit(cache=True)
@@ -95,4 +95,4 @@ def mass_matrix(model, q):
         If ``q`` has the wrong length or holds NaN/Inf.
     """
     (q,) = joint_vectors(model.n, q=q)
-    return crba_kernel(model_rows(model), q)
+    return crba_kernel(model.packed, q)

@@ -17,8 +17,9 @@ import os
 import numpy as np
 import yaml
 
+from rcac_ros.errors import ConfigError, ModelError
 from ._validate import as_array, joint_values
-from .exceptions import ConfigError, ModelError
+from .spatial import pack_kinematics
 
 #: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, NOTES.md 2).
 PARAMETER_NAMES = (
@@ -144,9 +145,11 @@ class RobotModel:
             raise ModelError(f"position_lower[{bad[0]}]: above position_upper[{bad[0]}]")
         self._theta = np.array([theta_from_inertia(self.mass[i], self.com[i], self.inertia[i])
                                 for i in range(n)])
+        #: (n, 25) the rows the compiled kernels read: p, R_fix, theta (:mod:`.spatial`)
+        self.packed = pack_kinematics(self)
         for arr in (self.p, self.R_fix, self.mass, self.com, self.inertia, self.gravity,
                     self.effort_limit, self.velocity_limit, self.position_lower,
-                    self.position_upper, self._theta):
+                    self.position_upper, self._theta, self.packed):
             arr.setflags(write=False)
 
     @property
@@ -204,16 +207,6 @@ class RobotModel:
         except yaml.YAMLError as err:
             raise ConfigError(f"{path}: not valid YAML ({err})") from None
         return cls.from_dict(doc, source=os.fspath(path))
-
-    @classmethod
-    def from_urdf(cls, path_or_xml, base_link=None, tip_link=None, **kwargs):
-        """Load the serial chain from ``base_link`` to ``tip_link`` of a URDF (file or XML string).
-
-        See :func:`rcac_ros.core.urdf.model_from_urdf` (``gravity``, ``name``,
-        ``triangle_tolerance`` pass through).
-        """
-        from .urdf import model_from_urdf
-        return model_from_urdf(path_or_xml, base_link=base_link, tip_link=tip_link, **kwargs)
 
     @classmethod
     def from_dict(cls, doc, source="model"):
@@ -337,6 +330,11 @@ def _inertia(value, name):
 #: The paper's initial position of the CSS arm (Section 4), rad.
 PAPER_Q0 = (0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3, math.pi / 2, 0.3)
 
+#: The paper's gains (Section 4) and the filter bandwidth ``lambda`` it leaves open, as keyword
+#: arguments of the controllers (``lam`` is the paper's lambda, a Python keyword; the node's
+#: parameter is ``lambda``); ``h`` is the control period, s.
+PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
+
 #: Table 1 link lengths a1..a8 (Section 4), metres.
 CSS_LENGTHS = dict(a1=0.5, a2=0.5, a3=4.0, a4=0.5, a5=4.0, a6=0.5, a7=0.5, a8=1.0)
 
@@ -362,3 +360,7 @@ def css_arm(gravity=(0.0, 0.0, 0.0)):
                                     [2, 2, 200], [2, 2, 200], [2, 2, 200])]
     return RobotModel(p, R_fix, mass, com, inertia, gravity, name="css_arm",
                       check_triangle=False)
+
+
+#: Model presets by name (the ``model`` parameter of the nodes, ``rcac inspect --model``).
+PRESETS = {"css_arm": css_arm}

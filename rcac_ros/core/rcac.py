@@ -46,7 +46,7 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE,
 from ._validate import as_array, scalar
 from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_terms,
                        parse_channels, power_terms)
-from .exceptions import GainError
+from rcac_ros.errors import GainError
 from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
                             potter_update)
 from .regressor import reference_wrench, regressor_row
@@ -519,10 +519,6 @@ class RecursiveCompositeController:
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
-
-    def kernel_arguments(self):
-        """``(kernel, arrays)``: the compiled step and its state arrays (for the op counter)."""
-        return rcac_step_kernel, (self._data, self._filt, self._chan)
 
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.

@@ -5,7 +5,7 @@ from numba import njit
 
 from ._validate import joint_vectors
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, model_rows, propagate, rotate, \
+from .spatial import P0, RF0, TH0, joint_rotation, propagate, rotate, \
     transform_force_T
 
 
@@ -64,4 +64,4 @@ def inverse_dynamics(model, q, qd, qdd):
         If a vector has the wrong length or holds NaN/Inf.
     """
     q, qd, qdd = joint_vectors(model.n, q=q, qd=qd, qdd=qdd)
-    return rnea_kernel(model_rows(model), model.gravity, q, qd, qdd)
+    return rnea_kernel(model.packed, model.gravity, q, qd, qdd)

@@ -5,8 +5,7 @@ from numba import njit
 
 from ._validate import as_array, joint_values, scalar
 from .aba import aba_kernel
-from .exceptions import InputError
-from .spatial import model_rows
+from rcac_ros.errors import InputError
 
 
 @njit(cache=True)
@@ -58,7 +57,7 @@ class Simulator:
         self.effort_limit = joint_values(limit, model.n, "effort_limit", finite=False)
         if np.any(self.effort_limit <= 0.0):
             raise InputError("effort_limit: every entry must be > 0")
-        self._kin = model_rows(model)
+        self._kin = model.packed
         self.reset(q0, qd0)
 
     def reset(self, q0=None, qd0=None, t=0.0):

@@ -32,7 +32,7 @@ from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_erro
 from ._packing import (CONST_COLS, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H,
                        I_IMPLICIT, I_K, I_LAM, I_Y, KD0, LAM, PG0, Gains, new_data)
 from ._validate import as_array
-from .exceptions import GainError
+from rcac_ros.errors import GainError
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
@@ -270,11 +270,6 @@ class SlotineLiCompositeController:
         """Current estimates, shape (n, 13) (a copy)."""
         return self._theta.reshape(self.n, 13).copy()
 
-    def kernel_arguments(self):
-        """``(kernel, arrays)``: the compiled step and its state arrays (for the op counter)."""
-        return slotine_li_step_kernel, (self._data, self._theta, self._filt)
-
-    @property
     def E(self):
         """Prediction errors ``e`` of the n filtered joint torques at the last step (eq 6)."""
         return self._filt[2, :, 13 * self.n].copy()

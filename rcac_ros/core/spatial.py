@@ -4,13 +4,13 @@ Motion vectors are ``V = [v; w]`` and force vectors ``F = [f; n]``: linear part
 first (NOTES.md 1). Frame ``i`` is reached from frame ``i-1`` by ``p_i``, then
 ``R_fix_i``, then ``Rz(q_i)``; ``C = iC_{i-1} = (R_fix_i Rz(q_i))^T``.
 
-The packed per-link model row (``RobotModel`` is unpacked once into this
-layout, see :func:`pack_kinematics`) is ``[p (3), R_fix row-major (9), theta (13)]``.
+The packed per-link model row (``RobotModel`` is unpacked once into this layout, its
+field ``packed``, see :func:`pack_kinematics`) is ``[p (3), R_fix row-major (9), theta (13)]``.
 
 All kernels are scalar code compiled by numba with ``cache=True``. They never
 allocate from another dtype than their inputs, so running them with
 ``NUMBA_DISABLE_JIT=1`` on object arrays counts their arithmetic exactly
-(:mod:`rcac_ros.core.opcount`).
+(:mod:`rcac_ros.tools.opcount`).
 """
 
 import math
@@ -23,22 +23,16 @@ P0, RF0, TH0, KIN_COLS = 0, 3, 12, 25
 
 
 def pack_kinematics(model):
-    """Pack ``model`` into the (n, 25) row layout the kernels read: p, R_fix, theta."""
+    """Pack ``model`` into the (n, 25) row layout the kernels read: p, R_fix, theta.
+
+    :class:`~rcac_ros.core.model.RobotModel` calls it once and keeps the result in its
+    ``packed`` field (read-only, as the model is immutable).
+    """
     buf = np.empty((model.n, KIN_COLS))
     buf[:, P0:P0 + 3] = model.p
     buf[:, RF0:RF0 + 9] = model.R_fix.reshape(model.n, 9)
     buf[:, TH0:TH0 + 13] = model.theta()
     return buf
-
-
-def model_rows(model):
-    """The packed rows of ``model``, built once and kept on it (the model is immutable)."""
-    rows = model.__dict__.get("_packed_rows")
-    if rows is None:
-        rows = pack_kinematics(model)
-        rows.setflags(write=False)
-        model.__dict__["_packed_rows"] = rows
-    return rows
 
 
 @njit(cache=True)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ._validate import as_array, joint_values, scalar
-from .exceptions import InputError
+from rcac_ros.errors import InputError
 
 
 class PaperTrajectory:

@@ -28,8 +28,8 @@ import os
 
 import numpy as np
 
-from .exceptions import ConfigError, ModelError
-from .model import RobotModel, check_inertia
+from rcac_ros.errors import ConfigError, ModelError
+from .model import check_inertia, RobotModel
 
 #: Joint types that become a degree of freedom of the chain.
 MOVING_TYPES = ("revolute", "continuous")

@@ -7,7 +7,7 @@ Two modes:
   steps when the effort answering state k arrives, or after ``lockstep_timeout``
   (the previous effort held, a miss counted). Deterministic on a loaded machine.
 * ``realtime``: free-running every ``dt`` on absolute deadlines of the steady clock
-  (:class:`rcac_ros.nodes.common.DeadlineLoop`: a late step is caught up, not skipped),
+  (:class:`rcac_ros.nodes.pacing.DeadlineLoop`: a late step is caught up, not skipped),
   the latest effort held; never paced on ROS time (see ROS_NOTES).
 
 Parameters are documented in ``config/simulator.yaml``.
@@ -17,40 +17,32 @@ import sys
 import time
 
 from builtin_interfaces.msg import Time as TimeMsg
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError, RcacError
+from rcac_ros import params, topics
 from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.core.simulator import Simulator
-from rcac_ros.nodes.common import (DeadlineLoop, declare, declare_joints, declare_model,
-                                   effort_tag, per_joint, positive, QOS, QOS_MONITOR, run,
-                                   RcacNode)
+from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes.base import QOS, QOS_MONITOR, RcacNode, run
+from rcac_ros.nodes.pacing import DeadlineLoop
 
 NS = 1_000_000_000
-BIG_NOISE = 1e6
 
 
 class SimulatorNode(RcacNode):
     """The arm simulator as a ROS 2 node.
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``, ...).
-
-    Raises
-    ------
-    ConfigError
-        At construction, on an invalid parameter (the message names it).
+    Constructed as :class:`~rcac_ros.nodes.base.RcacNode` (keyword arguments of
+    :class:`rclpy.node.Node`; :class:`ConfigError` naming an invalid parameter).
     """
+
+    PARAMETERS = params.SIMULATOR
 
     def __init__(self, **kwargs):
         super().__init__(topics.SIMULATOR_NODE, **kwargs)
@@ -75,7 +67,6 @@ class SimulatorNode(RcacNode):
         self.loop = DeadlineLoop(self.dt, self._on_tick) if self.mode == "realtime" else None
         self._pub_state = self.create_publisher(JointState, topics.JOINT_STATES, QOS_MONITOR)
         self._pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, QOS)
-        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self._sub = self.create_subscription(Float64MultiArray, topics.EFFORT_COMMANDS,
                                              self._on_effort, QOS)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -83,71 +74,33 @@ class SimulatorNode(RcacNode):
         if self.mode == "lockstep":
             self.create_timer(min(self.lockstep_timeout / 5.0, 0.005), self._check_timeout,
                               clock=steady)
-        self.create_timer(self.diagnostics_period, self._publish_diagnostics, clock=steady)
         self.get_logger().info(
             f"{self.mode} mode, model {self.model.name} (n={n}), dt={self.dt * 1e3:g} ms, "
             f"duration {'unlimited' if self.duration == 0 else f'{self.duration:g} s'}")
 
     # ------------------------------------------------------------------ parameters
-    def _read_parameters(self):
-        self.model = declare_model(self)
+    def _read_parameters(self, v):
         n = self.model.n
-        self.joints = declare_joints(self, self.model)
-        self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
-        self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
-        self.mode = declare(self, "mode", "lockstep",
-                            "'lockstep' (step when the effort for the last state arrives) or "
-                            "'realtime' (steady-clock timer)", constraints="lockstep | realtime")
-        if self.mode not in ("lockstep", "realtime"):
-            raise ConfigError(f"mode: must be 'lockstep' or 'realtime', got {self.mode!r}")
-        self.dt = positive("dt", declare(self, "dt", 0.002, "integration (and control) period, "
-                                         "s", lo=0.0, hi=10.0))
+        self.mode = v["mode"]
+        self.dt = v["dt"]
         self.dt_ns = round(self.dt * NS)
-        substeps = declare(self, "substeps", 1, "RK4 steps per dt", lo=1, hi=1000)
-        self.duration = declare(self, "duration", 0.0, "stop (exit 0) after this much sim "
-                                "time, s; 0 = run forever", lo=0.0, hi=1e9)
-        if self.duration < 0.0:
-            raise ConfigError(f"duration: must be >= 0, got {self.duration}")
-        self.lockstep_timeout = positive("lockstep_timeout", declare(
-            self, "lockstep_timeout", 0.5, "lockstep: wait this long (wall time) for the "
-            "effort, then hold the previous one and count a miss, s", lo=0.0, hi=3600.0))
-        self.wait_for_controller = declare(
-            self, "wait_for_controller", True, "start only once a node subscribes to "
-            "joint_states and publishes efforts")
-        self.min_subscribers = declare(
-            self, "min_subscribers", 1, "with wait_for_controller: also wait for this many "
-            "joint_states subscribers (e.g. 2 = the controller and a recorder)", lo=1, hi=1000)
-        q0 = declare(self, "q0", Parameter.Type.DOUBLE_ARRAY,
-                     "initial positions, rad, in joints order (unset: the paper's q0 for "
-                     "css_arm, else zero)")
-        qd0 = declare(self, "qd0", Parameter.Type.DOUBLE_ARRAY,
-                      "initial velocities, rad/s, in joints order (unset: zero)")
-        if q0 is None and self.model.name == "css_arm" and n == len(PAPER_Q0):
+        self.duration = v["duration"]
+        self.lockstep_timeout = v["lockstep_timeout"]
+        self.wait_for_controller = v["wait_for_controller"]
+        self.min_subscribers = v["min_subscribers"]
+        if v["q0"] is None and self.model.name == "css_arm" and n == len(PAPER_Q0):
             self.q0 = np.array(PAPER_Q0)        # already in model order
         else:
-            self.q0 = per_joint("q0", q0, n, 0.0)[self._order]
-        self.qd0 = per_joint("qd0", qd0, n, 0.0)[self._order]
-        self.position_noise = declare(self, "position_noise", 0.0, "std dev of the noise "
-                                      "added to published positions, rad", lo=0.0, hi=BIG_NOISE)
-        self.velocity_noise = declare(self, "velocity_noise", 0.0, "std dev of the noise "
-                                      "added to published velocities, rad/s", lo=0.0,
-                                      hi=BIG_NOISE)
-        for name in ("position_noise", "velocity_noise"):
-            positive(name, getattr(self, name), strict=False)
-        self.noise_seed = declare(self, "noise_seed", 0, "seed of the measurement noise",
-                                  lo=0, hi=2 ** 31 - 1)
-        self.publish_velocity = declare(self, "publish_velocity", True,
-                                        "fill JointState.velocity (false: positions only)")
-        limit = declare(self, "effort_limit", Parameter.Type.DOUBLE_ARRAY,
-                        "efforts are clipped to +-effort_limit, N m, in joints order "
-                        "(unset: the model's)")
-        limit = per_joint("effort_limit", limit, n, None, strict_positive=True)
-        self.diagnostics_period = positive("diagnostics_period", declare(
-            self, "diagnostics_period", 1.0, "diagnostics period, s (steady clock)", lo=0.0,
-            hi=3600.0))
+            self.q0 = params.per_joint("q0", v["q0"], n, 0.0)[self._order]
+        self.qd0 = params.per_joint("qd0", v["qd0"], n, 0.0)[self._order]
+        self.position_noise = v["position_noise"]
+        self.velocity_noise = v["velocity_noise"]
+        self.noise_seed = v["noise_seed"]
+        self.publish_velocity = v["publish_velocity"]
+        limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
         try:
             self.sim = Simulator(self.model, dt=self.dt, q0=self.q0, qd0=self.qd0,
-                                 substeps=substeps,
+                                 substeps=v["substeps"],
                                  effort_limit=None if limit is None else limit[self._order])
         except RcacError as err:
             raise ConfigError(f"simulator: {err}") from None
@@ -232,7 +185,7 @@ class SimulatorNode(RcacNode):
             return
         if not self.started or self.finished or self._waiting_since is None:
             return
-        tag = effort_tag(msg)
+        tag = topics.effort_tag(msg.layout.dim[0].label) if msg.layout.dim else None
         if tag is not None and tag[0] == "watchdog":
             self.ignored_watchdog += 1
             return
@@ -280,16 +233,8 @@ class SimulatorNode(RcacNode):
             "ignored_watchdog_efforts": self.ignored_watchdog,
             "rejected_messages": self._throttle.total, **pacing,
         }
-        return DiagnosticStatus(
-            level=level, name=f"{self.get_name()}: simulation",
-            message="waiting for a controller" if not self.started else "running",
-            hardware_id=self.model.name,
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-
-    def _publish_diagnostics(self):
-        msg = DiagnosticArray(status=[self.diagnostics()])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self._pub_diag.publish(msg)
+        return self.status(level, "simulation",
+                           "waiting for a controller" if not self.started else "running", values)
 
     def on_shutdown(self):
         """Nothing to send on an interrupt: just report."""

@@ -13,12 +13,12 @@ from test_nodes_support import (DEEP, JOINTS, NS, PAPER_Q0, Probe, ros_context, 
 
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from rcac_ros.core.model import css_arm  # noqa: E402
+from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
 from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CONFIG = os.path.join(ROOT, "config")
 DURATION = 3.0
 H = 0.002
@@ -58,8 +58,7 @@ def offline(steps, reading="velocity"):
     """The experiment without ROS: core Simulator + controller, same settings, same loop."""
     model = css_arm()
     sim = Simulator(model, dt=H, q0=PAPER_Q0)
-    ctrl = RecursiveCompositeController(model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1,
-                                        lam=10.0, h=H)
+    ctrl = RecursiveCompositeController(model, **dict(PAPER_GAINS, h=H))   # = controller.yaml
     traj = PaperTrajectory(PAPER_Q0, reading=reading)
     qs, errs = [], []
     for k in range(steps + 1):

@@ -8,12 +8,14 @@
   accelerations), chosen per segment from what both ends give.
 * After the last point the last position is held (zero velocity and acceleration).
 
-Pure numpy: no rclpy types beyond reading the message fields.
+:class:`DesiredMotion` is the controller's desired motion: the paper's, or the topic's
+trajectories after a hold. Pure numpy: no rclpy types beyond reading the message fields.
 """
 
 import numpy as np
 
-from rcac_ros.core.exceptions import InputError
+from rcac_ros.core.trajectory import PaperTrajectory
+from rcac_ros.errors import InputError
 
 
 class TrajectoryRejected(InputError):
@@ -155,3 +157,63 @@ class ActiveTrajectory:
         pick = (lambda a, i: None if a is None else a[i])  # noqa: E731
         return segment(t - pts[k], pts[k + 1] - pts[k], self.pos[k], self.pos[k + 1],
                        pick(vel, k), pick(vel, k + 1), pick(acc, k), pick(acc, k + 1))
+
+
+class DesiredMotion:
+    """The controller's desired ``(q_d, qd_d, qdd_d)`` over time.
+
+    It starts at the first :meth:`sample`: from ``q0`` (or the measured ``q`` then), the
+    paper's motion when ``paper`` is given, else a hold of that position until
+    :meth:`follow` starts a trajectory of the topic.
+
+    Parameters
+    ----------
+    paper : dict, optional
+        Keyword arguments of :class:`~rcac_ros.core.trajectory.PaperTrajectory`
+        (``reading``, ``amplitude``, ``period``); ``None``: trajectories from the topic.
+    q0 : ndarray (n,), optional
+        Start position (model order); ``None``: the state measured at the first sample.
+    """
+
+    def __init__(self, paper=None, q0=None):
+        self._paper_args = paper
+        self._q0 = q0
+        self._t0 = None         # time origin, ns
+        self._paper = None
+        self._hold = None       # desired state held before a topic trajectory
+        #: the :class:`ActiveTrajectory` followed, if any
+        self.active = None
+        #: the last desired ``(q_d, qd_d)``
+        self.last = None
+
+    def sample(self, t_ns, q):
+        """Desired ``(q_d, qd_d, qdd_d)`` at ``t_ns``; ``q`` is the measured position."""
+        if self._t0 is None:
+            self._t0 = t_ns
+            q_start = q if self._q0 is None else self._q0
+            zero = np.zeros_like(q_start)
+            self._hold = (q_start.copy(), zero, zero.copy())
+            if self._paper_args is not None:
+                self._paper = PaperTrajectory(q_start, **self._paper_args)
+        if self._paper is not None:
+            desired = self._paper((t_ns - self._t0) * 1e-9)
+        elif self.active is not None:
+            desired = self.active.sample(t_ns)
+        else:
+            desired = self._hold
+        self.last = desired[:2]
+        return desired
+
+    def follow(self, parsed, now_ns, q):
+        """Follow a parsed trajectory from the last desired state (or ``q`` at rest).
+
+        Returns False (nothing started) when there is neither yet.
+        """
+        if self.last is not None:
+            start, rate = self.last
+        elif q is not None:
+            start, rate = q, np.zeros_like(q)
+        else:
+            return False
+        self.active = ActiveTrajectory(parsed, now_ns, start, rate)
+        return True

@@ -3,7 +3,7 @@
 Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
 median over blocks of the mean time per call (µs), measured in one run on this
 machine; the ratios are what the targets are about. The operation count is
-exact (:mod:`rcac_ros.core.opcount`).
+exact (:mod:`rcac_ros.tools.opcount`).
 
 Besides the paper's law (channels ``[1]``) the table times the recursive law with the
 channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with the
@@ -147,7 +147,7 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
 def urdf_models():
     """The panda (to panda_link8) and the ur5 from example-robot-data, if both are installed."""
     from rcac_ros.core.urdf import model_from_urdf
-    from rcac_ros.robots import example_robot_urdf
+    from rcac_ros.tools.robots import example_robot_urdf
     out = []
     for label, rel, tip in (("panda", "panda_description/urdf/panda.urdf", "panda_link8"),
                             ("ur5", "ur_description/urdf/ur5_robot.urdf", None)):
@@ -192,7 +192,7 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
             ratios[f"controller_over_pin_rnea_{r['model']}"] = ratio
     result = {"rows": rows, "ratios": ratios, "goals": goal_ratios()}
     if ops:
-        from rcac_ros.core.opcount import count_step
+        from rcac_ros.tools.opcount import count_step
         c7, c14 = count_step("rcac", 7), count_step("rcac", 14)
         result["operations"] = {
             "rcac_n7": c7, "rcac_n14": c14,
@@ -237,7 +237,7 @@ def add_arguments(parser):
 
 def run(args):
     if args.ros:
-        from rcac_ros.ros_bench import run_ros_bench
+        from rcac_ros.tools.ros_bench import run_ros_bench
         result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode)
         return 0 if result else 1
     try:

@@ -9,8 +9,8 @@ from rclpy.parameter import Parameter  # noqa: E402  (after the importorskip in 
 from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 
 from rcac_ros import topics  # noqa: E402
-from rcac_ros.core.exceptions import ConfigError  # noqa: E402
-from rcac_ros.nodes.common import DeadlineLoop, QOS  # noqa: E402
+from rcac_ros.errors import ConfigError  # noqa: E402
+from rcac_ros.nodes.pacing import DeadlineLoop  # noqa: E402
 from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
 from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402
 
@@ -99,7 +99,7 @@ def test_controller_timer_mode_with_sim_time_ticks_on_clock():
             Parameter("mode", value="timer"), Parameter("use_sim_time", value=True),
             Parameter("state_timeout", value=1.0)])
         probe = Probe(ctx)
-        pub_clock = probe.create_publisher(ClockMsg, topics.CLOCK, QOS)
+        pub_clock = probe.create_publisher(ClockMsg, topics.CLOCK, topics.qos())
         ex.add_node(node)
         ex.add_node(probe)
         assert node.loop is None

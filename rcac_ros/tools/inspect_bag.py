@@ -14,15 +14,13 @@ state received before them.
 
 import json
 import os
-import sys
 
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools import metrics as measure
 
-#: seconds at the end of the run for ``rms_tracking_error_last_5s``
-LAST_WINDOW = 5.0
 #: diagnostics values shown in the summary (all are kept in metrics.json)
 DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
              "compute_time_p50_us", "compute_time_p99_us", "deadline_misses", "late_ticks",
@@ -246,7 +244,7 @@ class Timeline:
 
 
 def effort_tags(td):
-    """Lockstep tags of effort commands (see ``rcac_ros.nodes.common.effort_layout``).
+    """Lockstep tags of effort commands (see ``rcac_ros.topics.effort_label``).
 
     Returns
     -------
@@ -258,14 +256,12 @@ def effort_tags(td):
     watchdog = np.zeros(td.count, dtype=bool)
     stamp = np.full(td.count, np.nan)
     for k, label in enumerate(td.labels):
-        if label.endswith(" watchdog"):
+        tag = topics.effort_tag(label)
+        if tag is not None and tag[0] == "watchdog":
             watchdog[k] = True
-        elif " stamp=" in label:
-            sec, _, nsec = label.split(" stamp=", 1)[1].partition(".")
-            try:
-                stamp[k] = int(sec) + 1e-9 * int(nsec)
-            except ValueError:
-                pass
+        elif tag is not None:
+            sec, nsec = divmod(tag[1], 1_000_000_000)
+            stamp[k] = sec + 1e-9 * nsec     # as _stamp(header): matched to state stamps
     return watchdog, stamp
 
 
@@ -336,26 +332,16 @@ def loop_timing(data, eff=None, js=None, tagged=None):
     return {"period_ms": period, "latency_ms": latency, "unanswered": unanswered}
 
 
-def _percentiles(x, prefix, unit="ms"):
-    if len(x) == 0:
-        return {}
-    return {f"{prefix}_p50_{unit}": float(np.percentile(x, 50)),
-            f"{prefix}_p99_{unit}": float(np.percentile(x, 99)),
-            f"{prefix}_max_{unit}": float(np.max(x))}
-
-
 def load_truth(model):
-    """The true parameters (n, 13) of ``model`` ("css", "none", a YAML or URDF path)."""
+    """The true parameters (n, 13) of ``model`` (a preset, "none", a YAML or URDF path)."""
     if model in (None, "", "none"):
         return None
-    from rcac_ros.core.model import css_arm, RobotModel
-    if model == "css":
-        return css_arm().theta()
-    if not os.path.exists(model):
-        raise ConfigError(f"model: {model} is neither 'css', 'none' nor an existing file")
-    if model.endswith((".urdf", ".xml")):
-        return RobotModel.from_urdf(model).theta()
-    return RobotModel.from_yaml(model).theta()
+    from rcac_ros.core.load import is_urdf, load_model
+    from rcac_ros.core.model import PRESETS
+    if model not in PRESETS and not is_urdf(model) and not os.path.exists(model):
+        raise ConfigError(f"model: {model} is neither a preset ({', '.join(PRESETS)}), 'none' "
+                          "nor an existing file")
+    return load_model(model).theta()
 
 
 def _estimates(td):
@@ -393,10 +379,7 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if te is not None and te.count and isinstance(te.values, np.ndarray):
         t, e = tl.controller_time(te), te.values
         series["tracking_error"] = (t, e)
-        metrics["rms_tracking_error"] = float(np.sqrt(np.mean(e ** 2)))
-        metrics["max_tracking_error"] = float(np.max(np.abs(e)))
-        last = t >= t[-1] - LAST_WINDOW
-        metrics["rms_tracking_error_last_5s"] = float(np.sqrt(np.mean(e[last] ** 2)))
+        metrics.update(measure.tracking(t, e))
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     watchdog_efforts = 0
     repeated_answers = 0
@@ -412,21 +395,17 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         tagged = tagged[first]
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
-        metrics["max_abs_torque"] = float(np.max(np.abs(eff.values)))
+        metrics.update(measure.torque(eff.values))
     pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
     if pe is not None and pe.count:
         est = _estimates(pe)
         series["parameter_estimates"] = (tl.controller_time(pe), est)
         if theta_true is not None and theta_true.shape == est.shape[1:]:
-            err = est - theta_true
-            metrics["parameter_error_norm_start"] = float(np.linalg.norm(err[0]))
-            metrics["parameter_error_norm_end"] = float(np.linalg.norm(err[-1]))
-            metrics[f"link{est.shape[1]}_parameter_error_norm_end"] = \
-                float(np.linalg.norm(err[-1, -1]))
+            metrics.update(measure.estimates(est, theta_true))
     pr = data.get(priv + topics.PREDICTION_ERROR[2:])
     if pr is not None and pr.count:
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
-        metrics["final_abs_prediction_error"] = float(abs(pr.values[-1]))
+        metrics.update(measure.prediction(pr.values))
     js = data.get("/" + topics.JOINT_STATES)
     resent_states = 0
     if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -446,8 +425,10 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     timing = loop_timing(data, eff, js, tagged)
     if timing is not None:
         series["timing"] = timing
-        metrics.update(_percentiles(timing["period_ms"], "state_period"))
-        metrics.update(_percentiles(timing["latency_ms"], "state_to_effort_latency"))
+        for key, prefix in (("period_ms", "state_period"),
+                            ("latency_ms", "state_to_effort_latency")):
+            if len(timing[key]):
+                metrics.update(measure.percentiles(timing[key], prefix))
         metrics["unanswered_states"] = timing["unanswered"]
     return metrics, series
 
@@ -491,7 +472,7 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
     list of str
         Paths written.
     """
-    from rcac_ros import plots
+    from rcac_ros.tools import plots
 
     os.makedirs(out_dir, exist_ok=True)
     written = []
@@ -530,7 +511,8 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
     return written
 
 
-def inspect(path, plots_dir=None, model="css", link=None, controller_node=topics.CONTROLLER_NODE):
+def inspect(path, plots_dir=None, model="css_arm", link=None,
+            controller_node=topics.CONTROLLER_NODE):
     """Read, summarise and (optionally) plot a bag; write metrics.json beside the plots.
 
     Returns
@@ -565,8 +547,8 @@ def add_arguments(parser):
     parser.add_argument("bag", help="rosbag2 directory")
     parser.add_argument("--plots", default=None, metavar="DIR",
                         help="write the figures and metrics.json into DIR")
-    parser.add_argument("--model", default="css",
-                        help="true model for the estimate errors: 'css' (default, the paper's "
+    parser.add_argument("--model", default="css_arm",
+                        help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
     parser.add_argument("--link", type=int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")
@@ -585,8 +567,3 @@ def run(args):
     if result["metrics_path"]:
         print(f"wrote {result['metrics_path']}")
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["inspect"] + sys.argv[1:]))

@@ -113,7 +113,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_inspect_synthetic_bag(tmp_path, storage, capsys):
-    from rcac_ros.cli import main
+    from rcac_ros.tools.cli import main
     steps = 3000                       # 6 s of simulated time at 500 Hz
     bag = str(tmp_path / "bag")
     known = write_synthetic_bag(bag, steps, storage)
@@ -167,7 +167,7 @@ def test_inspect_synthetic_bag(tmp_path, storage, capsys):
 
 
 def test_inspect_rejects_missing_bag(tmp_path, capsys):
-    from rcac_ros.cli import main
+    from rcac_ros.tools.cli import main
     assert main(["inspect", str(tmp_path / "nope")]) == 2
     assert "bag:" in capsys.readouterr().err
 
@@ -232,12 +232,12 @@ def procs(tmp_path, ros_env):
 
 
 def _node(name, **over):
-    from rcac_ros.demo import node_command
+    from rcac_ros.tools.launch import node_command
     return node_command(name, overrides=over)
 
 
 def _start_recorder(procs, bag):
-    rec = procs.start("record", [PY, "-m", "rcac_ros.cli", "record", "--out", str(bag)])
+    rec = procs.start("record", [PY, "-m", "rcac_ros.tools.cli", "record", "--out", str(bag)])
     wait_for(lambda: "recording" in _output(rec), 60, "recorder start", [rec])
     return rec
 
@@ -343,6 +343,6 @@ def test_sigint_during_recording_leaves_a_readable_bag(tmp_path, procs):
     assert len(data["/clock"]) > 10
     assert len(data["/effort_controller/commands"]) > 10
     # the inspector reads it too
-    from rcac_ros.inspect_bag import inspect
+    from rcac_ros.tools.inspect_bag import inspect
     result = inspect(str(bag))
     assert result["summary"]["topics"]["/joint_states"]["count"] == len(data["/joint_states"])

@@ -11,13 +11,16 @@ import sys
 
 #: subcommand -> (module, one-line help)
 SUBCOMMANDS = {
-    "experiment": ("rcac_ros.experiment", "run the paper's Section 4 experiment (both laws)"),
-    "bench": ("rcac_ros.bench", "time the controller against Pinocchio and the baseline"),
-    "record": ("rcac_ros.bag", "record the package's topics into a rosbag2 bag"),
-    "inspect": ("rcac_ros.inspect_bag", "summarise a bag and plot what it holds"),
-    "demo": ("rcac_ros.demo", "simulator + controller over ROS 2, bag, summary and plots"),
-    "payload-demo": ("rcac_ros.payload_demo", "panda with an unknown 2 kg payload attached"),
-    "compare": ("rcac_ros.compare", "every adaptive law on the paper's run and the payload demo"),
+    "experiment": ("rcac_ros.tools.experiment",
+                   "run the paper's Section 4 experiment (both laws)"),
+    "bench": ("rcac_ros.tools.bench", "time the controller against Pinocchio and the baseline"),
+    "record": ("rcac_ros.tools.record", "record the package's topics into a rosbag2 bag"),
+    "inspect": ("rcac_ros.tools.inspect_bag", "summarise a bag and plot what it holds"),
+    "demo": ("rcac_ros.tools.demo", "simulator + controller over ROS 2, bag, summary and plots"),
+    "payload-demo": ("rcac_ros.tools.payload_demo",
+                     "panda with an unknown 2 kg payload attached"),
+    "compare": ("rcac_ros.tools.compare",
+                "every adaptive law on the paper's run and the payload demo"),
 }
 
 
@@ -39,7 +42,7 @@ def main(argv=None):
     if argv is not None:
         sys.argv = [sys.argv[0]] + list(argv)
     args = build_parser().parse_args()
-    from rcac_ros.core.exceptions import RcacError
+    from rcac_ros.errors import RcacError
     try:
         return importlib.import_module(args._module).run(args) or 0
     except RcacError as err:

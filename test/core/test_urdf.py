@@ -5,11 +5,11 @@ import os
 import numpy as np
 import pytest
 
-from rcac_ros.core import ConfigError, ModelError, RobotModel
+from rcac_ros.core import ConfigError, ModelError
 from rcac_ros.core.model import rot_x
 from rcac_ros.core.rnea import inverse_dynamics
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.robots import example_robots_dir
+from rcac_ros.tools.robots import example_robots_dir
 
 pin = pytest.importorskip("pinocchio")
 
@@ -80,7 +80,7 @@ def compare(model, pm, rng, states=20, gravity=True):
 # ---------------------------------------------------------------------- real robots
 @needs_robots
 def test_panda_arm_matches_pinocchio():
-    model = RobotModel.from_urdf(PANDA, tip_link="panda_link8")
+    model = model_from_urdf(PANDA, tip_link="panda_link8")
     assert model.joint_names == tuple(f"panda_joint{k}" for k in range(1, 8))
     np.testing.assert_array_equal(model.effort_limit, [87, 87, 87, 87, 12, 12, 12])
     np.testing.assert_array_equal(model.velocity_limit, [2.175] * 4 + [2.61] * 3)
@@ -353,7 +353,7 @@ def test_triangle_inequality_tolerance():
 def test_from_urdf_reads_a_file(tmp_path):
     path = tmp_path / "skewed.urdf"
     path.write_text(SKEWED)
-    a = RobotModel.from_urdf(str(path))
+    a = model_from_urdf(str(path))
     b = model_from_urdf(SKEWED)
     np.testing.assert_array_equal(a.theta(), b.theta())
     np.testing.assert_array_equal(a.R_fix, b.R_fix)

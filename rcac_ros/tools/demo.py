@@ -15,141 +15,14 @@ import os
 import re
 import shutil
 import signal
-import subprocess
 import sys
 import time
 
 from rcac_ros import topics
-from rcac_ros.bag import BagRecorder, format_counts, init_context, StopFlag
-from rcac_ros.core.exceptions import ConfigError, RcacError
-
-#: node -> (executable, module, params file)
-NODES = {
-    "controller": ("controller", "rcac_ros.nodes.controller_node", "controller.yaml"),
-    "simulator": ("simulator", "rcac_ros.nodes.simulator_node", "simulator.yaml"),
-}
-
-
-class NodeFailed(RcacError):
-    """A child node exited early, or the run made no progress."""
-
-
-def config_file(name):
-    """Path of a shipped config file: the installed share directory, else the source tree."""
-    candidates = []
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(os.path.join(get_package_share_directory("rcac_ros"), "config", name))
-    except Exception:  # noqa: BLE001 - not installed with colcon: use the source tree
-        pass
-    here = os.path.dirname(os.path.abspath(__file__))
-    candidates.append(os.path.join(os.path.dirname(here), "config", name))   # source tree
-    candidates.append(os.path.join(sys.prefix, "share", "rcac_ros", "config", name))  # pip
-    for path in candidates:
-        if os.path.isfile(path):
-            return path
-    raise ConfigError(f"config: cannot find {name} (looked in {', '.join(candidates)})")
-
-
-def node_command(node, params=None, overrides=None):
-    """Command line of a node: the installed executable, else ``python -m``.
-
-    Parameters
-    ----------
-    node : {"controller", "simulator"}
-    params : str, optional
-        Parameters file; default the shipped ``config/<node>.yaml``.
-    overrides : dict, optional
-        ``-p name:=value`` overrides.
-
-    Returns
-    -------
-    list of str
-    """
-    exe, module, yaml_name = NODES[node]
-    cmd = None
-    candidates = [os.path.join(os.path.dirname(sys.executable), exe)]
-    try:
-        from ament_index_python.packages import get_package_prefix
-        candidates.insert(0, os.path.join(get_package_prefix("rcac_ros"), "lib", "rcac_ros",
-                                          exe))
-    except Exception:  # noqa: BLE001 - not in an ament index
-        pass
-    for path in candidates:
-        if os.path.isfile(path) and os.access(path, os.X_OK):
-            cmd = [path]
-            break
-    if cmd is None:
-        cmd = [sys.executable, "-m", module]
-    cmd += ["--ros-args", "--params-file", params or config_file(yaml_name)]
-    for key, value in (overrides or {}).items():
-        cmd += ["-p", f"{key}:={_param_text(value)}"]
-    return cmd
-
-
-def _param_text(value):
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (list, tuple)):
-        return "[" + ",".join(_param_text(v) for v in value) + "]"
-    return str(value)
-
-
-class Child:
-    """A node process in its own session, its output in a log file."""
-
-    def __init__(self, name, cmd, env, log_path):
-        self.name = name
-        self.cmd = cmd
-        self.log_path = log_path
-        self._log = open(log_path, "w")
-        self._log.write("$ " + " ".join(cmd) + "\n")
-        self._log.flush()
-        self.proc = subprocess.Popen(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
-
-    def alive(self):
-        return self.proc.poll() is None
-
-    @property
-    def returncode(self):
-        return self.proc.poll()
-
-    def stop(self, timeout=5.0):
-        """SIGINT, then SIGTERM, then SIGKILL; returns the exit code."""
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0),
-                          (signal.SIGKILL, 3.0)):
-            if self.proc.poll() is not None:
-                break
-            try:
-                os.killpg(self.proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                self.proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                continue
-        code = self.proc.poll()
-        self._log.close()
-        return code
-
-    def tail(self, lines=15):
-        try:
-            with open(self.log_path) as f:
-                return "".join(f.readlines()[-lines:])
-        except OSError:
-            return ""
-
-
-def child_env(domain_id):
-    env = os.environ.copy()
-    env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
+    StopFlag
+from rcac_ros.tools.record import BagRecorder, format_counts
 
 
 def _prepare_out(out):
@@ -315,7 +188,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    from rcac_ros.inspect_bag import format_metrics, format_summary, inspect
+    from rcac_ros.tools.inspect_bag import format_metrics, format_summary, inspect
 
     out = os.path.abspath(args.out)
     try:
@@ -343,8 +216,3 @@ def run(args):
         print(f"  figure   {path}")
     print(f"  logs     {os.path.join(out, 'logs')}")
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["demo"] + sys.argv[1:]))

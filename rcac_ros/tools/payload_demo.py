@@ -31,8 +31,9 @@ import numpy as np
 from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory)
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.progress import Progress
-from rcac_ros.robots import example_robot_urdf
+from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.progress import Progress
+from rcac_ros.tools.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
 READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
@@ -154,9 +155,7 @@ def simulate(model, loaded, controller, trajectory, duration, jump, progress=Non
 
 def window_rms(run, start, stop):
     """RMS of ``q - q_d`` over all joints for ``start <= t < stop``."""
-    sel = (run["t"] >= start) & (run["t"] < stop)
-    e = run["q"][sel] - run["q_d"][sel]
-    return float(np.sqrt(np.mean(e ** 2)))
+    return measure.window_rms(run["t"], run["q"] - run["q_d"], start, stop)
 
 
 def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None):
@@ -217,8 +216,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
 
 def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
     """metrics.json and the three figures into ``out_dir``."""
-    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
-    import matplotlib.pyplot as plt     # rcac_ros.plots selected the Agg backend
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
+    import matplotlib.pyplot as plt     # rcac_ros.tools.plots selected the Agg backend
 
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:

@@ -25,12 +25,13 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (PaperTrajectory, RcacError, RecursiveCompositeController, Simulator,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
+                           Simulator, SinusoidTrajectory, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
-from rcac_ros.core.model import PAPER_Q0
-from rcac_ros.progress import Progress
+from rcac_ros.errors import RcacError
+from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.progress import Progress
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -73,7 +74,6 @@ class Scenario:
 
 
 def paper_scenario():
-    from rcac_ros.experiment import PAPER_GAINS
     model = css_arm()
     q0 = np.array(PAPER_Q0)
     return Scenario("paper", model, dict(PAPER_GAINS), PaperTrajectory(q0), q0,
@@ -81,8 +81,8 @@ def paper_scenario():
 
 
 def payload_scenario():
-    from rcac_ros.payload_demo import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                       load_panda, with_payload)
+    from rcac_ros.tools.payload_demo import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                             load_panda, with_payload)
     model = load_panda()
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
     q0, qd0, _ = traj(0.0)
@@ -152,12 +152,11 @@ def metrics(run, scenario, last_seconds=5.0):
     """The table's figures for one run (NaN where a diverged run has no value)."""
     t, e = run["t"], run["e"]
     ok = np.all(np.isfinite(e), axis=1)
-    last = ok & (t >= t[-1] - last_seconds)
-    rms = float(np.sqrt(np.mean(e[ok] ** 2))) if ok.any() else float("nan")
+    fig = measure.tracking(t[ok], e[ok], last_seconds) if ok.any() else {}
     out = {
-        "rms": rms,
-        "rms_last_5s": float(np.sqrt(np.mean(e[last] ** 2))) if last.any() else float("nan"),
-        "max_error": float(np.max(np.abs(e[ok]))) if ok.any() else float("nan"),
+        "rms": fig.get("rms_tracking_error", float("nan")),
+        "rms_last_5s": fig.get("rms_tracking_error_last_5s", float("nan")),
+        "max_error": fig.get("max_tracking_error", float("nan")),
         "theta_error_start": float(run["theta_error"][0]),
         "theta_error_end": float(np.linalg.norm(run["theta_end"] - scenario.theta_end)),
         "max_abs_E": float(np.nanmax(run["E"])),
@@ -168,8 +167,7 @@ def metrics(run, scenario, last_seconds=5.0):
         out["rms_last_5s"] = out["theta_error_end"] = float("nan")
     if scenario.jump is not None:
         after = ok & (t >= scenario.jump)
-        out["rms_after_payload"] = float(np.sqrt(np.mean(e[after] ** 2))) if after.any() \
-            else float("nan")
+        out["rms_after_payload"] = measure.rms(e[after]) if after.any() else float("nan")
         out["mass_last_end"] = float(run["mass_last"][ok][-1])
         out["mass_last_true"] = float(scenario.theta_end[-1, 0])
     if run["excitation"] is not None and run["diverged_at"] is None:
@@ -228,7 +226,7 @@ def markdown(report, n_links=None):
 
 def plot(series, report, out_dir):
     """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
-    from rcac_ros.plots import plt
+    from rcac_ros.tools.plots import plt
     paths = []
     for name, runs in series.items():
         fig, axes = plt.subplots(1, 4, figsize=(24, 5))

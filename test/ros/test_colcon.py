@@ -10,7 +10,7 @@ import pytest
 
 from test_nodes_support import ros_domain
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def colcon():

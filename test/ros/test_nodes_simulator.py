@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout  # noqa: E402
 
-from rcac_ros.core.exceptions import ConfigError  # noqa: E402
+from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.core.model import css_arm  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402

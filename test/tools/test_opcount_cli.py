@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from rcac_ros.core.opcount import count_step
+from rcac_ros.tools.opcount import count_step
 
 
 def test_recursive_step_operation_count_is_exactly_linear():
@@ -18,7 +18,7 @@ def test_recursive_step_operation_count_is_exactly_linear():
 
 
 def run(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "rcac_ros.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "rcac_ros.tools.cli", *args], capture_output=True,
                           text=True, timeout=timeout)
 
 

@@ -12,12 +12,10 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
-from rcac_ros.core.model import PAPER_Q0
-from rcac_ros.progress import Progress
-
-#: The paper's gains (Section 4) and the filter bandwidth it leaves open.
-PAPER_GAINS = dict(K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002)
+from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
+                           Simulator, css_arm)
+from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
+from rcac_ros.tools.progress import Progress
 
 
 def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=None):
@@ -50,21 +48,11 @@ def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=N
     return out
 
 
-def metrics(run, theta_true, last_seconds=5.0):
-    """The figures of ``metrics.json`` for one run (see the README for their definitions)."""
-    e = run["q"] - run["q_d"]
-    last = run["t"] >= run["t"][-1] - last_seconds
-    err = run["theta_hat"] - theta_true
-    return {
-        "rms_tracking_error": float(np.sqrt(np.mean(e ** 2))),
-        "max_tracking_error": float(np.max(np.abs(e))),
-        "rms_tracking_error_last_5s": float(np.sqrt(np.mean(e[last] ** 2))),
-        "parameter_error_norm_start": float(np.linalg.norm(err[0])),
-        "parameter_error_norm_end": float(np.linalg.norm(err[-1])),
-        f"link{theta_true.shape[0]}_parameter_error_norm_end": float(np.linalg.norm(err[-1, -1])),
-        "final_abs_prediction_error": float(np.max(np.abs(run["E"][-1]))),
-        "max_abs_torque": float(np.max(np.abs(run["tau"]))),
-    }
+def metrics(run, theta_true, last_seconds=LAST_WINDOW):
+    """The figures of ``metrics.json`` for one run (defined in :mod:`rcac_ros.tools.metrics`)."""
+    return {**tracking(run["t"], run["q"] - run["q_d"], last_seconds),
+            **estimates(run["theta_hat"], theta_true),
+            **prediction(run["E"]), **torque(run["tau"])}
 
 
 def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True,
@@ -90,7 +78,7 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
 
 def write_outputs(model, runs, report, out_dir, settings):
     """metrics.json, tracking_errors.png and parameter_estimates.png into ``out_dir``."""
-    from rcac_ros.plots import plot_parameter_estimates, plot_tracking_errors
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=settings), f, indent=2)
@@ -104,19 +92,19 @@ def write_outputs(model, runs, report, out_dir, settings):
 
 
 def add_arguments(parser):
-    from rcac_ros.compare import channel_list
+    from rcac_ros.tools.compare import channel_list
     parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (NOTES.md 5)")
-    for name, default, text in (("K_D", 1e4, "link gain K_Di = K_D I6"),
-                                ("Lambda", 1.0, "Lambda = value * I"),
-                                ("P", 100.0, "adaptation gain P_i = P I13"),
-                                ("gamma", 0.1, "prediction-error weight of the composite law"),
-                                ("lam", 10.0, "filter bandwidth lambda, rad/s"),
-                                ("h", 0.002, "control period, s")):
-        parser.add_argument(f"--{name}", type=float, default=default,
-                            help=f"{text} (default {default:g})")
+    for name, text in (("K_D", "link gain K_Di = K_D I6"),
+                       ("Lambda", "Lambda = value * I"),
+                       ("P", "adaptation gain P_i = P I13"),
+                       ("gamma", "prediction-error weight of the composite law"),
+                       ("lam", "filter bandwidth lambda, rad/s"),
+                       ("h", "control period, s")):
+        parser.add_argument(f"--{name}", type=float, default=PAPER_GAINS[name],
+                            help=f"{text} (default {PAPER_GAINS[name]:g})")
     parser.add_argument("--substeps", type=int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--channels", type=channel_list, default=(1,),

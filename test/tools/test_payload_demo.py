@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from rcac_ros import payload_demo as demo
+from rcac_ros.tools import payload_demo as demo
 
 pin = pytest.importorskip("pinocchio")
 pytestmark = pytest.mark.skipif(demo.find_panda_urdf() is None,
@@ -67,7 +67,7 @@ def test_estimates_find_the_payload(short_run):
 
 
 def test_cli_writes_metrics_and_figures(tmp_path):
-    from rcac_ros.cli import main
+    from rcac_ros.tools.cli import main
     out = tmp_path / "payload"
     code = main(["payload-demo", "--duration", "1.5", "--jump", "0.5", "--out", str(out),
                  "--quiet"])
@@ -81,6 +81,6 @@ def test_cli_writes_metrics_and_figures(tmp_path):
 
 
 def test_cli_rejects_a_jump_after_the_end(tmp_path):
-    from rcac_ros.cli import main
+    from rcac_ros.tools.cli import main
     assert main(["payload-demo", "--duration", "1", "--jump", "2", "--out",
                  str(tmp_path), "--quiet"]) == 2

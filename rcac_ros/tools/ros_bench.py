@@ -28,8 +28,10 @@ import time
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.bag import init_context, StopFlag
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
+    StopFlag
+from rcac_ros.tools.metrics import percentiles
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
 #: delay); free-running, the effort lands up to one period late and that loop diverges within
@@ -51,12 +53,10 @@ class Probe:
     def __init__(self, context, depth=1000):
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                         reliability=ReliabilityPolicy.RELIABLE)
+        qos = topics.qos(depth)
         self.node = Node("rcac_bench_probe", context=context)
         self.recording = False
         self.states = []     # (source, receive) ns
@@ -96,15 +96,6 @@ class Probe:
         return all(s.get_publisher_count() > 0 for s in self._subs[:2])
 
 
-def _stats(x, prefix):
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return {f"{prefix}_p50_ms": None, f"{prefix}_p99_ms": None, f"{prefix}_max_ms": None}
-    return {f"{prefix}_p50_ms": float(np.percentile(x, 50)),
-            f"{prefix}_p99_ms": float(np.percentile(x, 99)),
-            f"{prefix}_max_ms": float(np.max(x))}
-
-
 def analyse(probe, window_s, rate):
     """The benchmark figures from the probe's stamps (see the module docstring)."""
     h_ms = 1e3 / rate
@@ -117,12 +108,12 @@ def analyse(probe, window_s, rate):
     out["controller_rate_hz"] = len(eff) / window_s
     out["simulator_rate_hz"] = len(st) / window_s
     period = 1e-6 * np.diff(eff[:, 0]).astype(float) if len(eff) > 1 else np.empty(0)
-    out.update(_stats(period, "period"))
+    out.update(percentiles(period, "period"))
     state_period = 1e-6 * np.diff(st[:, 0]).astype(float) if len(st) > 1 else np.empty(0)
-    out.update(_stats(state_period, "state_period"))
-    out.update(_stats(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
-    out.update(_stats(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
-    out.update(_stats(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
+    out.update(percentiles(state_period, "state_period"))
+    out.update(percentiles(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
+    out.update(percentiles(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
+    out.update(percentiles(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
     out["late_periods"] = int(np.count_nonzero(period > 1.5 * h_ms))
     out["missing_ticks"] = max(0, int(round(window_s * rate)) - len(eff))
     for node, name, keys in (
@@ -227,8 +218,6 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
     import domain_coordinator
     from rclpy.executors import SingleThreadedExecutor
 
-    from rcac_ros.demo import Child, child_env, NodeFailed, node_command
-
     if not duration > 0.0:
         raise ConfigError(f"duration: must be > 0 s, got {duration}")
     if not rate > 0.0:
@@ -309,7 +298,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
 
 
 def _main(argv):
-    """``python -m rcac_ros.ros_bench [SECONDS [JSON [timer|on_state [NAME=VALUE ...]]]]``."""
+    """``python -m rcac_ros.tools.ros_bench [SECONDS [JSON [timer|on_state [NAME=VALUE]...]]]``."""
     secs = float(argv[0]) if argv else 60.0
     json_path = argv[1] if len(argv) > 1 and argv[1] else None
     mode = argv[2] if len(argv) > 2 else "timer"

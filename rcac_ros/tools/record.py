@@ -11,13 +11,12 @@ import datetime
 import functools
 import importlib
 import os
-import signal
 import struct
-import sys
 import time
 
 from rcac_ros import topics
-from rcac_ros.core.exceptions import ConfigError
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import init_context, StopFlag
 
 #: recorded topics (relative names are resolved against the controller node) -> message type
 TOPIC_TYPES = (
@@ -115,7 +114,7 @@ class BagRecorder:
     def __init__(self, path, context, storage="mcap", controller_node=topics.CONTROLLER_NODE,
                  depth=1000, node_name="rcac_recorder"):
         from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.qos import ReliabilityPolicy
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.typesys import get_typestore, Stores
 
@@ -127,12 +126,8 @@ class BagRecorder:
         os.makedirs(parent, exist_ok=True)
         self.path = os.path.abspath(path)
         self._qos = {
-            ReliabilityPolicy.RELIABLE: QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=depth,
-                reliability=ReliabilityPolicy.RELIABLE),
-            ReliabilityPolicy.BEST_EFFORT: QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=depth,
-                reliability=ReliabilityPolicy.BEST_EFFORT),
+            ReliabilityPolicy.RELIABLE: topics.qos(depth),
+            ReliabilityPolicy.BEST_EFFORT: topics.qos(depth, reliable=False),
         }
         self._best_effort = ReliabilityPolicy.BEST_EFFORT
         typestore = get_typestore(Stores.ROS2_JAZZY)
@@ -270,49 +265,6 @@ class BagRecorder:
         self.node.destroy_node()
 
 
-class StopFlag:
-    """Set by SIGINT / SIGTERM; restores the previous handlers on :meth:`restore`."""
-
-    def __init__(self, signals=(signal.SIGINT, signal.SIGTERM)):
-        self.signum = None
-        self._previous = {}
-        for sig in signals:
-            self._previous[sig] = signal.signal(sig, self._handler)
-
-    def _handler(self, signum, frame):
-        if self.signum is not None and signum == signal.SIGINT:
-            raise KeyboardInterrupt  # a second Ctrl-C: stop waiting for a clean exit
-        self.signum = signum
-
-    def __bool__(self):
-        return self.signum is not None
-
-    def restore(self):
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-
-
-def init_context(domain_id=None):
-    """A fresh rclpy context without rclpy's signal handlers (ours close the bag).
-
-    Parameters
-    ----------
-    domain_id : int, optional
-        ROS domain; default ``ROS_DOMAIN_ID`` from the environment.
-
-    Returns
-    -------
-    rclpy.context.Context
-    """
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-
-    ctx = rclpy.Context()
-    kwargs = {} if domain_id is None else {"domain_id": int(domain_id)}
-    rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
-    return ctx
-
-
 def format_counts(recorder):
     """One line per topic: name, type, messages written."""
     width = max(len(n) for n, _ in recorder.topics)
@@ -377,8 +329,3 @@ def run(args):
     print(f"rcac record: closed {recorder.path}: {recorder.total} messages", flush=True)
     print(format_counts(recorder), flush=True)
     return 0
-
-
-if __name__ == "__main__":
-    from rcac_ros.cli import main
-    sys.exit(main(["record"] + sys.argv[1:]))

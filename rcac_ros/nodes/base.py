@@ -1,0 +1,289 @@
+"""What the controller and simulator nodes share (they never import each other).
+
+Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
+left behind), the QoS profiles, diagnostics, on-set parameter checks, throttled warnings,
+compute-time statistics, and :func:`run`: the ``main`` of a node (clean start-up refusal
+with one line and exit 2, clean shutdown on SIGINT/SIGTERM).
+"""
+
+import math
+import signal
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from rcac_ros import params, topics
+from rcac_ros.core.load import load_model
+from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes.pacing import spin_node_once
+
+#: reliable, keep-last 10: the control topics (what ros2_control uses)
+QOS = topics.qos()
+#: reliable, keep-last 1000: the topics a recorder or a test reads
+QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
+
+
+# ------------------------------------------------------------------ parameters
+def declare(node, p):
+    """Declare the parameter of row ``p`` (:mod:`rcac_ros.params`); return its checked value.
+
+    Returns ``None`` for a row without default that the user left unset.
+
+    Raises
+    ------
+    ConfigError
+        If the value given by the user has the wrong type or is invalid; the message
+        names the parameter.
+    """
+    desc = ParameterDescriptor(description=p.description, read_only=p.read_only,
+                               additional_constraints=p.constraints)
+    if p.lo is not None and p.type == "integer":
+        desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
+    elif p.lo is not None and p.type == "double":
+        desc.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
+                                                        to_value=float(p.hi), step=0.0)]
+    default = Parameter.Type[p.type.upper()] if p.default is None else p.default
+    try:
+        node.declare_parameter(p.name, default, desc)
+        value = node.get_parameter(p.name).value
+    except InvalidParameterTypeException as err:
+        raise ConfigError(f"{p.name}: wrong type, expected {p.type} ({_first_line(err)})") \
+            from None
+    except InvalidParameterValueException:
+        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]") from None
+    except ParameterUninitializedException:
+        return None
+    if p.type.endswith("_array"):
+        value = list(value)         # rclpy gives array.array for double arrays
+    return params.check(p, value)
+
+
+def _first_line(err):
+    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+
+
+def declare_parameters(node, rows):
+    """Declare every row of a node's table (:mod:`rcac_ros.params`) and load its robot.
+
+    Returns
+    -------
+    values : dict
+        name -> checked value (``None``: unset).
+    model : RobotModel
+        ``robot_description`` (URDF XML or a file path) when it is set, else ``model``
+        (a preset, a YAML or a URDF file), with ``gravity`` if given.
+    joints : tuple of str
+        The joint order of the node's messages (``joints``, default the model's).
+
+    Raises
+    ------
+    ConfigError
+        Naming the parameter whose value is invalid or could not be turned into a model.
+    """
+    values = {p.name: declare(node, p) for p in rows}
+    urdf = values["robot_description"]
+    which = "robot_description" if urdf else "model"
+    try:
+        if urdf:
+            model = model_from_urdf(urdf, base_link=values["base_link"] or None,
+                                    tip_link=values["tip_link"] or None)
+        else:
+            model = load_model(values["model"])
+    except RcacError as err:
+        raise ConfigError(f"{which}: {err}") from None
+    except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
+        raise ConfigError(f"{which}: cannot load ({_first_line(err)})") from None
+    if values["gravity"] is not None:
+        model = model.replace(gravity=list(values["gravity"]))
+    return values, model, _joints(values["joints"], model)
+
+
+def _joints(joints, model):
+    if joints is None:
+        return tuple(model.joint_names)
+    if len(set(joints)) != len(joints):
+        raise ConfigError(f"joints: duplicate names in {list(joints)}")
+    if set(joints) != set(model.joint_names):
+        raise ConfigError(f"joints: {list(joints)} does not match the model's joints "
+                          f"{list(model.joint_names)}")
+    return tuple(joints)
+
+
+# ------------------------------------------------------------------ node
+class RcacNode(Node):
+    """The start-up both nodes share: read and check every parameter, or leave nothing behind.
+
+    ``RcacNode(name, **kwargs)``: ``kwargs`` go to :class:`rclpy.node.Node` (``context``,
+    ``parameter_overrides``, ...); an invalid parameter raises :class:`ConfigError` naming
+    it. A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
+    ``_read_parameters(values)``, ``diagnostics()`` (a DiagnosticStatus, published every
+    ``diagnostics_period`` s of the steady clock) and ``on_shutdown()``. It finds the robot
+    in ``model``, the joint order of its messages in ``joints``; ``finished`` and
+    ``exit_code`` tell :func:`run` when and how to stop.
+    """
+
+    #: the node's rows of :mod:`rcac_ros.params`
+    PARAMETERS = ()
+
+    def __init__(self, name, **kwargs):
+        super().__init__(name, **kwargs)
+        self.finished = False
+        self.exit_code = 0
+        try:
+            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS)
+            # index arrays: model order -> message (joints) order, and back
+            self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
+            self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
+            self._read_parameters(values)
+        except Exception:
+            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
+            raise
+        self._throttle = Throttle(self.get_logger())
+        self._rows = {p.name: p for p in self.PARAMETERS}
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
+        self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _check_parameters(self, changed):
+        """On-set callback: validate against the table (a subclass applies them post-set)."""
+        for p in changed:
+            row = self._rows.get(p.name)
+            if row is None:
+                continue                # rclpy's own (use_sim_time, ...)
+            value = p.value
+            if row.type.endswith("_array") and value is not None:
+                value = list(value)
+            try:
+                params.check(row, value)
+            except ConfigError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _publish_diagnostics(self):
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._pub_diag.publish(msg)
+
+    def status(self, level, name, message, values):
+        """A DiagnosticStatus of this node from a ``{key: value}`` dict."""
+        return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
+                                hardware_id=self.model.name,
+                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+
+class Throttle:
+    """One warning per kind per ``period`` seconds (steady clock), with counts per kind."""
+
+    def __init__(self, logger, period=1.0):
+        self.logger = logger
+        self.period = period
+        self.counts = {}
+        self._last = {}
+
+    def warn(self, kind, text):
+        """Count a rejection of ``kind`` and log ``text`` unless one was logged recently."""
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        now = time.monotonic()
+        if now - self._last.get(kind, -math.inf) >= self.period:
+            self._last[kind] = now
+            suppressed = self.counts[kind]
+            self.logger.warning(f"rejected ({kind}): {text} [{suppressed} so far]")
+
+    @property
+    def total(self):
+        """Total number of rejections."""
+        return sum(self.counts.values())
+
+
+class Percentiles:
+    """Compute-time statistics over a window (p50, p99, max) in microseconds."""
+
+    def __init__(self):
+        self._samples = []
+        self.max_all = 0.0
+        self._last = (math.nan, math.nan, math.nan)
+
+    def add(self, seconds):
+        """Record one sample, in seconds."""
+        self._samples.append(seconds)
+        self.max_all = max(self.max_all, seconds)
+
+    def pop(self):
+        """Return ``(count, p50, p99, max)`` in µs over the window, and start a new window.
+
+        An empty window (the node is idle) repeats the figures of the last non-empty one.
+        """
+        if not self._samples:
+            return (0,) + self._last
+        arr = np.asarray(self._samples) * 1e6
+        self._samples = []
+        self._last = (float(np.percentile(arr, 50)), float(np.percentile(arr, 99)),
+                      float(arr.max()))
+        return (arr.size,) + self._last
+
+
+# ------------------------------------------------------------------ main
+def _raise_interrupt(signum, frame):
+    # one interrupt starts the clean shutdown; later ones must not cut it short
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def run(node_factory, prog, args=None):
+    """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
+
+    A node with a ``loop`` attribute (a :class:`DeadlineLoop`) is paced by it; otherwise
+    the executor is spun. The node's ``on_shutdown()`` runs after an interrupt (the
+    controller publishes a zero effort there). A :class:`RcacError` at start-up (a bad
+    parameter) prints one line naming the parameter and returns 2.
+
+    Returns
+    -------
+    int
+        The process exit code.
+    """
+    # rclpy's own SIGINT handler would shut the context down before we could publish the
+    # final zero effort: handle both signals in Python instead.
+    rclpy.init(args=sys.argv if args is None else args,
+               signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    node = None
+    code = 0
+    try:
+        node = node_factory()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            spin_node_once(executor, node)
+        code = node.exit_code
+    except RcacError as err:
+        print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
+        code = 2
+    except KeyboardInterrupt:
+        if node is not None:
+            node.on_shutdown()
+    except ExternalShutdownException:
+        pass
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

@@ -1,0 +1,103 @@
+"""The controller node's publishers: the effort command and the monitor topics.
+
+Arrays arrive in model order and leave in the order of the ``joints`` parameter. In
+lockstep each effort is tagged with the stamp of the state it answers
+(:func:`rcac_ros.topics.effort_label`); in timer mode one message object is reused.
+"""
+
+import numpy as np
+from rclpy.duration import Duration
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+
+from rcac_ros import topics
+from rcac_ros.nodes.base import QOS, QOS_MONITOR
+
+
+def effort_layout(n, stamp=None, watchdog=False):
+    """The layout of an effort message: one dimension of size ``n``, tagged (:mod:`topics`)."""
+    return MultiArrayLayout(dim=[MultiArrayDimension(label=topics.effort_label(stamp, watchdog),
+                                                     size=n, stride=n)], data_offset=0)
+
+
+class ControllerOutputs:
+    """Publishers of ``effort_controller/commands`` and of the controller's private topics.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    joints : sequence of str
+        The joint order of the messages.
+    out : ndarray of int
+        Model order -> ``joints`` order.
+    tagged : bool
+        Lockstep: tag each effort with the stamp of the state it answers.
+    """
+
+    def __init__(self, node, joints, out, tagged):
+        n = len(joints)
+        self.n = n
+        self._node = node
+        self._out = out
+        self._tagged = tagged
+        self._effort = node.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
+        self._theta = node.create_publisher(Float64MultiArray, topics.PARAMETER_ESTIMATES,
+                                            QOS_MONITOR)
+        self._e = node.create_publisher(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
+        self._track = node.create_publisher(Float64MultiArray, topics.TRACKING_ERROR,
+                                            QOS_MONITOR)
+        self._desired = node.create_publisher(JointState, topics.DESIRED_STATE, QOS_MONITOR)
+        self._theta_layout = MultiArrayLayout(dim=[
+            MultiArrayDimension(label="link", size=n, stride=13 * n),
+            MultiArrayDimension(label="parameter", size=13, stride=13)])
+        self._joint_layout = MultiArrayLayout(dim=[
+            MultiArrayDimension(label="joint", size=n, stride=n)])
+        # timer mode reuses its messages (publish serialises at once)
+        self._effort_layout = effort_layout(n)
+        self._watchdog_layout = effort_layout(n, watchdog=True)
+        self._timer_msg = Float64MultiArray(layout=self._effort_layout)
+        self._desired_msg = JointState(name=list(joints))
+        #: lockstep: the last answer sent (re-sent when the same state comes again)
+        self.last_answer = None
+
+    def effort(self, values, stamp=None, watchdog=False):
+        """Publish efforts given in ``joints`` order (zeros if any is NaN/Inf)."""
+        values = np.asarray(values, dtype=float)
+        if not np.all(np.isfinite(values)):      # never publish NaN/Inf
+            values = np.zeros_like(values)
+        if not self._tagged:                     # untagged: one message object, reused
+            msg = self._timer_msg
+            msg.layout = self._watchdog_layout if watchdog else self._effort_layout
+            msg.data = values.tolist()
+            self._effort.publish(msg)
+            return
+        msg = Float64MultiArray(layout=effort_layout(self.n, stamp, watchdog),
+                                data=values.tolist())
+        self._effort.publish(msg)
+        if not watchdog:
+            self.last_answer = msg
+
+    def answer_again(self):
+        """Publish the last answer again (lockstep: the same state came twice)."""
+        self._effort.publish(self.last_answer)
+
+    def monitors(self, theta_hat, E, q, q_d, qd_d, qdd_d, stamp=None):
+        """Publish the estimates, E, the tracking error and the desired state (model order)."""
+        out = self._out
+        self._theta.publish(Float64MultiArray(layout=self._theta_layout,
+                                              data=theta_hat.ravel().tolist()))
+        self._e.publish(Float64(data=float(E[0])))   # the first channel (joint 1 by default)
+        self._track.publish(Float64MultiArray(layout=self._joint_layout,
+                                              data=(q - q_d)[out].tolist()))
+        ds = self._desired_msg
+        ds.position = q_d[out].tolist()
+        ds.velocity = qd_d[out].tolist()
+        ds.effort = qdd_d[out].tolist()
+        ds.header.stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
+        self._desired.publish(ds)
+
+    def zero_effort(self, timeout=0.5):
+        """Publish one zero effort (tagged watchdog) and wait up to ``timeout`` s for delivery."""
+        self._effort.publish(Float64MultiArray(layout=effort_layout(self.n, watchdog=True),
+                                               data=[0.0] * self.n))
+        self._effort.wait_for_all_acked(Duration(seconds=timeout))

@@ -1,0 +1,363 @@
+"""Every parameter of the two nodes, in one declarative table.
+
+Each :class:`Param` row gives a parameter's name, type, default, range, whether it can be
+changed at run time, and its description. The table drives:
+
+* the declaration (:func:`rcac_ros.nodes.base.declare_parameters` builds each
+  ``ParameterDescriptor`` from its row);
+* the validation, at start-up and in the controller's on-set callback (:func:`check`: one
+  line naming the parameter);
+* the check of a parameters file (:func:`check_file_params`, run on the shipped
+  ``config/*.yaml`` by the tests);
+* the parameter tables of ``doc/parameters.md`` (:func:`markdown`, ``python -m
+  rcac_ros.params``; a test keeps the file equal to the output).
+
+To add a parameter, add a row here and read it in the node. This module imports neither
+rclpy nor numba's kernels at run time beyond the core model (for the paper's gains).
+"""
+
+from dataclasses import dataclass
+import math
+import sys
+
+import numpy as np
+
+from rcac_ros.core.model import PAPER_GAINS, PRESETS
+from rcac_ros.errors import ConfigError
+
+#: the ROS parameter types a row may have
+TYPES = ("bool", "integer", "double", "string", "double_array", "string_array")
+
+#: upper bound of the "any positive number" ranges
+BIG = 1e12
+
+
+@dataclass(frozen=True)
+class Param:
+    """One node parameter.
+
+    Parameters
+    ----------
+    name : str
+        The ROS name (``paper.period`` is ``paper: {period: ...}`` in a YAML file).
+    type : str
+        One of :data:`TYPES`.
+    default : object
+        The value when the user gives none; ``None``: unset (the node then derives one,
+        as said in the description).
+    description : str
+        One line, with the unit.
+    lo, hi : float, optional
+        Inclusive range (declared in the descriptor; every entry of an array).
+    strict : bool
+        The value must also be ``> lo`` (a period, a gain).
+    choices : tuple of str
+        The values a string may take.
+    read_only : bool
+        False: may be changed at run time (``ros2 param set``).
+    per_joint : bool
+        An array of 1 (broadcast) or n values, in the order of ``joints``.
+    size : int, optional
+        The exact length of an array.
+    """
+
+    name: str
+    type: str
+    default: object
+    description: str
+    lo: float = None
+    hi: float = None
+    strict: bool = False
+    choices: tuple = ()
+    read_only: bool = True
+    per_joint: bool = False
+    size: int = None
+
+    @property
+    def constraints(self):
+        """The ``additional_constraints`` text of the descriptor."""
+        parts = []
+        if self.choices:
+            parts.append(" | ".join(self.choices))
+        if self.strict:
+            parts.append(f"> {self.lo:g}")
+        if self.per_joint:
+            parts.append("1 or n values")
+        if self.size:
+            parts.append(f"{self.size} values")
+        return "; ".join(parts)
+
+
+def _robot(node):
+    """The robot description rows both nodes share."""
+    order = "effort commands" if node == "controller" else "efforts and joint states"
+    return (
+        Param("model", "string", "css_arm",
+              f"robot model: a preset ({', '.join(PRESETS)}), a YAML model file or a URDF file"),
+        Param("robot_description", "string", "",
+              "URDF XML string or URDF file path; when set it replaces 'model'"),
+        Param("base_link", "string", "", "URDF chain start (empty: the root link)"),
+        Param("tip_link", "string", "", "URDF chain end (empty: the single leaf)"),
+        Param("gravity", "double_array", None,
+              "gravity in the base frame, m/s^2 (unset: the model's own)", size=3),
+        Param("joints", "string_array", None,
+              f"joint names, in the order of the {order} (unset: the model's)"),
+    )
+
+
+def _effort_limit():
+    return Param("effort_limit", "double_array", None,
+                 "efforts are clipped to +-effort_limit, N m, in joints order (unset: the "
+                 "model's)", lo=0.0, hi=math.inf, strict=True, per_joint=True)
+
+
+def _diagnostics_period():
+    return Param("diagnostics_period", "double", 1.0, "diagnostics period, s (steady clock)",
+                 lo=0.0, hi=3600.0, strict=True)
+
+
+#: The controller node's parameters (``config/controller.yaml``).
+CONTROLLER = _robot("controller") + (
+    Param("mode", "string", "lockstep",
+          "timing: 'lockstep' (one step per JointState, simulator) or 'timer' (rate Hz on "
+          "the node clock, real arms)", choices=("lockstep", "timer")),
+    Param("rate", "double", 1.0 / PAPER_GAINS["h"],
+          "control rate, Hz (h = 1/rate; in lockstep it must match the simulator's dt)",
+          lo=1.0, hi=1e5),
+    Param("K_D", "double", PAPER_GAINS["K_D"], "link feedback gain K_Di = K_D I6 (eq 19)",
+          lo=0.0, hi=BIG, strict=True),
+    Param("Lambda", "double", PAPER_GAINS["Lambda"], "Lambda of eq 18, 1/s",
+          lo=0.0, hi=BIG, strict=True),
+    Param("P", "double", PAPER_GAINS["P"], "adaptation gain P_i = P I13 (eq 24)",
+          lo=0.0, hi=BIG, strict=True),
+    Param("gamma", "double", PAPER_GAINS["gamma"],
+          "weight of the prediction error (eq 24); 0 = direct adaptive law", lo=0.0, hi=BIG),
+    Param("lambda", "double", PAPER_GAINS["lam"],
+          "bandwidth of the filter lambda/(p+lambda), rad/s", lo=0.0, hi=BIG, strict=True),
+    Param("trajectory", "string", "paper",
+          "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
+          choices=("paper", "topic")),
+    Param("paper.reading", "string", "velocity",
+          "reading of the paper's motion: 'velocity' or 'position'",
+          choices=("velocity", "position")),
+    Param("paper.amplitude", "double", 5.0 * math.pi / 180.0, "amplitude A (rad/s or rad)",
+          lo=0.0, hi=BIG),
+    Param("paper.period", "double", 20.0, "period of the paper's motion, s",
+          lo=0.0, hi=BIG, strict=True),
+    Param("paper.q0", "double_array", None,
+          "start of the paper's motion, rad (unset: the first state received)", per_joint=True),
+    Param("state_timeout", "double", 0.02,
+          "watchdog: safe effort after this long without a valid state, s",
+          lo=0.0, hi=BIG, strict=True, read_only=False),
+    Param("safe_effort", "double_array", None,
+          "effort sent by the watchdog, N m, in joints order (unset: zero)", per_joint=True),
+    _effort_limit(),
+    Param("velocity_filter_cutoff", "double", 50.0,
+          "cut-off of the velocity estimate used when JointState has no velocities, Hz",
+          lo=0.0, hi=BIG, strict=True),
+    Param("monitor_decimation", "integer", 1, "publish estimates and errors every k-th step",
+          lo=1, hi=1_000_000, read_only=False),
+    _diagnostics_period(),
+)
+
+#: The simulator node's parameters (``config/simulator.yaml``).
+SIMULATOR = _robot("simulator") + (
+    Param("mode", "string", "lockstep",
+          "'lockstep' (step when the effort for the last state arrives) or 'realtime' "
+          "(steady-clock timer)", choices=("lockstep", "realtime")),
+    Param("dt", "double", PAPER_GAINS["h"], "integration (and control) period, s",
+          lo=0.0, hi=10.0, strict=True),
+    Param("substeps", "integer", 1, "RK4 steps per dt", lo=1, hi=1000),
+    Param("duration", "double", 0.0,
+          "stop (exit 0) after this much sim time, s; 0 = run forever", lo=0.0, hi=1e9),
+    Param("lockstep_timeout", "double", 0.5,
+          "lockstep: wait this long (wall time) for the effort, then hold the previous one "
+          "and count a miss, s", lo=0.0, hi=3600.0, strict=True),
+    Param("wait_for_controller", "bool", True,
+          "start only once a node subscribes to joint_states and publishes efforts"),
+    Param("min_subscribers", "integer", 1,
+          "with wait_for_controller: also wait for this many joint_states subscribers "
+          "(e.g. 2 = the controller and a recorder)", lo=1, hi=1000),
+    Param("q0", "double_array", None,
+          "initial positions, rad, in joints order (unset: the paper's q0 for css_arm, "
+          "else zero)", per_joint=True),
+    Param("qd0", "double_array", None,
+          "initial velocities, rad/s, in joints order (unset: zero)", per_joint=True),
+    Param("position_noise", "double", 0.0,
+          "std dev of the noise added to published positions, rad", lo=0.0, hi=1e6),
+    Param("velocity_noise", "double", 0.0,
+          "std dev of the noise added to published velocities, rad/s", lo=0.0, hi=1e6),
+    Param("noise_seed", "integer", 0, "seed of the measurement noise", lo=0, hi=2 ** 31 - 1),
+    Param("publish_velocity", "bool", True,
+          "fill JointState.velocity (false: positions only)"),
+    _effort_limit(),
+    _diagnostics_period(),
+)
+
+#: node -> its rows
+TABLE = {"controller": CONTROLLER, "simulator": SIMULATOR}
+
+
+def row(node, name):
+    """The row of ``name`` in ``node``'s table (``KeyError`` if there is none)."""
+    for p in TABLE[node]:
+        if p.name == name:
+            return p
+    raise KeyError(f"{node}: no parameter {name!r}")
+
+
+def _type_ok(kind, value):
+    if kind == "bool":
+        return isinstance(value, bool)
+    if kind == "integer":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "double":
+        return isinstance(value, float)
+    if kind == "string":
+        return isinstance(value, str)
+    element = {"double_array": float, "string_array": str}[kind]
+    return isinstance(value, (list, tuple)) and all(isinstance(v, element) for v in value)
+
+
+def check(p, value):
+    """Validate ``value`` against row ``p``; return it (arrays as tuples).
+
+    ``None`` is accepted for a row without default (unset).
+
+    Raises
+    ------
+    ConfigError
+        One line starting with the parameter's name.
+    """
+    if value is None and p.default is None:
+        return None
+    if not _type_ok(p.type, value):
+        raise ConfigError(f"{p.name}: wrong type, expected {p.type}, got {value!r}")
+    if p.type.endswith("_array"):
+        value = tuple(value)
+        if p.size is not None and len(value) != p.size:
+            raise ConfigError(f"{p.name}: expected {p.size} values, got {len(value)}")
+        if p.type == "double_array":
+            if not all(math.isfinite(v) for v in value):
+                raise ConfigError(f"{p.name}: contains NaN or Inf")
+            if p.lo is not None and not all(_in_range(p, v) for v in value):
+                bound = ">" if p.strict else ">="
+                raise ConfigError(f"{p.name}: every value must be {bound} {p.lo:g}, got "
+                                  f"{list(value)}")
+        return value
+    if p.type == "double" and not math.isfinite(value):
+        raise ConfigError(f"{p.name}: must be finite, got {value}")
+    if p.lo is not None and not p.lo <= value <= p.hi:
+        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]")
+    if p.strict and not value > p.lo:
+        raise ConfigError(f"{p.name}: must be > {p.lo:g}, got {value}")
+    if p.choices and value not in p.choices:
+        raise ConfigError(f"{p.name}: must be {' or '.join(repr(c) for c in p.choices)}, "
+                          f"got {value!r}")
+    return value
+
+
+def _in_range(p, v):
+    return (v > p.lo if p.strict else v >= p.lo) and (p.hi is None or v <= p.hi)
+
+
+def per_joint(name, value, n, default):
+    """A checked per-joint array: 1 (broadcast) or ``n`` values; ``default`` if unset.
+
+    Returns
+    -------
+    ndarray, shape (n,), or None (unset without default)
+    """
+    if value is None:
+        return None if default is None else np.array(np.broadcast_to(default, (n,)), float)
+    arr = np.asarray(list(value), dtype=float)
+    if arr.size == 1:
+        arr = np.full(n, arr[0])
+    if arr.shape != (n,):
+        raise ConfigError(f"{name}: expected 1 or {n} values (one per joint), got {len(value)}")
+    return arr
+
+
+def check_file_params(node, params):
+    """Check the ``{name: value}`` of one node's section of a parameters file.
+
+    Nested mappings are flattened (``paper: {period: 20.0}`` is ``paper.period``).
+    ``use_sim_time`` and the other parameters rclpy declares itself are allowed.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first unknown parameter or invalid value.
+    """
+    known = {p.name: p for p in TABLE[node]}
+    for name, value in _flatten(params):
+        if name in ("use_sim_time", "start_type_description_service"):
+            continue
+        if name not in known:
+            raise ConfigError(f"{name}: the {node} declares no such parameter")
+        check(known[name], value)
+
+
+def _flatten(params, prefix=""):
+    for key, value in params.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{key}.")
+        else:
+            yield f"{prefix}{key}", value
+
+
+def _cell(value):
+    if value is None:
+        return "unset"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f"`{value!r}`" if value == "" else f"`{value}`"
+    return repr(value)      # doubles keep their decimal point
+
+
+def _range(p):
+    if p.choices:
+        return " \\| ".join(f"`{c}`" for c in p.choices)
+    if p.lo is None:
+        return ""
+    left = "(" if p.strict else "["
+    number = str if p.type == "integer" else (lambda x: f"{x:g}")
+    hi = "inf" if p.hi is None or p.hi == math.inf else number(p.hi)
+    text = f"{left}{number(p.lo)}, {hi}]"
+    return text + (" each" if p.type.endswith("_array") else "")
+
+
+def markdown(node):
+    """The Markdown table of ``node``'s parameters."""
+    lines = ["| name | type | default | range | settable | description |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for p in TABLE[node]:
+        kind = p.type + (" (1 or n)" if p.per_joint else "")
+        lines.append(f"| `{p.name}` | {kind} | {_cell(p.default)} | {_range(p)} | "
+                     f"{'' if p.read_only else 'yes'} | {p.description} |")
+    return "\n".join(lines)
+
+
+def document():
+    """The whole of ``doc/parameters.md``."""
+    parts = ["# Node parameters", "",
+             "Generated from `rcac_ros/params.py` by `python -m rcac_ros.params > "
+             "doc/parameters.md`; do not edit by hand (a test compares the two).",
+             "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
+             "decimal point in a YAML file. Settable parameters can be changed with "
+             "`ros2 param set` while the node runs; the others are read once at start-up."]
+    for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
+        parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
+                  markdown(node)]
+    return "\n".join(parts) + "\n"
+
+
+def main():
+    """Print ``doc/parameters.md``."""
+    sys.stdout.write(document())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

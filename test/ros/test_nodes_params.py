@@ -1,0 +1,59 @@
+"""The nodes declare exactly the table's parameters; run-time changes go through its checks."""
+
+import pytest
+
+from test_nodes_support import ros_context
+
+from rclpy.exceptions import ParameterUninitializedException  # noqa: E402  (after support)
+from rclpy.parameter import Parameter  # noqa: E402
+
+from rcac_ros import params  # noqa: E402
+from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402
+
+RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
+
+
+@pytest.mark.parametrize("node_class, node", [(ControllerNode, "controller"),
+                                              (SimulatorNode, "simulator")])
+def test_declared_parameters_and_descriptors_follow_the_table(node_class, node):
+    with ros_context() as (ctx, _):
+        n = node_class(context=ctx)
+        try:
+            names = set(n.list_parameters([], 0).names) - RCLPY_OWN
+            assert names == {p.name for p in params.TABLE[node]}
+            for p in params.TABLE[node]:
+                desc = n.describe_parameter(p.name)
+                assert desc.read_only == p.read_only, p.name
+                assert desc.description == p.description, p.name
+                if p.type == "double" and p.lo is not None:
+                    r = desc.floating_point_range[0]
+                    assert (r.from_value, r.to_value) == (p.lo, p.hi), p.name
+                if p.type == "integer" and p.lo is not None:
+                    r = desc.integer_range[0]
+                    assert (r.from_value, r.to_value) == (p.lo, p.hi), p.name
+                if p.default is not None:
+                    assert n.get_parameter(p.name).value == p.default, p.name
+                else:
+                    with pytest.raises(ParameterUninitializedException):
+                        n.get_parameter(p.name)
+        finally:
+            n.destroy_node()
+
+
+def test_controller_applies_a_valid_change_and_refuses_an_invalid_one():
+    with ros_context() as (ctx, _):
+        n = ControllerNode(context=ctx)
+        try:
+            ok = n.set_parameters([Parameter("state_timeout", value=0.5)])[0]
+            assert ok.successful and n.state_timeout == 0.5
+            bad = n.set_parameters([Parameter("state_timeout", value=0.0)])[0]
+            assert not bad.successful and bad.reason.startswith("state_timeout:")
+            assert n.state_timeout == 0.5
+            ok = n.set_parameters([Parameter("monitor_decimation", value=10)])[0]
+            assert ok.successful and n.publish_every == 10
+            frozen = n.set_parameters([Parameter("K_D", value=5.0)])[0]
+            assert not frozen.successful                       # read-only
+            assert n.get_parameter("K_D").value == params.row("controller", "K_D").default
+        finally:
+            n.destroy_node()

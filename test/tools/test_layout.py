@@ -1,0 +1,184 @@
+"""The package's layout: imports run one way (tools -> nodes -> core), with no cycle.
+
+The graph is read from the source (every ``import``, module level or inside a function);
+the heavy-dependency checks import the modules in a fresh interpreter.
+"""
+
+import ast
+import collections
+import os
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PACKAGE = os.path.join(ROOT, "rcac_ros")
+
+#: rank of each part of the package: a module may import its own rank or a lower one
+RANKS = {"errors": 0, "topics": 0, "core": 1, "params": 2, "nodes": 3, "tools": 4}
+
+
+def modules():
+    """``{dotted name: path}`` of every module of the package."""
+    out = {}
+    for folder, _, files in os.walk(PACKAGE):
+        for name in files:
+            if name.endswith(".py"):
+                path = os.path.join(folder, name)
+                rel = os.path.relpath(path, ROOT)[:-3].replace(os.sep, ".")
+                out[rel[:-len(".__init__")] if rel.endswith(".__init__") else rel] = path
+    return out
+
+
+def imports(name, path):
+    """The modules ``name`` imports (absolute dotted names), anywhere in its source."""
+    tree = ast.parse(open(path, encoding="utf-8").read(), path)
+    package = name if path.endswith("__init__.py") else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[:len(parts) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return found
+
+
+def graph():
+    """Edges between the package's own modules: ``{module: {imported module, ...}}``."""
+    mods = modules()
+    return {name: {m for m in imports(name, path) if m in mods and m != name}
+            for name, path in mods.items()}
+
+
+def part(module):
+    """``core``, ``nodes``, ``tools``, ``errors``, ... (None for the package itself)."""
+    pieces = module.split(".")
+    return pieces[1] if len(pieces) > 1 else None
+
+
+def test_nothing_imports_upward():
+    upward = []
+    for mod, targets in graph().items():
+        if part(mod) is None:
+            continue
+        for target in targets:
+            if part(target) is not None and RANKS[part(target)] > RANKS[part(mod)]:
+                upward.append(f"{mod} -> {target}")
+    assert not upward, "upward imports:\n" + "\n".join(sorted(upward))
+
+
+def test_every_part_has_a_rank():
+    assert {part(m) for m in modules() if part(m)} <= set(RANKS)
+
+
+def test_no_import_cycle():
+    edges = graph()
+    state = collections.defaultdict(int)    # 0 new, 1 on the stack, 2 done
+    cycles = []
+
+    def visit(node, stack):
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(edges[node]):
+            if state[nxt] == 1:
+                cycles.append(" -> ".join(stack[stack.index(nxt):] + [nxt]))
+            elif state[nxt] == 0:
+                visit(nxt, stack)
+        stack.pop()
+        state[node] = 2
+
+    for node in sorted(edges):
+        if state[node] == 0:
+            visit(node, [])
+    assert not cycles, "import cycles:\n" + "\n".join(cycles)
+
+
+def module_level_imports(name):
+    """The package modules ``name`` imports at module level (not inside a function)."""
+    path = modules()[name]
+    tree = ast.parse(open(path, encoding="utf-8").read(), path)
+    top = ast.Module(body=[n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))],
+                     type_ignores=[])
+    found = set()
+    for node in ast.walk(top):
+        if isinstance(node, ast.ImportFrom):
+            found.add(node.module)
+            found.update(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+    return found
+
+
+def test_tools_that_must_stay_apart():
+    """bench imports ros_bench only when asked (--ros); ros_bench does not need the demo."""
+    assert "rcac_ros.tools.ros_bench" not in module_level_imports("rcac_ros.tools.bench")
+    assert "rcac_ros.tools.demo" not in graph()["rcac_ros.tools.ros_bench"]
+    # the child processes and the ROS context live in launch, below demo and record
+    for mod in ("rcac_ros.tools.ros_bench", "rcac_ros.tools.record"):
+        assert "rcac_ros.tools.demo" not in graph()[mod]
+
+
+def test_core_never_imports_rclpy():
+    mods = modules()
+    bad = [f"{m} imports {t}" for m in mods if part(m) == "core"
+           for t in imports(m, mods[m]) if t.split(".")[0] in ("rclpy", "rcl_interfaces")]
+    assert not bad, "\n".join(bad)
+
+
+def test_main_blocks_do_not_call_the_cli():
+    bad = []
+    for mod, path in modules().items():
+        tree = ast.parse(open(path, encoding="utf-8").read(), path)
+        for node in tree.body:
+            if isinstance(node, ast.If) and "__main__" in ast.dump(node.test) \
+                    and mod != "rcac_ros.tools.cli" and "cli" in ast.dump(node):
+                bad.append(mod)
+    assert not bad, f"__main__ blocks calling rcac_ros.tools.cli: {bad}"
+
+
+def loaded_after_import(module):
+    """The top-level packages loaded by ``import module`` in a fresh interpreter."""
+    code = (f"import sys, {module}; "
+            "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([ROOT, os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return set(out.stdout.split())
+
+
+@pytest.mark.parametrize("module", ["rcac_ros.tools.record", "rcac_ros.tools.inspect_bag",
+                                    "rcac_ros.errors", "rcac_ros.topics", "rcac_ros.tools.cli"])
+def test_light_modules_do_not_load_numba(module):
+    assert "numba" not in loaded_after_import(module)
+
+
+@pytest.mark.parametrize("module", ["rcac_ros.core", "rcac_ros.tools.experiment",
+                                    "rcac_ros.tools.bench", "rcac_ros.params"])
+def test_offline_modules_do_not_load_rclpy(module):
+    assert "rclpy" not in loaded_after_import(module)
+
+
+def test_every_folder_of_the_package_is_a_regular_package():
+    """setup.py's find_packages (and so colcon and pip) installs only folders with __init__."""
+    from setuptools import find_packages
+    found = set(find_packages(ROOT, exclude=["test", "test.*"]))
+    folders = {os.path.relpath(os.path.dirname(path), ROOT).replace(os.sep, ".")
+               for path in modules().values()}
+    assert folders <= found, f"missing __init__.py: {sorted(folders - found)}"
+
+
+def test_test_files_have_unique_names():
+    seen = collections.defaultdict(list)
+    for folder, _, files in os.walk(os.path.join(ROOT, "test")):
+        for name in files:
+            if name.startswith("test_") and name.endswith(".py"):
+                seen[name].append(folder)
+    assert not {k: v for k, v in seen.items() if len(v) > 1}
