@@ -270,6 +270,7 @@ class SlotineLiCompositeController:
         """Current estimates, shape (n, 13) (a copy)."""
         return self._theta.reshape(self.n, 13).copy()
 
+    @property
     def E(self):
         """Prediction errors ``e`` of the n filtered joint torques at the last step (eq 6)."""
         return self._filt[2, :, 13 * self.n].copy()
