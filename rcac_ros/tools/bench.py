@@ -233,9 +233,19 @@ def add_arguments(parser):
                              "each joint state")
     parser.add_argument("--budget", type=float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
+    parser.add_argument("--noise", action="store_true",
+                        help="instead: 10-minute closed loops with sensor noise, plain and with "
+                             "dead zones + projection (are the estimates bounded?)")
+    parser.add_argument("--noise-duration", type=float, default=600.0,
+                        help="seconds of each --noise run (default 600)")
+    parser.add_argument("--out", default="results/noise", help="--noise: output directory")
 
 
 def run(args):
+    if args.noise:
+        from rcac_ros.tools.noise_bench import run_noise_bench
+        run_noise_bench(args.noise_duration, args.out)
+        return 0
     if args.ros:
         from rcac_ros.tools.ros_bench import run_ros_bench
         result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode)
