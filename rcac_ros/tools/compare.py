@@ -168,8 +168,8 @@ def metrics(run, scenario, last_seconds=5.0):
     if scenario.jump is not None:
         after = ok & (t >= scenario.jump)
         out["rms_after_payload"] = measure.rms(e[after]) if after.any() else float("nan")
-        out["mass_last_end"] = float(run["mass_last"][ok][-1])
-        out["mass_last_true"] = float(scenario.theta_end[-1, 0])
+    out["mass_last_end"] = float(run["mass_last"][ok][-1])
+    out["mass_last_true"] = float(scenario.theta_end[-1, 0])
     if run["excitation"] is not None and run["diverged_at"] is None:
         ident = summary(run["excitation"], run["theta_end"])
         out["identifiable"] = ident["identifiable_combinations_total"]
@@ -230,6 +230,9 @@ def plot(series, report, out_dir):
     paths = []
     for name, runs in series.items():
         fig, axes = plt.subplots(1, 4, figsize=(24, 5))
+        colors = plt.cm.tab20(np.linspace(0.0, 1.0, 20))      # up to 20 laws, all distinct
+        for ax in axes:
+            ax.set_prop_cycle(color=list(colors))
         for law, r in runs.items():
             t = r["t"]
             err = np.minimum(np.linalg.norm(r["e"], axis=1), 1e3)
@@ -247,7 +250,7 @@ def plot(series, report, out_dir):
             ax.set_xlabel("time (s)")
             ax.grid(alpha=0.3)
         if truth is not None:
-            axes[2].axhline(truth, color="k", ls="--", lw=0.9, label="true (after payload)")
+            axes[2].axhline(truth, color="k", ls="--", lw=0.9, label="true (end)")
         axes[0].set_ylim(1e-7, 1.0)
         axes[3].set_ylim(bottom=1e-12)
         axes[0].legend(fontsize=7, ncol=2)
