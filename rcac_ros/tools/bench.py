@@ -219,7 +219,7 @@ def _format_row(r):
         return f"{v:12.2f}" if v is not None else f"{'-':>12s}"
     return (f"{r['model']:>10s} {r['n']:5d} {f(r['controller_us'])} {f(r['pin_rnea_us'])} "
             f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}"
-            + "".join(f(r[k]) for k in VARIANTS))
+            + "".join(f"     {f(r[k])}" for k in VARIANTS))
 
 
 def add_arguments(parser):
@@ -256,7 +256,7 @@ def run(args):
         print("pinocchio (pip package 'pin') is not installed: the pin.rnea column is skipped")
     print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
           f"{'SlotineLi us':>12s} {'sim step us':>12s}"
-          + "".join(f"{k[:-3] + ' us':>12s}" for k in VARIANTS))
+          + "".join(f" {k[:-3] + ' us':>16s}" for k in VARIANTS))
     result = run_bench(budget_s=args.budget)
     print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
           "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
