@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros clean
+.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros readme-timings clean
 
 demo: $(VENV)/.runtime
 	$(BIN)/rcac demo --out $(OUT)/demo
@@ -30,6 +30,10 @@ bench: $(VENV)/.test
 
 bench-ros: $(VENV)/.runtime
 	$(BIN)/rcac bench --ros --json $(OUT)/bench_ros.json
+
+# time `make demo` and `make test` in a fresh clone of HEAD and write them into README.md
+readme-timings:
+	$(PYTHON) rcac_ros/tools/readme_timings.py --clean
 
 $(VENV)/.runtime: requirements.txt setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)

@@ -29,8 +29,8 @@ DIAGNOSTICS = "/diagnostics"
 CLOCK = "/clock"
 
 # ------------------------------------------------------------------ quality of service
-#: keep-last depth of the control topics: reliable, keep-last 10, what ros2_control uses
-#: (ROS_NOTES "QoS")
+#: keep-last depth of the control topics: reliable, keep-last 10, what ros2_control uses (a
+#: best-effort publisher would deliver nothing to ros2_control's reliable subscribers)
 DEPTH = 10
 #: the same, keep-last 1000, for the topics a recorder or a test reads (2 s at 500 Hz): a slow
 #: subscriber catches up instead of losing samples. Depth does not affect QoS compatibility.

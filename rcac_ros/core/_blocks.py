@@ -1,6 +1,6 @@
 """Compiled building blocks shared by the recursive law and the Slotine-Li baseline.
 
-Each block is one equation of NOTES.md 3-4 over one link, reading the packed layout of
+Each block is one equation of doc/design.md §3-4 over one link, reading the packed layout of
 :mod:`rcac_ros.core._packing`.
 """
 

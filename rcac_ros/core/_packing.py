@@ -12,7 +12,7 @@ their constants, state and scalars into three float64 arrays:
 ``chan`` (m, CHAN_COLS)
     channel c: its joint (0-based, :data:`POWER` for the energy channel), ``y_c``, ``E_c``,
     whether it adapts this step (dead zone), and its axis ``a_j``, ``adot_j`` while the
-    forward pass runs (NOTES.md 4).
+    forward pass runs (doc/design.md §4).
 
 Every offset below is a module constant, so numba folds it; :func:`block` gives the
 slices the Python side reads.

@@ -1,4 +1,4 @@
-"""Prediction channels: which filtered torques the composite law predicts (NOTES.md 4).
+"""Prediction channels: which filtered torques the composite law predicts (doc/design.md §4).
 
 A channel is a fixed weighted combination ``c^T tau`` of the joint torques. It is predicted
 by one recursion over the links, with ``a_j`` the channel's axis seen in frame j:
@@ -116,7 +116,7 @@ def channel_axis(chan, c, i, C, px, py, pz, qd):
     """Propagate joint channel c's ``a_j``, ``adot_j`` to link i; False if it has not begun.
 
     ``a_k = z6``, ``adot_k = 0`` at the channel's joint k, then ``a_j = T_j a_j-1``,
-    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (NOTES.md 4). Kept in ``chan[c]``.
+    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (doc/design.md §4). Kept in ``chan[c]``.
     """
     k = int(chan[c, CH_JOINT])
     if i < k:
@@ -160,7 +160,7 @@ def joint_terms(chan, c, V, g):
 def power_terms(V, g):
     """The energy channel: ``phi_j = 1/2 V_j^T Ym(V_j)``, ``psi_j = V_j^T G_j`` (13-tuples).
 
-    ``V^T G = -(m v.g + w.(h x g)) = -m v.g + h.(w x g)`` (G of NOTES.md 2).
+    ``V^T G = -(m v.g + w.(h x g)) = -m v.g + h.(w x g)`` (G of doc/design.md §2).
     """
     vx, vy, vz, wx, wy, wz = V
     gx, gy, gz = g

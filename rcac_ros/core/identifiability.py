@@ -1,13 +1,13 @@
-"""Identifiability and physical consistency of a run's estimates (NOTES.md 2).
+"""Identifiability and physical consistency of a run's estimates (doc/design.md §2).
 
 Excitation. The composite law learns link i's parameters through the rows ``W_ci`` of the
 prediction channels (eq 24). Over a run the information it gathered is
 ``Sigma_i = sum_k h sum_c W_ci(k)^T W_ci(k)`` (13 x 13); its smallest singular value and
 condition number say how well the run excited link i, and its numerical rank how many
-combinations of the 13 parameters it could identify (at most 10-11, NOTES.md 2).
+combinations of the 13 parameters it could identify (at most 10-11, doc/design.md §2).
 
 Consistency. From the 13 parameters ``m``, ``h = m c``, the inertia about the frame origin
-``I_o`` (NOTES.md 2), the inertia about the centre of mass is
+``I_o`` (doc/design.md §2), the inertia about the centre of mass is
 ``I_c = I_o - (|h|^2 I - h h^T) / m``. A physical link has ``m > 0``, ``I_c`` positive
 definite, and principal moments obeying the triangle inequalities
 ``I_1 + I_2 >= I_3`` (every permutation).
@@ -62,7 +62,7 @@ class Excitation:
 
 
 def inertia_about_com(theta):
-    """``(m, c, I_c)`` of one link's 13 parameters (NOTES.md 2); c and I_c NaN if m == 0."""
+    """``(m, c, I_c)`` of one link's 13 parameters (doc/design.md §2); c and I_c NaN if m == 0."""
     t = as_array(theta, (13,), "theta")
     m, h = t[0], t[1:4]
     I_o = np.array([[t[10] + t[5] + t[6], -t[7], -t[8]],

@@ -1,6 +1,6 @@
 """The constant description of a serial chain of revolute joints (the paper's frames).
 
-Conventions (NOTES.md section 1): frame ``i`` is frame ``i-1`` translated by
+Conventions (doc/design.md §1): frame ``i`` is frame ``i-1`` translated by
 ``p[i]`` (expressed in frame ``i-1``), turned by the constant rotation
 ``R_fix[i]`` and then by ``Rz(q_i)``; so ``iC_{i-1} = (R_fix_i Rz(q_i))^T``.
 Each link carries its mass, its centre of mass ``com`` (frame ``i``) and its
@@ -21,7 +21,7 @@ from rcac_ros.errors import ConfigError, ModelError
 from ._validate import as_array, joint_values
 from .spatial import pack_kinematics
 
-#: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, NOTES.md 2).
+#: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, doc/design.md §2).
 PARAMETER_NAMES = (
     "m", "m*px", "m*py", "m*pz", "m*px^2", "m*py^2", "m*pz^2",
     "m*px*py-Ixy", "m*px*pz-Ixz", "m*py*pz-Iyz", "Ixx", "Iyy", "Izz",
@@ -53,7 +53,7 @@ def rpy_matrix(rpy):
 
 
 def theta_from_inertia(mass, com, inertia):
-    """The 13 parameters of eq 13 (NOTES.md 2) from mass, centre of mass and inertia about it."""
+    """The 13 parameters of eq 13 (doc/design.md §2) from mass, centre of mass, inertia there."""
     m = float(mass)
     px, py, pz = (float(v) for v in com)
     I = np.asarray(inertia, dtype=float)
@@ -343,7 +343,7 @@ def css_arm(gravity=(0.0, 0.0, 0.0)):
     """The Chinese Space Station arm of the paper's Table 1 (7 links, g = 0).
 
     Figure 2 (the frames) is missing from the text, so the constant rotations
-    follow NOTES.md section 5: ``R_fix = [I, Rx(-90), I, I, Ry(90), Rx(-90), Ry(90)]``.
+    follow doc/design.md §5: ``R_fix = [I, Rx(-90), I, I, Ry(90), Rx(-90), Ry(90)]``.
     ``config/css_arm.yaml`` holds the same preset in the YAML schema. Table 1's
     inertias (``diag[2 2 200]``) break the triangle inequality of a real body, so
     that check is off for this preset (positive definiteness is still checked).

@@ -1,4 +1,4 @@
-"""The recursive composite adaptive controller (eqs 18-24, NOTES.md 3-4), with m channels.
+"""The recursive composite adaptive controller (eqs 18-24, doc/design.md §3-4), with m channels.
 
 Per control period ``h``, with ``s_i = V_i - V_ri``:
 

@@ -1,4 +1,4 @@
-"""The per-link 6x13 reference regressor (eqs 13-14, NOTES.md 2) and its companions.
+"""The per-link 6x13 reference regressor (eqs 13-14, doc/design.md §2) and its companions.
 
 ``Y(Vdot_r, V_r, w, g) theta = M Vdot_r + C(w) V_r + G`` with the paper's 13
 parameters, ``C`` evaluated at the actual angular velocity ``w``:
@@ -8,7 +8,7 @@ parameters, ``C`` evaluated at the actual angular velocity ``w``:
              + I_o (w x w_r) - (t5 + t6 + t7) (w x w_r)
 
 ``Ym(V) = Y(V, 0, w, 0)`` is the regressor of ``M V`` and
-``Yc(V) = Y(0, V, w, g)`` that of ``C(w) V + G`` (NOTES.md 4).
+``Yc(V) = Y(0, V, w, g)`` that of ``C(w) V + G`` (doc/design.md §4).
 """
 
 import numpy as np
@@ -131,7 +131,7 @@ def link_regressor(Vdot_r, V_r, w, g=(0.0, 0.0, 0.0)):
 
 
 def mass_regressor(V):
-    """``Ym(V)``, shape (6, 13): ``Ym(V) theta = M V`` (NOTES.md 4)."""
+    """``Ym(V)``, shape (6, 13): ``Ym(V) theta = M V`` (doc/design.md §4)."""
     V = as_array(V, (6,), "V")
     return link_regressor(V, np.zeros(6), V[3:])
 
@@ -143,7 +143,7 @@ def coriolis_gravity_regressor(V, g=(0.0, 0.0, 0.0)):
 
 
 def link_matrices(theta, w, g=(0.0, 0.0, 0.0)):
-    """The blocks of eq 14 (NOTES.md 2) from one link's 13 parameters: ``M``, ``C(w)``, ``G``.
+    """The blocks of eq 14 (doc/design.md §2) of one link's 13 parameters: ``M``, ``C(w)``, ``G``.
 
     These are the explicit matrices, used to check the regressor and for the
     Lyapunov function of eq 26.
@@ -171,7 +171,7 @@ def _skew(v):
 
 @njit(cache=True)
 def inertia_row(ax, ay, az, wx, wy, wz):
-    """``d(a^T I_o(theta) w) / d theta_5..13`` as a 9-tuple (I_o of NOTES.md 2)."""
+    """``d(a^T I_o(theta) w) / d theta_5..13`` as a 9-tuple (I_o of doc/design.md §2)."""
     px = ax * wx
     py = ay * wy
     pz = az * wz

@@ -1,7 +1,7 @@
 """Compiled building blocks of the matrix-form Newton-Euler recursion (eqs 9-12, 15).
 
 Motion vectors are ``V = [v; w]`` and force vectors ``F = [f; n]``: linear part
-first (NOTES.md 1). Frame ``i`` is reached from frame ``i-1`` by ``p_i``, then
+first (doc/design.md §1). Frame ``i`` is reached from frame ``i-1`` by ``p_i``, then
 ``R_fix_i``, then ``Rz(q_i)``; ``C = iC_{i-1} = (R_fix_i Rz(q_i))^T``.
 
 The packed per-link model row (``RobotModel`` is unpacked once into this layout, its
@@ -105,7 +105,7 @@ def propagate(C, i, px, py, pz, qd, x, xd, u, ud):
 
     ``x_i = T x + z6 u``, ``xdot_i = T xdot + Tdot x + z6 ud``, with ``Tdot x = -(z qd)^x (T x)``
     (eq 12). ``(u, ud) = (qd, qdd)`` gives V and Vdot; ``(qd_r, qdd_r)`` the reference motion
-    of eq 18; ``(0, 0)`` carries joint 1's axis ``a_j`` and ``adot_j`` (NOTES.md 4).
+    of eq 18; ``(0, 0)`` carries joint 1's axis ``a_j`` and ``adot_j`` (doc/design.md §4).
     """
     tvx, tvy, tvz, twx, twy, twz = transform_motion(C, i, px, py, pz,
                                                     x[0], x[1], x[2], x[3], x[4], x[5])

@@ -1,6 +1,6 @@
 """Desired joint motions ``t -> (q_d, qd_d, qdd_d)``.
 
-The paper's Section 4 motion is ambiguous (NOTES.md 5); both readings are here:
+The paper's Section 4 motion is ambiguous (doc/design.md §5); both readings are here:
 
 * ``"velocity"`` (default): ``qd_d = A sin(w t)`` from ``q_d(0) = q(0)``, so
   ``q_d = q0 + (A / w) (1 - cos(w t))``: zero initial error, matches ``qdot(0) = 0``.

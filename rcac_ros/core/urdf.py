@@ -2,7 +2,7 @@
 
 The URDF is parsed by ``yourdfpy`` (no meshes, no scene graph). The chain runs
 from ``base_link`` (default: the root) to ``tip_link`` (default: the end of the
-only path of moving joints) and is mapped onto the paper's frames (NOTES.md 1):
+only path of moving joints) and is mapped onto the paper's frames (doc/design.md §1):
 
 - Each revolute or continuous joint ``i`` gets a frame ``F_i = L_i A_i``: the
   URDF frame ``L_i`` of its child link turned by the constant rotation ``A_i``

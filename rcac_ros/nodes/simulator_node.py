@@ -8,7 +8,8 @@ Two modes:
   (the previous effort held, a miss counted). Deterministic on a loaded machine.
 * ``realtime``: free-running every ``dt`` on absolute deadlines of the steady clock
   (:class:`rcac_ros.nodes.pacing.DeadlineLoop`: a late step is caught up, not skipped),
-  the latest effort held; never paced on ROS time (see ROS_NOTES).
+  the latest effort held; never paced on ROS time, which stops when ``use_sim_time`` is set
+  (a ``/**`` parameter block may set it on this node too) and nothing publishes /clock.
 
 Parameters are documented in ``config/simulator.yaml``.
 """

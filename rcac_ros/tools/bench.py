@@ -17,6 +17,7 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
+from rcac_ros.tools.args import positive_float
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -226,17 +227,17 @@ def add_arguments(parser):
     parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     parser.add_argument("--ros", action="store_true",
                         help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
-    parser.add_argument("--duration", type=float, default=60.0,
+    parser.add_argument("--duration", type=positive_float, default=60.0,
                         help="seconds of the --ros run (default 60)")
     parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
                         help="--ros: the controller on its 500 Hz timer (default) or answering "
                              "each joint state")
-    parser.add_argument("--budget", type=float, default=0.3,
+    parser.add_argument("--budget", type=positive_float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
     parser.add_argument("--noise", action="store_true",
                         help="instead: 10-minute closed loops with sensor noise, plain and with "
                              "dead zones + projection (are the estimates bounded?)")
-    parser.add_argument("--noise-duration", type=float, default=600.0,
+    parser.add_argument("--noise-duration", type=positive_float, default=600.0,
                         help="seconds of each --noise run (default 600)")
     parser.add_argument("--out", default="results/noise", help="--noise: output directory")
 

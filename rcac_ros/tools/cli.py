@@ -3,6 +3,8 @@
 Each subcommand lives in its own module exposing ``add_arguments(parser)`` and
 ``run(args) -> int``; modules are imported only when their subcommand runs, so
 ``rcac --help`` stays fast and ``rcac experiment`` never imports rclpy.
+Numbers are checked as they are parsed (the ``type=`` helpers of ``tools/args.py``); a bad
+argument gives one line naming it and exit code 2.
 """
 
 import argparse
@@ -24,8 +26,15 @@ SUBCOMMANDS = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, with each usage error on one line naming the option, and exit code 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="rcac", description="rcac_ros tools: the recursive composite adaptive controller "
         "offline, over ROS 2, and its bags.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

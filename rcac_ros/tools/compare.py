@@ -31,6 +31,7 @@ from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.errors import RcacError
 from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.progress import Progress
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
@@ -261,17 +262,6 @@ def plot(series, report, out_dir):
         plt.close(fig)
         paths.append(path)
     return paths
-
-
-def positive_float(text):
-    """argparse type: a finite float > 0 (else exit 2 with one line)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not np.isfinite(v) or v <= 0.0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return v
 
 
 def channel_list(text):

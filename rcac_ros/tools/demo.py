@@ -20,6 +20,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
     StopFlag
 from rcac_ros.tools.record import BagRecorder, format_counts
@@ -31,7 +32,8 @@ def _prepare_out(out):
     bag = os.path.join(out, "bag")
     if os.path.exists(bag):
         leftovers = set(os.listdir(bag)) - {"metadata.yaml"}
-        if not all(f.endswith((".mcap", ".db3", ".db3-wal", ".db3-shm")) for f in leftovers):
+        kinds = (".mcap", ".db3", ".db3-wal", ".db3-shm", ".db3-journal", "metadata.yaml.tmp")
+        if not all(f.endswith(kinds) for f in leftovers):
             raise ConfigError(f"out: {bag} exists and does not look like a bag; move it away")
         shutil.rmtree(bag)
     os.makedirs(os.path.join(out, "logs"), exist_ok=True)
@@ -82,7 +84,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
         try:
             ctx = init_context(domain)
             executor = SingleThreadedExecutor(context=ctx)
-            recorder = BagRecorder(bag, ctx, storage=storage)
+            recorder = BagRecorder(bag, ctx, storage=storage, log=log)
             executor.add_node(recorder.node)
             log(f"rcac demo: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
                 f"lockstep (dt {dt * 1e3:g} ms); bag {bag}")
@@ -137,12 +139,15 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                     next_report = now + progress
             check("before the end of the run")
             wall = time.monotonic() - t_start
-            # drain what is still in flight: the controller's answer to the last state
+            # drain what is still in flight: the last states (the simulator publishes states
+            # 0..steps) and the controller's answers to them
             states = "/" + topics.JOINT_STATES
             answers = f"/{topics.CONTROLLER_NODE}/{topics.DESIRED_STATE[2:]}"
+            last_state = int(round(duration / dt)) * int(round(dt * 1e9))
             drain_end = time.monotonic() + 2.0
             while time.monotonic() < drain_end and not stop \
-                    and recorder.counts[answers] < recorder.counts[states]:
+                    and (recorder.last_state_stamp != last_state
+                         or recorder.counts[answers] < recorder.counts[states]):
                 executor.spin_once(timeout_sec=0.02)
             sim = recorder.sim_time or 0.0
             log(f"rcac demo: {sim:.3f} s simulated in {wall:.1f} s wall "
@@ -178,7 +183,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
 
 
 def add_arguments(parser):
-    parser.add_argument("--duration", type=float, default=20.0,
+    parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="simulated seconds (default: 20, the paper's experiment)")
     parser.add_argument("--out", "-o", default="rcac_demo",
                         help="output directory: bag/, logs/, figures, metrics.json "
@@ -194,7 +199,7 @@ def run(args):
     try:
         bag = run_demo(args.duration, out, args.storage)
     except KeyboardInterrupt:
-        print(f"rcac demo: interrupted; both nodes stopped; the partial bag is in "
+        print(f"rcac demo: interrupted; both nodes stopped; the bag is closed in "
               f"{os.path.join(out, 'bag')} (rcac inspect reads it)", file=sys.stderr)
         return 130
     except NodeFailed as err:
@@ -209,6 +214,8 @@ def run(args):
               f"{start:.3f} s; the controller's topics, and the metrics, cover the whole run")
     print("Metrics (as rcac experiment):")
     print(format_metrics(result["metrics"]))
+    for line in result["notes"]:
+        print(f"rcac demo: note: {line}")
     print("Wrote:")
     print(f"  bag      {bag}")
     print(f"  metrics  {result['metrics_path']}")

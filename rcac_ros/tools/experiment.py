@@ -1,6 +1,6 @@
 """``rcac experiment``: the paper's Section 4 for the direct and the composite laws.
 
-Both laws run on the CSS arm (Table 1, g = 0, frames of NOTES.md 5) from
+Both laws run on the CSS arm (Table 1, g = 0, frames of doc/design.md §5) from
 ``theta_hat(0) = 0``, with the paper's gains, the plant integrated by RK4 at the
 control period with the torque held. Writes ``metrics.json``,
 ``tracking_errors.png`` (Figure 3) and ``parameter_estimates.png`` (Figure 4).
@@ -14,6 +14,7 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            Simulator, css_arm)
+from rcac_ros.tools.args import non_negative_float, positive_float, positive_int
 from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 from rcac_ros.tools.progress import Progress
 
@@ -93,19 +94,21 @@ def write_outputs(model, runs, report, out_dir, settings):
 
 def add_arguments(parser):
     from rcac_ros.tools.compare import channel_list
-    parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
+    parser.add_argument("--duration", type=positive_float, default=20.0,
+                        help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
-                        help="reading of the paper's desired motion (NOTES.md 5)")
+                        help="reading of the paper's desired motion (doc/design.md §5)")
     for name, text in (("K_D", "link gain K_Di = K_D I6"),
                        ("Lambda", "Lambda = value * I"),
                        ("P", "adaptation gain P_i = P I13"),
                        ("gamma", "prediction-error weight of the composite law"),
                        ("lam", "filter bandwidth lambda, rad/s"),
                        ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=float, default=PAPER_GAINS[name],
+        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
+                            else positive_float, default=PAPER_GAINS[name],
                             help=f"{text} (default {PAPER_GAINS[name]:g})")
-    parser.add_argument("--substeps", type=int, default=1,
+    parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--channels", type=channel_list, default=(1,),
                         help="prediction channels of the composite law, e.g. 1,power or all "

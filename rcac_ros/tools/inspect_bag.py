@@ -1,10 +1,13 @@
-"""``rcac inspect``: summarise a bag of the package's topics, compute metrics, plot.
+"""``rcac inspect``: verify and summarise a bag of the package's topics, compute metrics, plot.
 
-The summary lists every topic (type, count, rate from the receive stamps) and the
-bag's duration. The metrics are those of ``rcac experiment`` that the bag allows
-(tracking errors, estimate errors against the model's true parameters,
-prediction error, torques) plus the loop timing seen by the recorder (period
-between joint states, latency from a joint state to the effort that answers it).
+The bag (or the single bag in a folder) is first verified (:func:`bag_io.verify`: CRCs, counts,
+sqlite's integrity check); a damaged or cut bag is one line and exit 2, and ``--recover``
+salvages it (:func:`bag_io.recover`). The summary starts with the header ``ros2 bag info``
+prints, then lists every topic (type, count, rate from the message stamps) and the bag's
+duration. The metrics are those of ``rcac experiment`` that the bag allows (tracking errors,
+estimate errors against the model's true parameters, prediction error, torques) plus the loop
+timing (period between joint states, latency from a joint state to the effort that answers
+it), from the publishers' send stamps when the bag holds them.
 
 Times on the plots are simulated time: a joint state carries it in its header;
 the controller's outputs take the header stamp of the ``desired_state`` published
@@ -20,6 +23,9 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import positive_int
+from rcac_ros.tools.bag_io import (bag_info, default_recovered_path, find_bag, format_recovery,
+                                   recover, Report, verify)
 
 #: diagnostics values shown in the summary (all are kept in metrics.json)
 DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
@@ -40,6 +46,8 @@ class TopicData:
         self.velocity = []
         self.dims = None     # MultiArray layout dims [(label, size), ...]
         self.labels = []     # MultiArray: label of the first dimension, per message
+        self.sent = None     # publisher's send stamps (ns), when the bag holds them (mcap)
+        self.seq = None      # publication sequence numbers, idem (0: unknown)
 
     @property
     def count(self):
@@ -50,6 +58,9 @@ class TopicData:
         self.recv = np.asarray(self.recv, dtype=np.int64)
         self.stamp = np.asarray(self.stamp, dtype=float)
         self.labels = np.asarray(self.labels, dtype=object)
+        if self.sent is not None:
+            self.sent = np.asarray(self.sent, dtype=np.int64)
+            self.seq = np.asarray(self.seq, dtype=np.int64)
         try:
             self.values = np.asarray(self.values, dtype=float)
         except ValueError:
@@ -65,13 +76,22 @@ def _stamp(header):
     return header.stamp.sec + 1e-9 * header.stamp.nanosec
 
 
-def read_bag(path):
-    """Read a bag into :class:`TopicData` per topic.
+def read_bag(path, report=None):
+    """Verify, then read a bag into :class:`TopicData` per topic.
+
+    The bag is first checked with what its format offers (:func:`bag_io.verify`: chunk
+    CRCs, counts against metadata.yaml, sqlite's integrity check); a cut or corrupt bag
+    raises :class:`rcac_ros.tools.bag_io.BagError` with one line naming the problem. The
+    messages are then read with rosbags. For mcap, the publishers' send stamps and sequence
+    numbers (``publish_time``, ``sequence``, stored by ``rcac record``) come from the
+    ``mcap`` library's scan.
 
     Parameters
     ----------
     path : str
-        rosbag2 directory (mcap or sqlite3).
+        rosbag2 directory (mcap or sqlite3), or a folder holding exactly one.
+    report : bag_io.Report, optional
+        Filled with what the verification found.
 
     Returns
     -------
@@ -81,8 +101,16 @@ def read_bag(path):
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import get_typestore, Stores
 
-    if not os.path.isdir(path):
-        raise ConfigError(f"bag: {path} is not a rosbag2 directory")
+    path = find_bag(path)
+    sent = {}
+
+    def collect(channel, schemas, msg):
+        sent.setdefault(channel.topic, []).append((msg.log_time, msg.publish_time,
+                                                   msg.sequence))
+
+    checked = verify(path, on_message=collect)
+    if report is not None:
+        report.__dict__.update(checked.__dict__)
     typestore = get_typestore(Stores.ROS2_JAZZY)
     data = {}
     try:
@@ -123,6 +151,13 @@ def read_bag(path):
                 td.stamp.append(msg.clock.sec + 1e-9 * msg.clock.nanosec)
     finally:
         reader.close()
+    for topic, rows in sent.items():
+        td = data.get(topic)
+        if td is None or len(rows) != td.count or all(r[1] == r[0] for r in rows):
+            continue            # no send stamps (a bag written by another tool)
+        rows.sort(key=lambda r: r[0])     # rosbags yields receive-stamp order
+        td.sent = [r[1] for r in rows]
+        td.seq = [r[2] for r in rows]
     return {k: v.finish() for k, v in data.items()}
 
 
@@ -157,9 +192,12 @@ def summary(data):
 
 
 def format_summary(path, summ):
-    """The summary as text, ``ros2 bag info`` style."""
-    lines = [f"Bag:       {path}",
-             f"Duration:  {summ['duration_s']:.3f} s (receive stamps)"]
+    """The summary as text: ``ros2 bag info``'s header, then counts, rates and checks."""
+    lines = []
+    if summ.get("info"):
+        lines += [summ["info"], ""]
+    lines += [f"Bag:       {path}",
+              f"Duration:  {summ['duration_s']:.3f} s (message stamps)"]
     if summ["sim_duration_s"] is not None:
         lines.append(f"Sim time:  {summ['sim_duration_s']:.3f} s (/clock)")
     lines.append(f"Messages:  {summ['messages']}")
@@ -173,6 +211,8 @@ def format_summary(path, summ):
         for name, values in summ["diagnostics"].items():
             shown = ", ".join(f"{k}={v}" for k, v in values.items() if k in DIAG_KEYS)
             lines.append(f"  {name}: {shown}")
+    if summ.get("checks"):
+        lines.append(f"Checked:   {', '.join(summ['checks'])}")
     return "\n".join(lines)
 
 
@@ -288,13 +328,21 @@ def _subset(td, mask):
     out.stamp = td.stamp[mask] if len(td.stamp) == len(mask) else td.stamp
     if isinstance(td.velocity, np.ndarray) and len(td.velocity) == len(mask):
         out.velocity = td.velocity[mask]
+    if td.sent is not None:
+        out.sent, out.seq = td.sent[mask], td.seq[mask]
     out.names = td.names
     out.dims = td.dims
     return out
 
 
 def loop_timing(data, eff=None, js=None, tagged=None):
-    """Period between joint states and state -> effort latency, from receive stamps.
+    """Period between joint states and state -> effort latency.
+
+    The times are the publishers' send stamps when the bag holds them (an mcap written by
+    ``rcac record``): the simulator's publish times and the controller's, on the same host
+    clock. Otherwise they are the recorder's receive stamps, which a descheduled recorder
+    takes in a burst for messages queued meanwhile: a cluster near 0 ms that is the
+    recorder's, not the loop's.
 
     With ``tagged`` (the stamp, s, of the state each effort answers: the lockstep tag)
     a state is paired with the effort that answers it; otherwise with the first effort
@@ -305,21 +353,25 @@ def loop_timing(data, eff=None, js=None, tagged=None):
     Returns
     -------
     dict or None
-        ``{"period_ms": array, "latency_ms": array, "unanswered": int}``.
+        ``{"period_ms": array, "latency_ms": array, "unanswered": int, "clock": str}``;
+        ``clock`` is ``"send"`` or ``"receive"``.
     """
     js = data.get("/" + topics.JOINT_STATES) if js is None else js
     eff = data.get("/" + topics.EFFORT_COMMANDS) if eff is None else eff
     if js is None or js.count < 2:
         return None
-    period = 1e-6 * np.diff(js.recv).astype(float)
+    send = js.sent is not None and (eff is None or not eff.count or eff.sent is not None)
+    js_t = js.sent if send else js.recv
+    eff_t = None if eff is None else (eff.sent if send else eff.recv)
+    period = 1e-6 * np.diff(js_t).astype(float)
     latency = np.empty(0)
     unanswered = js.count
     if eff is not None and eff.count and tagged is not None and len(js.stamp) == js.count \
             and np.all(np.isfinite(tagged)):
-        answer = {int(round(t * 1e9)): r for t, r in zip(tagged, eff.recv)}
+        answer = {int(round(t * 1e9)): r for t, r in zip(tagged, eff_t)}
         keys = [int(round(t * 1e9)) for t in js.stamp]
         ok = np.array([k in answer for k in keys], dtype=bool)
-        latency = 1e-6 * np.array([answer[k] - r for k, r in zip(keys, js.recv) if k in answer],
+        latency = 1e-6 * np.array([answer[k] - r for k, r in zip(keys, js_t) if k in answer],
                                   dtype=float)
         unanswered = int(np.count_nonzero(~ok))
     elif eff is not None and eff.count:
@@ -329,7 +381,22 @@ def loop_timing(data, eff=None, js=None, tagged=None):
         ok[ok] &= eff.recv[idx[ok]] < nxt[ok]
         latency = 1e-6 * (eff.recv[idx[ok]] - js.recv[ok]).astype(float)
         unanswered = int(np.count_nonzero(~ok))
-    return {"period_ms": period, "latency_ms": latency, "unanswered": unanswered}
+    return {"period_ms": period, "latency_ms": latency, "unanswered": unanswered,
+            "clock": "send" if send else "receive"}
+
+
+def sequence_gaps(td):
+    """Messages the publisher numbered that are not in the bag (None: not known).
+
+    From the publication sequence numbers an mcap written by ``rcac record`` holds; only
+    for a topic with one publisher (numbers that increase).
+    """
+    if td is None or td.seq is None or td.count < 2 or np.any(td.seq == 0):
+        return None
+    d = np.diff(td.seq)
+    if np.any(d <= 0):
+        return None
+    return int(np.sum(d - 1))
 
 
 def load_truth(model):
@@ -384,6 +451,9 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     watchdog_efforts = 0
     repeated_answers = 0
     tagged = None
+    missed = sequence_gaps(eff)
+    if missed is not None:
+        metrics["recorder_missed_efforts"] = missed
     if eff is not None and eff.count:
         watchdog, tagged = effort_tags(eff)
         watchdog_efforts = int(np.count_nonzero(watchdog))
@@ -430,7 +500,35 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
             if len(timing[key]):
                 metrics.update(measure.percentiles(timing[key], prefix))
         metrics["unanswered_states"] = timing["unanswered"]
+        metrics["timing_stamps"] = timing["clock"]
     return metrics, series
+
+
+def notes(metrics, summ):
+    """Plain-language explanations of figures that look alarming (list of lines)."""
+    out = []
+    unanswered = metrics.get("unanswered_states", 0)
+    if unanswered:
+        missed = metrics.get("recorder_missed_efforts")
+        sim = (summ.get("diagnostics") or {}).get("rcac_simulator: simulation") or \
+            next((v for k, v in (summ.get("diagnostics") or {}).items()
+                  if "simulat" in k), {})
+        held = sim.get("lockstep_misses")
+        text = (f"unanswered_states {unanswered}: joint states whose answering effort is not "
+                "in the bag.")
+        if missed:
+            text += (f" The recorder missed {missed} effort messages (gaps in the controller's "
+                     "publication sequence numbers): efforts are published reliable keep-last "
+                     "10, so a recorder descheduled for more than 10 messages loses some.")
+        if held is not None:
+            text += (f" The simulator held an effort {held} times (lockstep_misses)"
+                     + (": the controller answered every state it received; the gap is the "
+                        "recorder's." if str(held) == "0" else "."))
+        out.append(text)
+    if metrics.get("timing_stamps") == "receive":
+        out.append("loop timing from the recorder's receive stamps: a descheduled recorder "
+                   "stamps queued messages in a burst (the cluster near 0 ms)")
+    return out
 
 
 def joint_names(data):
@@ -439,7 +537,8 @@ def joint_names(data):
 
 
 def plot_timing(timing, path):
-    """Histograms of the joint-state period and the state -> effort latency."""
+    """Histograms of the joint-state period and the state -> effort latency, captioned with
+    the stamps they come from (see :func:`loop_timing`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -456,10 +555,18 @@ def plot_timing(timing, path):
             ax.axvline(np.percentile(x, 99), color="C3", ls=":",
                        label=f"p99 {np.percentile(x, 99):.3f} ms")
             ax.legend()
-        ax.set_xlabel("ms (receive stamps)")
+        ax.set_xlabel("ms")
         ax.set_ylabel("count")
         ax.set_title(title)
-    fig.tight_layout()
+    if timing.get("clock") == "send":
+        caption = ("From the publishers' send stamps (simulator: joint state published; "
+                   "controller: effort published), same host clock.")
+    else:
+        caption = ("From the recorder's receive stamps: when the recorder is descheduled, the "
+                   "messages queued meanwhile are stamped together,\nso a cluster near 0 ms "
+                   "is the recorder catching up, not the loop.")
+    fig.text(0.01, 0.01, caption, fontsize=8, va="bottom")
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -485,7 +592,7 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
         t, tau = series["effort"]
         path = os.path.join(out_dir, "efforts.png")
         plots.plot_series(t, {label: tau}, path, "joint efforts (effort_controller/commands)",
-                          "torque (N m)")
+                          "torque (N m)", legend=names)
         written.append(path)
     if "parameter_estimates" in series:
         t, est = series["parameter_estimates"]
@@ -502,7 +609,7 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
         t, pr = series["prediction_error"]
         path = os.path.join(out_dir, "prediction_error.png")
         plots.plot_series(t, {label: np.asarray(pr).reshape(-1, 1)}, path,
-                          "prediction error E", "E (N m)")
+                          "prediction error |E| (eq 24), log scale", "|E| (N m)", logy=True)
         written.append(path)
     if "timing" in series:
         path = os.path.join(out_dir, "loop_timing.png")
@@ -520,11 +627,16 @@ def inspect(path, plots_dir=None, model="css_arm", link=None,
     dict
         ``{"summary", "metrics", "plots", "metrics_path"}``.
     """
-    data = read_bag(path)
+    path = find_bag(path)
+    report = Report(path, "")
+    data = read_bag(path, report)
     theta_true = load_truth(model)
     summ = summary(data)
+    summ["info"] = bag_info(path)
+    summ["checks"] = list(report.checks)
     metrics, series = analyse(data, theta_true, controller_node)
-    result = {"summary": summ, "metrics": metrics, "plots": [], "metrics_path": None}
+    result = {"summary": summ, "metrics": metrics, "plots": [], "metrics_path": None,
+              "bag": path, "notes": notes(metrics, summ)}
     if plots_dir is not None:
         result["plots"] = write_plots(series, plots_dir, theta_true, joint_names(data), link)
         result["metrics_path"] = os.path.join(plots_dir, "metrics.json")
@@ -544,24 +656,37 @@ def format_metrics(metrics):
 
 
 def add_arguments(parser):
-    parser.add_argument("bag", help="rosbag2 directory")
+    parser.add_argument("bag", help="rosbag2 directory (or a folder holding one bag)")
+    parser.add_argument("--recover", action="store_true",
+                        help="salvage a bag cut by a crash or damaged (complete mcap chunks, "
+                             "committed sqlite transactions) into a new bag, then inspect it")
+    parser.add_argument("--recover-out", default=None, metavar="DIR",
+                        help="the recovered bag (default: BAG_recovered)")
     parser.add_argument("--plots", default=None, metavar="DIR",
                         help="write the figures and metrics.json into DIR")
     parser.add_argument("--model", default="css_arm",
                         help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
-    parser.add_argument("--link", type=int, default=None,
+    parser.add_argument("--link", type=positive_int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")
     parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
                         help=f"controller node name (default: {topics.CONTROLLER_NODE})")
 
 
 def run(args):
-    result = inspect(args.bag, args.plots, args.model, args.link, args.controller_node)
-    print(format_summary(args.bag, result["summary"]))
+    bag = args.bag
+    if args.recover:
+        bag = find_bag(bag)
+        report = recover(bag, args.recover_out or default_recovered_path(bag))
+        print(format_recovery(bag, report), flush=True)
+        bag = report.path
+    result = inspect(bag, args.plots, args.model, args.link, args.controller_node)
+    print(format_summary(result["bag"], result["summary"]))
     if result["metrics"]:
         print("Metrics:")
         print(format_metrics(result["metrics"]))
+    for line in result["notes"]:
+        print(f"Note: {line}")
     for path in result["plots"]:
         print(f"wrote {path}")
     if result["metrics_path"]:

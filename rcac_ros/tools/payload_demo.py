@@ -32,6 +32,7 @@ from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory)
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import finite_float, non_negative_float, positive_float
 from rcac_ros.tools.progress import Progress
 from rcac_ros.tools.robots import example_robot_urdf
 
@@ -68,7 +69,7 @@ def _skew(v):
 
 
 def spatial_inertia(mass, com, inertia):
-    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (NOTES.md 2)."""
+    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (doc/design.md §2)."""
     P = _skew(com)
     return np.block([[mass * np.eye(3), -mass * P], [mass * P, inertia - mass * P @ P]])
 
@@ -252,11 +253,13 @@ def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
 
 
 def add_arguments(parser):
-    parser.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
-    parser.add_argument("--jump", type=float, default=5.0,
+    parser.add_argument("--duration", type=positive_float, default=20.0,
+                        help="seconds (default 20)")
+    parser.add_argument("--jump", type=non_negative_float, default=5.0,
                         help="time the payload is attached, s (default 5)")
-    parser.add_argument("--payload-mass", type=float, default=2.0, help="kg (default 2)")
-    parser.add_argument("--payload-com", type=float, nargs=3, default=(0.03, -0.02, 0.08),
+    parser.add_argument("--payload-mass", type=non_negative_float, default=2.0,
+                        help="kg (default 2)")
+    parser.add_argument("--payload-com", type=finite_float, nargs=3, default=(0.03, -0.02, 0.08),
                         metavar=("X", "Y", "Z"),
                         help="payload centre of mass in the flange frame, m "
                              "(default 0.03 -0.02 0.08)")
@@ -269,7 +272,8 @@ def add_arguments(parser):
                        ("gamma", "prediction-error weight of the composite law"),
                        ("lam", "filter bandwidth lambda, rad/s"),
                        ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=float, default=GAINS[name],
+        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
+                            else positive_float, default=GAINS[name],
                             help=f"{text} (default {GAINS[name]:g})")
     parser.add_argument("--adapt-all", action="store_true",
                         help="adapt links 1-6 too (default: only link 7)")
@@ -278,8 +282,9 @@ def add_arguments(parser):
 
 def run(args):
     gains = {k: getattr(args, k) for k in GAINS}
-    if not 0.0 <= args.jump < args.duration:
-        raise ConfigError(f"jump: must be in [0, duration), got {args.jump}")
+    if args.jump >= args.duration:
+        raise ConfigError(f"--jump: the payload must attach before the end of the run "
+                          f"(--duration {args.duration:g} s), got {args.jump:g} s")
     model, loaded, runs, report = run_demo(args.duration, args.jump, args.payload_mass,
                                            args.payload_com, gains, args.adapt_all, args.urdf,
                                            progress=not args.quiet)

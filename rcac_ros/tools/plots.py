@@ -70,17 +70,24 @@ def plot_parameter_estimates(t, estimates, theta_true, path, link=7, names=PARAM
     plt.close(fig)
 
 
-def plot_series(t, series, path, title, ylabel, logy=False):
-    """A generic figure: one panel per label, each (T,) or (T, k) series plotted against t."""
+def plot_series(t, series, path, title, ylabel, logy=False, legend=None):
+    """A generic figure: one panel per label, each (T,) or (T, k) series plotted against t.
+
+    ``legend`` names the k columns (e.g. joint names); default ``joint 1..k`` when k > 1.
+    With ``logy``, |y| is plotted on a log scale.
+    """
     labels = list(series)
     fig, axes = plt.subplots(1, len(labels), figsize=(6 * len(labels), 4), sharey=True,
                              squeeze=False)
     for ax, label in zip(axes[0], labels):
         y = np.asarray(series[label])
         y = y[:, None] if y.ndim == 1 else y
+        names = legend or [f"joint {j + 1}" for j in range(y.shape[1])]
         for j in range(y.shape[1]):
             (ax.semilogy if logy else ax.plot)(t[:len(y)], np.abs(y[:, j]) if logy else y[:, j],
-                                               lw=0.9)
+                                               lw=0.9, label=names[j])
+        if y.shape[1] > 1:
+            ax.legend(fontsize=7, loc="upper right", ncol=2)
         ax.set_title(label)
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)

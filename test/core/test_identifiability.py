@@ -11,7 +11,7 @@ from rcac_ros.core.model import PAPER_Q0, rpy_matrix
 
 def test_excitation_rank_of_random_regressor_rows_is_the_regressor_rank():
     """Rows of Y(Vdot_r, V_r, w) with w_r != w span 11 dimensions, with V_r = V 10
-    (NOTES.md 2): the accumulated Sigma's numerical rank says so."""
+    (doc/design.md §2): the accumulated Sigma's numerical rank says so."""
     rng = np.random.default_rng(41)
     for same, expected in ((False, 11), (True, 10)):
         exc = Excitation(1, 0.002)

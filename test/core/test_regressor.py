@@ -88,7 +88,7 @@ def transforms(model, q, qd):
 
 
 def test_matrix_recursion_and_joint1_torque_split():
-    """Eqs 9-16 as 6x6 products reproduce RNEA, and tau_1 = sum_j a_j^T F*_j (NOTES.md 4)."""
+    """Eqs 9-16 as 6x6 products reproduce RNEA, and tau_1 = sum_j a_j^T F*_j (doc/design.md §4)."""
     rng = np.random.default_rng(14)
     for model in (css_arm((0.0, 0.0, -9.81)), random_chain(rng, 9)):
         n = model.n

@@ -39,7 +39,8 @@ def test_experiment_command_writes_metrics_and_figures(tmp_path):
 def test_experiment_rejects_bad_gain_with_one_line(tmp_path):
     out = run("experiment", "--duration", "1", "--out", str(tmp_path), "--K_D", "-5")
     assert out.returncode == 2
-    assert out.stderr.strip().splitlines()[-1].startswith("rcac experiment: error: K_D")
+    assert out.stderr.splitlines() == [
+        "rcac experiment: error: argument --K_D: must be > 0, got '-5'"]
 
 
 def test_bench_command_json(tmp_path):

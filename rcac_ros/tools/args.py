@@ -1,0 +1,62 @@
+"""argparse ``type=`` helpers: every number on the ``rcac`` command line is checked when parsed.
+
+A bad value stops the command before anything runs, with one line naming the option and exit
+code 2 (``cli.py`` makes argparse's errors one line)::
+
+    $ rcac experiment --duration -5
+    rcac experiment: error: argument --duration: must be > 0, got '-5'
+
+Every helper rejects NaN and infinities. Checks that relate two options (``--jump`` before
+``--duration``) belong to the subcommand's ``run``, which raises the package's ``ConfigError``.
+"""
+
+import argparse
+import math
+
+
+def _parse(text, kind):
+    try:
+        return kind(text)
+    except ValueError:
+        what = "an integer" if kind is int else "a number"
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+
+
+def finite_float(text):
+    """A finite number (any sign)."""
+    value = _parse(text, float)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+def positive_float(text):
+    """A finite number > 0 (durations, gains, periods)."""
+    value = finite_float(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def non_negative_float(text):
+    """A finite number >= 0 (a time within the run, a weight that may be off)."""
+    value = finite_float(text)
+    if value < 0.0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def positive_int(text):
+    """An integer >= 1 (counts, 1-based indices)."""
+    value = _parse(text, int)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return value
+
+
+def non_negative_int(text):
+    """An integer >= 0."""
+    value = _parse(text, int)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return value

@@ -1,0 +1,103 @@
+"""Bags other tools open (issue 10 item 8): ``rcac record`` writes the publishers' real QoS
+profiles and ``ros_distro: jazzy``, stamps with ``/clock`` under ``--use-sim-time``, and its
+mcap files read back through ``mcap`` + ``mcap-ros2-support`` and through rosbags; ``rcac
+inspect`` prints the header ``ros2 bag info`` prints."""
+
+import json
+import signal
+import time
+
+import yaml
+from bagtest_support import (bag_file, clock_k, Publisher, rcac, read_mcap_ros2, read_rosbags,
+                             Recorder, wait_for)
+from bagtest_support import ros_env  # noqa: F401 - a fixture
+
+
+def _record(tmp_path, env, pub, *args, seconds=2.0):
+    bag = tmp_path / "bag"
+    rec = Recorder(tmp_path, env, "--out", str(bag), *args)
+    try:
+        wait_for(pub.matched, 60, "the recorder subscribes", rec)
+        pub.start()
+        time.sleep(seconds)
+        pub.stop()
+        time.sleep(0.3)
+        rec.proc.send_signal(signal.SIGINT)
+        assert rec.proc.wait(30) == 0, rec.output()
+    finally:
+        rec.stop()
+        pub.close()
+    return bag, rec
+
+
+def test_recorded_qos_distro_and_two_readers(tmp_path, ros_env):  # noqa: F811
+    # joint states offered best-effort, transient-local: the recorder must match them (it
+    # adapts) and write that profile. DDS discovery does not carry history and depth: like
+    # ros2 bag record, the bag says history unknown, depth 0 for them
+    pub = Publisher(ros_env["_DOMAIN"], state_qos_depth=7, state_best_effort=True,
+                    state_transient_local=True)
+    bag, rec = _record(tmp_path, ros_env, pub)
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["ros_distro"] == "jazzy"
+    assert meta["custom_data"]["rcac_state"] == "closed"
+    qos = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+           for t in meta["topics_with_message_count"]}
+    assert len(qos["/joint_states"]) == 1
+    state_qos = qos["/joint_states"][0]
+    assert (state_qos["reliability"], state_qos["durability"]) == \
+        ("best_effort", "transient_local")
+    assert (qos["/clock"][0]["reliability"], qos["/clock"][0]["durability"]) == \
+        ("reliable", "volatile")
+
+    via_mcap = read_mcap_ros2(bag_file(str(bag)))       # validates the chunk CRCs too
+    via_rosbags = read_rosbags(str(bag))
+    for topic in ("/clock", "/joint_states"):
+        assert len(via_mcap[topic]) == len(via_rosbags[topic]) > 100
+    ks = [clock_k(m) for _, _, m in via_mcap["/clock"]]
+    assert ks == [clock_k(m) for _, m in via_rosbags["/clock"]]
+    assert ks == list(range(ks[0], ks[0] + len(ks)))     # nothing lost, in order
+    # the publisher's send time precedes the receive time, by well under a second
+    lag = [log - pub_t for log, pub_t, _ in via_mcap["/clock"]]
+    assert all(0 <= x < 1e9 for x in lag)
+    # the mcap channels carry the same QoS as metadata.yaml
+    from mcap.reader import make_reader
+    with open(bag_file(str(bag)), "rb") as f:
+        channels = make_reader(f).get_summary().channels.values()
+        chq = {c.topic: yaml.safe_load(c.metadata["offered_qos_profiles"]) for c in channels}
+    assert chq["/joint_states"] == qos["/joint_states"]
+
+    # the ros2 bag info header; the loop timing from the publisher's send stamps (every
+    # 2 ms), not from the recorder's bursty receive stamps
+    res = rcac("inspect", str(bag), "--plots", str(tmp_path / "plots"), env=ros_env)
+    assert res.returncode == 0, res.stderr
+    metrics = json.loads((tmp_path / "plots" / "metrics.json").read_text())["metrics"]
+    assert metrics["timing_stamps"] == "send"
+    assert 1.5 <= metrics["state_period_p50_ms"] <= 2.5
+    for field in ("Files:", "Bag size:", "Storage id:        mcap", "ROS Distro:        jazzy",
+                  "Duration:", "Start:", "End:", "Messages:",
+                  "Topic information: Topic: ",
+                  "Topic: /joint_states | Type: sensor_msgs/msg/JointState | Count: "):
+        assert field in res.stdout, (field, res.stdout)
+    assert "chunk CRCs" in res.stdout
+
+
+def test_use_sim_time_stamps_with_clock(tmp_path, ros_env):  # noqa: F811
+    pub = Publisher(ros_env["_DOMAIN"])
+    bag, rec = _record(tmp_path, ros_env, pub, "--use-sim-time", seconds=1.5)
+    assert "stamped with the ROS time (/clock)" in rec.output()
+    data = read_rosbags(str(bag))
+    states = data["/joint_states"]
+    assert len(states) > 100
+    clock_max = max(m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in data["/clock"])
+    lags = []
+    for log_ns, msg in states:
+        header_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        # stamped with the latest /clock received before the state: the state's own sim
+        # time (its /clock is published just before it). States a reliable publisher
+        # delivers late (those sent while the subscription was matching) are received
+        # later, and take a later time
+        lags.append(header_ns - log_ns)
+        assert 0 <= log_ns <= clock_max               # simulated time, not the wall clock
+    assert sorted(lags)[len(lags) // 2] == 0           # the median state: its own time
+    on_time = [x for x in lags if 0 <= x <= 10 * 2_000_000]
+    assert len(on_time) >= 0.8 * len(lags), sorted(lags)[:10]

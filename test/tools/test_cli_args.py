@@ -1,0 +1,151 @@
+"""Every number on the ``rcac`` command line is checked by the parser: one line, exit code 2."""
+
+import argparse
+import subprocess
+import sys
+
+import pytest
+
+from rcac_ros.tools import args as checked
+from rcac_ros.tools import cli
+
+#: (subcommand, the arguments it needs besides the option, numeric option, a valid value)
+NUMERIC_OPTIONS = [
+    ("experiment", [], "--duration", "20"),
+    ("experiment", [], "--K_D", "1e4"),
+    ("experiment", [], "--Lambda", "1"),
+    ("experiment", [], "--P", "100"),
+    ("experiment", [], "--lam", "10"),
+    ("experiment", [], "--h", "0.002"),
+    ("experiment", [], "--substeps", "2"),
+    ("bench", [], "--duration", "60"),
+    ("bench", [], "--budget", "0.3"),
+    ("demo", [], "--duration", "20"),
+    ("record", [], "--duration", "5"),
+    ("inspect", ["some_bag"], "--link", "7"),
+    ("payload-demo", [], "--duration", "20"),
+    ("payload-demo", [], "--kappa", "100"),
+    ("payload-demo", [], "--Lambda", "10"),
+    ("payload-demo", [], "--rho", "30"),
+    ("payload-demo", [], "--lam", "10"),
+    ("payload-demo", [], "--h", "0.002"),
+]
+#: options where 0 is allowed and a negative number is not
+NON_NEGATIVE_OPTIONS = [
+    ("experiment", [], "--gamma"),
+    ("payload-demo", [], "--gamma"),
+    ("payload-demo", [], "--jump"),
+    ("payload-demo", [], "--payload-mass"),
+]
+INTEGER_OPTIONS = {("experiment", "--substeps"), ("inspect", "--link")}
+
+
+def parse_error(capsys, monkeypatch, argv):
+    """Run ``rcac ARGV`` in this process; return (exit code, stderr lines)."""
+    monkeypatch.setattr(sys, "argv", ["rcac"])
+    with pytest.raises(SystemExit) as stop:
+        cli.main(argv)
+    return stop.value.code, capsys.readouterr().err.splitlines()
+
+
+def assert_one_line(code, lines, command, option):
+    assert code == 2
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"rcac {command}: error: argument {option}"), lines
+
+
+@pytest.mark.parametrize("command,extra,option,good", NUMERIC_OPTIONS)
+@pytest.mark.parametrize("bad", ["0", "-5", "nan", "inf", "abc"])
+def test_a_non_positive_or_non_numeric_value_stops_at_the_parser(
+        capsys, monkeypatch, command, extra, option, good, bad):
+    code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, bad])
+    assert_one_line(code, lines, command, option)
+
+
+@pytest.mark.parametrize("command,extra,option", NON_NEGATIVE_OPTIONS)
+@pytest.mark.parametrize("bad", ["-1", "-1e-9", "nan", "-inf", "x"])
+def test_a_negative_value_stops_at_the_parser(capsys, monkeypatch, command, extra, option, bad):
+    code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, bad])
+    assert_one_line(code, lines, command, option)
+
+
+@pytest.mark.parametrize("command,option", sorted(INTEGER_OPTIONS))
+def test_an_integer_option_rejects_a_fraction(capsys, monkeypatch, command, option):
+    extra = ["some_bag"] if command == "inspect" else []
+    code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, "1.5"])
+    assert_one_line(code, lines, command, option)
+    assert "expected an integer" in lines[0]
+
+
+def test_the_payload_centre_of_mass_must_be_finite(capsys, monkeypatch):
+    code, lines = parse_error(capsys, monkeypatch,
+                              ["payload-demo", "--payload-com", "0", "nan", "0"])
+    assert_one_line(code, lines, "payload-demo", "--payload-com")
+
+
+def subcommand_parser(command):
+    """The parser of one subcommand, built as ``rcac COMMAND`` builds it."""
+    parser = argparse.ArgumentParser(prog=f"rcac {command}")
+    cli.importlib.import_module(cli.SUBCOMMANDS[command][0]).add_arguments(parser)
+    return parser
+
+
+@pytest.mark.parametrize("command,extra,option,good", NUMERIC_OPTIONS)
+def test_valid_values_are_accepted(command, extra, option, good):
+    args = subcommand_parser(command).parse_args([*extra, option, good])
+    value = getattr(args, option.lstrip("-").replace("-", "_"))
+    assert value == float(good)
+    assert isinstance(value, int if (command, option) in INTEGER_OPTIONS else float)
+
+
+@pytest.mark.parametrize("command", sorted(cli.SUBCOMMANDS))
+def test_every_numeric_option_of_every_subcommand_is_checked(command):
+    """No option is parsed with a bare ``float`` or ``int``; each default passes its own check."""
+    parser = subcommand_parser(command)
+    for action in parser._actions:
+        assert action.type not in (float, int), f"rcac {command} {action.option_strings}"
+        if action.type is not None and action.default not in (None, argparse.SUPPRESS):
+            defaults = (action.default if isinstance(action.default, (list, tuple))
+                        else [action.default])
+            for value in defaults:
+                action.type(repr(value))   # raises if a default breaks its own rule
+
+
+@pytest.mark.parametrize("text", ["1e-300", "0.002", "3", "1e12"])
+def test_positive_float_takes_every_finite_positive_number(text):
+    assert checked.positive_float(text) == float(text)
+
+
+def test_zero_is_non_negative_but_not_positive():
+    assert checked.non_negative_float("0") == 0.0
+    assert checked.non_negative_int("0") == 0
+    for fn in (checked.positive_float, checked.positive_int):
+        with pytest.raises(argparse.ArgumentTypeError, match="> 0|>= 1"):
+            fn("0")
+
+
+@pytest.mark.parametrize("text", ["1e400", "-1e400", "nan", "NaN"])
+def test_overflow_and_nan_are_not_finite(text):
+    with pytest.raises(argparse.ArgumentTypeError, match="finite"):
+        checked.finite_float(text)
+
+
+def test_the_payload_must_attach_before_the_end(tmp_path, capsys, monkeypatch):
+    """A relation between two options is checked in ``run``: one line naming both."""
+    monkeypatch.setattr(sys, "argv", ["rcac"])
+    assert cli.main(["payload-demo", "--duration", "3", "--out", str(tmp_path), "--quiet"]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "--jump" in lines[0] and "--duration 3" in lines[0], lines
+
+
+@pytest.mark.parametrize("argv", [["experiment", "--duration", "-5"],
+                                  ["experiment", "--duration", "0"],
+                                  ["payload-demo", "--duration", "-1"]])
+def test_the_cases_a_new_user_hit(argv):
+    """As typed in a shell (issue 11): no traceback, one line naming --duration, exit 2."""
+    out = subprocess.run([sys.executable, "-m", "rcac_ros.tools.cli", *argv],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.splitlines() == [
+        f"rcac {argv[0]}: error: argument --duration: must be > 0, got '{argv[2]}'"]
+    assert out.stdout == ""

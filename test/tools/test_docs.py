@@ -1,0 +1,50 @@
+"""The documentation's references resolve: design-note citations, links, no outside notes."""
+
+import os
+import re
+import subprocess
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CITATION = re.compile(r"doc/design\.md §(\d+)(?:-(\d+))?")
+LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+
+
+def tracked(*suffixes):
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
+    if out.returncode != 0:            # not a git checkout (an sdist): walk the tree
+        return sorted(os.path.relpath(os.path.join(d, f), ROOT)
+                      for d, _, files in os.walk(ROOT) if "/." not in d
+                      for f in files if f.endswith(suffixes))
+    return [p for p in out.stdout.split() if p.endswith(suffixes)]
+
+
+def read(path):
+    with open(os.path.join(ROOT, path), encoding="utf-8") as f:
+        return f.read()
+
+
+def test_every_design_citation_names_a_section_of_doc_design():
+    sections = set(re.findall(r"^## §(\d+) ", read("doc/design.md"), re.MULTILINE))
+    cited = 0
+    for path in tracked(".py", ".yaml", ".md", ".xml"):
+        for first, last in CITATION.findall(read(path)):
+            for n in range(int(first), int(last or first) + 1):
+                assert str(n) in sections, f"{path}: doc/design.md §{n} does not exist"
+            cited += 1
+    assert cited >= 15
+
+
+def test_no_reference_to_notes_outside_the_repository():
+    me = os.path.relpath(os.path.abspath(__file__), ROOT)
+    for path in tracked(".py", ".yaml", ".md", ".xml", ".cfg", ".txt"):
+        if path != me:
+            text = read(path)
+            assert "NOTES.md" not in text and "ROS_NOTES" not in text, path
+
+
+def test_every_relative_link_of_the_docs_resolves():
+    for path in tracked(".md"):
+        for target in LINK.findall(read(path)):
+            if "://" not in target and not target.startswith("mailto:"):
+                where = os.path.normpath(os.path.join(ROOT, os.path.dirname(path), target))
+                assert os.path.exists(where), f"{path}: broken link {target}"
