@@ -272,24 +272,14 @@ def channel_list(text):
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
-def name_list(choices, what):
-    def parse(text):
-        names = [s.strip() for s in text.split(",") if s.strip()]
-        bad = [s for s in names if s not in choices]
-        if bad or not names:
-            raise argparse.ArgumentTypeError(f"unknown {what} {', '.join(bad) or text!r}; "
-                                             f"choose from {', '.join(choices)}")
-        return names
-    return parse
-
-
 def add_arguments(parser):
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="seconds per run (default 20)")
-    parser.add_argument("--scenarios", type=name_list(tuple(SCENARIOS), "scenario"),
-                        default=list(SCENARIOS), help="comma list (default paper,payload)")
-    parser.add_argument("--laws", type=name_list(tuple(LAWS), "law"), default=list(LAWS),
-                        help=f"comma list (default all: {','.join(LAWS)})")
+    parser.add_argument("--scenarios", nargs="+", choices=tuple(SCENARIOS),
+                        default=list(SCENARIOS), metavar="SCENARIO",
+                        help=f"any of {' '.join(SCENARIOS)} (default both)")
+    parser.add_argument("--laws", nargs="+", choices=tuple(LAWS), default=list(LAWS),
+                        metavar="LAW", help=f"any of {' '.join(LAWS)} (default all)")
     parser.add_argument("--channels", type=channel_list, default=None,
                         help="add a law with these channels, e.g. 1,power")
     parser.add_argument("--out", default="results/compare", help="output directory")
