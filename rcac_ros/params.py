@@ -102,6 +102,10 @@ def _robot(node):
               "gravity in the base frame, m/s^2 (unset: the model's own)", size=3),
         Param("joints", "string_array", None,
               f"joint names, in the order of the {order} (unset: the model's)"),
+        Param("description_topic", "string", "",
+              "take the URDF from this transient-local std_msgs/String topic (e.g. "
+              "/robot_description, as robot_state_publisher offers it) and wait for it; "
+              "empty: 'robot_description' or 'model'"),
     )
 
 
@@ -118,6 +122,9 @@ def _diagnostics_period():
 
 #: The controller node's parameters (``config/controller.yaml``).
 CONTROLLER = _robot("controller") + (
+    Param("autostart", "bool", True,
+          "configure and activate at start-up (false: stay unconfigured until "
+          "~/change_state)"),
     Param("mode", "string", "lockstep",
           "timing: 'lockstep' (one step per JointState, simulator) or 'timer' (rate Hz on "
           "the node clock, real arms)", choices=("lockstep", "timer")),
@@ -157,8 +164,38 @@ CONTROLLER = _robot("controller") + (
           lo=0.0, hi=BIG, strict=True),
     Param("monitor_decimation", "integer", 1, "publish estimates and errors every k-th step",
           lo=1, hi=1_000_000, read_only=False),
+    # the defaults of FollowJointTrajectory goals (JTC's constraints, one value for all joints)
+    Param("constraints.trajectory", "double", 0.0,
+          "FollowJointTrajectory: default path position tolerance, rad (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.goal", "double", 0.0,
+          "FollowJointTrajectory: default goal position tolerance, rad (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.stopped_velocity_tolerance", "double", 0.01,
+          "FollowJointTrajectory: default goal velocity tolerance, rad/s (0: not checked)",
+          lo=0.0, hi=BIG),
+    Param("constraints.goal_time", "double", 0.0,
+          "FollowJointTrajectory: default goal_time_tolerance, s (0: no time limit)",
+          lo=0.0, hi=BIG),
+    Param("initial_estimates", "string", "zero",
+          "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters) or the "
+          "path of a file written by ~/save_estimates"),
+    Param("estimates_file", "string", "",
+          "~/save_estimates writes the estimates here (YAML), and the physically consistent "
+          "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
 )
+
+#: per-joint gain overrides of the controller: ``gains.<joint>.<gain>`` (JTC style)
+GAINS_PREFIX = "gains."
+
+
+def gain_override(name):
+    """The row of a per-joint gain override ``gains.<joint>.<gain>`` (the gain's own range)."""
+    gain = name.rpartition(".")[2]
+    return Param(name, "double", None, f"per-joint override of {gain} (the link moved by "
+                 "that joint for K_D and P)", lo=0.0, hi=BIG, strict=True)
+
 
 #: The simulator node's parameters (``config/simulator.yaml``).
 SIMULATOR = _robot("simulator") + (
@@ -293,6 +330,9 @@ def check_file_params(node, params):
     for name, value in _flatten(params):
         if name in ("use_sim_time", "start_type_description_service"):
             continue
+        if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
+            check(gain_override(name), value)       # the joint is checked at start-up
+            continue
         if name not in known:
             raise ConfigError(f"{name}: the {node} declares no such parameter")
         check(known[name], value)
@@ -346,7 +386,9 @@ def document():
              "doc/parameters.md`; do not edit by hand (a test compares the two).",
              "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
              "decimal point in a YAML file. Settable parameters can be changed with "
-             "`ros2 param set` while the node runs; the others are read once at start-up."]
+             "`ros2 param set` while the node runs; the others are read once at start-up (the "
+             "managed controller: at each configure). The controller also takes per-joint "
+             "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
                   markdown(node)]

@@ -60,6 +60,7 @@ I_P_DIAG = 12       #: 1 if every P_i is diagonal
 I_IMPLICIT = 13     #: 1: implicit Euler in the prediction-error term, 0: explicit
 I_ADAPT = 14        #: ADAPT_GRADIENT, ADAPT_LS or ADAPT_LS_PREDICTION
 I_FORGET = 15       #: lambda_0 of the bounded-gain forgetting, 1/s
+I_FROZEN = 16       #: 1: adaptation frozen (set_adaptation(False)): theta_hat and P held
 I_DZ_S = 17         #: dead zone on max |qd - qd_r| (0: none)
 I_DZ_E = 18         #: dead zone on |E_c| (0: none)
 I_PROJECT = 19      #: 1: clip theta_hat to [TLO, THI] after each step

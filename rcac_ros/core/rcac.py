@@ -39,8 +39,8 @@ from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_
                       gain_apply, gain_step, input_error, reference_motion)
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
                        CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
-                       I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_G, I_GAMMA, I_H, I_IMPLICIT,
-                       I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
+                       I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA, I_H,
+                       I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
                        LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
                        new_data)
 from ._validate import as_array, scalar
@@ -310,7 +310,8 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
                       wx, wy, wz, gx, gy, gz)
         predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first)
     close_channels(chan, scal)
-    tracking = tracking_active(const, scal, q, qd, q_d, qd_d)
+    frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
+    tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
     scal[I_TRACKING] = 1.0 if tracking else 0.0
     for k in range(6):
         F[k] = 0.0
@@ -323,16 +324,19 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
                 C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
         feedback_wrench(row, Fs[i], st[S0:S0 + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
         tau[i] = F[5]                                                              # eq 20
-        adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
-    if scal[I_IMPLICIT] != 0.0:
+        if not frozen:
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
+    if frozen:
+        pass
+    elif scal[I_IMPLICIT] != 0.0:
         implicit_solve(chan, filt, state, R, scal)
     else:
         for i in range(n):
             for k in range(13):
                 state[i, TH + k] = R[i, k]
-    if scal[I_ADAPT] != ADAPT_GRADIENT:
+    if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
         update_least_squares(chan, filt, const, state, scal, grad, Pg)
-    if scal[I_PROJECT] != 0.0:
+    if not frozen and scal[I_PROJECT] != 0.0:
         project(const, state)
     for i in range(n):
         state[i, TAU] = tau[i]
@@ -412,6 +416,7 @@ class RecursiveCompositeController:
         self._filt = np.zeros((m, n, FILT_COLS))
         self._chan = np.zeros((m, CHAN_COLS))
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
+        self.adapting = True
         self.reset(theta_hat0)
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
@@ -520,6 +525,16 @@ class RecursiveCompositeController:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
 
+    def set_adaptation(self, enabled):
+        """Freeze (``False``) or resume (``True``) the adaptation of eq 24, keeping ``theta_hat``.
+
+        Frozen, ``theta_hat`` (and a least-squares gain) stay where they are, the torque of
+        eqs 19-20 uses them, and the filters and ``E`` keep running (``E`` then measures the
+        frozen estimates).
+        """
+        self._scal[I_FROZEN] = 0.0 if enabled else 1.0
+        self.adapting = bool(enabled)
+
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.
 
@@ -576,7 +591,7 @@ class RecursiveCompositeController:
         return S @ S.transpose(0, 2, 1)
 
     @property
-    def adapting(self):
+    def adapted(self):
         """Whether the tracking term and each channel adapted at the last step (dead zones)."""
         return bool(self._scal[I_TRACKING]), self._chan[:, CH_ACTIVE] != 0.0
 

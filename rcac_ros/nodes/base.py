@@ -11,10 +11,9 @@ import signal
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
@@ -28,6 +27,8 @@ from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes.description import wait_for_description
+from rcac_ros.nodes.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.pacing import spin_node_once
 
 #: reliable, keep-last 10: the control topics (what ros2_control uses)
@@ -57,7 +58,8 @@ def declare(node, p):
                                                         to_value=float(p.hi), step=0.0)]
     default = Parameter.Type[p.type.upper()] if p.default is None else p.default
     try:
-        node.declare_parameter(p.name, default, desc)
+        if not node.has_parameter(p.name):     # a managed node configures more than once
+            node.declare_parameter(p.name, default, desc)
         value = node.get_parameter(p.name).value
     except InvalidParameterTypeException as err:
         raise ConfigError(f"{p.name}: wrong type, expected {p.type} ({_first_line(err)})") \
@@ -75,8 +77,11 @@ def _first_line(err):
     return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
-def declare_parameters(node, rows):
+def declare_parameters(node, rows, description=None):
     """Declare every row of a node's table (:mod:`rcac_ros.params`) and load its robot.
+
+    ``description`` (URDF XML received on ``description_topic``) replaces
+    ``robot_description`` when given.
 
     Returns
     -------
@@ -94,8 +99,9 @@ def declare_parameters(node, rows):
         Naming the parameter whose value is invalid or could not be turned into a model.
     """
     values = {p.name: declare(node, p) for p in rows}
-    urdf = values["robot_description"]
-    which = "robot_description" if urdf else "model"
+    urdf = description or values["robot_description"]
+    which = "description_topic" if description else \
+        "robot_description" if urdf else "model"
     try:
         if urdf:
             model = model_from_urdf(urdf, base_link=values["base_link"] or None,
@@ -123,16 +129,18 @@ def _joints(joints, model):
 
 
 # ------------------------------------------------------------------ node
-class RcacNode(Node):
-    """The start-up both nodes share: read and check every parameter, or leave nothing behind.
+class RcacNode(RcacNodeMixin, Node):
+    """The start-up of a plain node: read and check every parameter, or leave nothing behind.
 
     ``RcacNode(name, **kwargs)``: ``kwargs`` go to :class:`rclpy.node.Node` (``context``,
     ``parameter_overrides``, ...); an invalid parameter raises :class:`ConfigError` naming
     it. A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
     ``_read_parameters(values)``, ``diagnostics()`` (a DiagnosticStatus, published every
-    ``diagnostics_period`` s of the steady clock) and ``on_shutdown()``. It finds the robot
+    ``diagnostics_period`` s of the steady clock) and ``on_interrupt()``. It finds the robot
     in ``model``, the joint order of its messages in ``joints``; ``finished`` and
-    ``exit_code`` tell :func:`run` when and how to stop.
+    ``exit_code`` tell :func:`run` when and how to stop. With a ``description_topic`` row
+    set, it waits for the robot description first. (The controller is managed:
+    :class:`rcac_ros.nodes.managed.ManagedNode`.)
     """
 
     #: the node's rows of :mod:`rcac_ros.params`
@@ -143,7 +151,10 @@ class RcacNode(Node):
         self.finished = False
         self.exit_code = 0
         try:
-            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS)
+            topic = [declare(self, p) for p in self.PARAMETERS if p.name == "description_topic"]
+            xml = wait_for_description(self, topic[0], SingleThreadedExecutor) \
+                if topic and topic[0] else None
+            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS, xml)
             # index arrays: model order -> message (joints) order, and back
             self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
             self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
@@ -157,32 +168,6 @@ class RcacNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-    def _check_parameters(self, changed):
-        """On-set callback: validate against the table (a subclass applies them post-set)."""
-        for p in changed:
-            row = self._rows.get(p.name)
-            if row is None:
-                continue                # rclpy's own (use_sim_time, ...)
-            value = p.value
-            if row.type.endswith("_array") and value is not None:
-                value = list(value)
-            try:
-                params.check(row, value)
-            except ConfigError as err:
-                return SetParametersResult(successful=False, reason=str(err))
-        return SetParametersResult(successful=True)
-
-    def _publish_diagnostics(self):
-        msg = DiagnosticArray(status=[self.diagnostics()])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self._pub_diag.publish(msg)
-
-    def status(self, level, name, message, values):
-        """A DiagnosticStatus of this node from a ``{key: value}`` dict."""
-        return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
-                                hardware_id=self.model.name,
-                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
 
 class Throttle:
@@ -248,7 +233,7 @@ def run(node_factory, prog, args=None):
     """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
 
     A node with a ``loop`` attribute (a :class:`DeadlineLoop`) is paced by it; otherwise
-    the executor is spun. The node's ``on_shutdown()`` runs after an interrupt (the
+    the executor is spun. The node's ``on_interrupt()`` runs after an interrupt (the
     controller publishes a zero effort there). A :class:`RcacError` at start-up (a bad
     parameter) prints one line naming the parameter and returns 2.
 
@@ -277,7 +262,7 @@ def run(node_factory, prog, args=None):
         code = 2
     except KeyboardInterrupt:
         if node is not None:
-            node.on_shutdown()
+            node.on_interrupt()
     except ExternalShutdownException:
         pass
     finally:

@@ -1,111 +1,150 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
-Thin: message -> arrays -> :class:`rcac_ros.core.rcac.RecursiveCompositeController` ->
-message. Two timing modes:
+A managed node (:class:`~rcac_ros.nodes.managed.ManagedNode`, ``~/get_state``,
+``~/change_state``): configure reads the parameters, the model, the gains (and their
+overrides ``gains.<joint>.<gain>``) and warms the kernels; activate starts the efforts (the
+motion starts again from the next state); deactivate sends one zero effort, then silence;
+``autostart`` (default) does both at start-up. Services ``~/reset_estimates``,
+``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.estimate_services`);
+``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller_state`); doc/nodes.md.
 
-* ``lockstep`` (default): one step per valid JointState, the trajectory time taken
-  from the state's stamp (deterministic with the simulator node);
-* ``timer``: ``rate`` Hz on the latest valid state (real arms). On the steady clock the
-  ticks keep absolute deadlines (:class:`rcac_ros.nodes.pacing.DeadlineLoop`: a late tick
-  is caught up, not skipped); with ``use_sim_time`` a ROS-time timer ticks on ``/clock``.
-
+Thin: message -> arrays -> :class:`~rcac_ros.core.rcac.RecursiveCompositeController` ->
+message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
+from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
+latest valid state (real arms), on absolute deadlines of the steady clock
+(:class:`~rcac_ros.nodes.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
-``state_timeout`` seconds. Parameters are documented in ``config/controller.yaml``.
+``state_timeout`` s. Parameters: ``config/controller.yaml``, doc/parameters.md.
 """
 
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from rcac_ros import params, topics
-from rcac_ros.core.rcac import RecursiveCompositeController
-from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes.base import Percentiles, QOS, RcacNode, run
+from rcac_ros.errors import RcacError
+from rcac_ros.nodes.base import Percentiles, QOS, run
+from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
+from rcac_ros.nodes.controller_params import read_parameters
+from rcac_ros.nodes.estimate_services import EstimateServices
+from rcac_ros.nodes.follow_joint_trajectory import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
+from rcac_ros.nodes.managed import ManagedNode
 from rcac_ros.nodes.pacing import DeadlineLoop
 from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, TrajectoryRejected
 
 
-class ControllerNode(RcacNode):
-    """The recursive composite adaptive controller as a ROS 2 node.
+class ControllerNode(ManagedNode):
+    """The recursive composite adaptive controller as a managed ROS 2 node.
 
-    Constructed as :class:`~rcac_ros.nodes.base.RcacNode` (keyword arguments of
-    :class:`rclpy.node.Node`; :class:`ConfigError` naming an invalid parameter).
+    Constructed as :class:`~rcac_ros.nodes.managed.ManagedNode` (keyword arguments of
+    :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
+    parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
     """
 
     PARAMETERS = params.CONTROLLER
 
     def __init__(self, **kwargs):
+        self.ctrl = None
+        self.loop = None                    # the steady-clock pacing of timer mode
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
+
+    # ------------------------------------------------------------------ lifecycle
+    def _configure(self, values):
+        """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
+        read_parameters(self, values)      # ... and the core controller, its kernels warmed
         self._stats = Percentiles()
-        n = self.model.n
-        self._warm_up()
-        self._outputs = ControllerOutputs(self, self.joints, self._out,
-                                          tagged=self.mode == "lockstep")
-        self._motion = DesiredMotion(self.paper, self.paper_q0)
+        self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
+            self, self.joints, self._out, tagged=self.mode == "lockstep"))
         self._reader = JointStateReader(self.model.joint_names)
+        self._steps = self._watchdog_trips = self._deadline_misses = 0
+        self._late_ticks = self._nonfinite = 0
+        self._rate_warned = False
+        self._reset_motion()
+        sub, timer = self.destroy_subscription, self.destroy_timer
+        self.keep(sub, self.create_subscription(JointState, topics.JOINT_STATES,
+                                                self._on_state, QOS))
+        self._fjt = None                    # the FollowJointTrajectory server, if any
+        if self.trajectory_source == "topic":
+            self.keep(sub, self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
+                                                    self._on_trajectory, QOS))
+            self._fjt = create_server(self, _ActionSink(self), defaults=self.tolerances)
+            if self._fjt is not None:
+                self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
+        if self.mode == "timer" and self.get_parameter("use_sim_time").value:
+            self.keep(timer, self.create_timer(self.h, self._on_tick))  # ticks on /clock
+        elif self.mode == "timer":
+            self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
+            self.keep(lambda _: setattr(self, "loop", None), self.loop)
+        else:
+            self.keep(timer, self.create_timer(min(self.state_timeout / 2.0, 0.01),
+                                               self._on_watchdog))
+        self.keep(EstimateServices.destroy, EstimateServices(self))
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
+        self.get_logger().info(
+            f"configured: {self.mode} mode, model {self.model.name} (n={self.model.n}), "
+            f"trajectory {self.trajectory_source}, h={self.h * 1e3:g} ms, "
+            f"joints {list(self.joints)}")
+
+    def _reset_motion(self):
+        """A fresh start: the motion, the velocity estimate and the watchdog restart."""
+        self._motion = DesiredMotion(self.paper, self.paper_q0)
         self._velocity = VelocityEstimate(self.velocity_cutoff)
-        # state
         self._q = self._qd = None           # latest valid state (model order)
         self._last_stamp = None             # ns, of the latest valid state
         self._last_rx = None                # node-clock ns at the latest valid state
-        self._steps = 0
         self._watchdog = True               # no valid state yet
-        self._watchdog_trips = 0
-        self._deadline_misses = 0
-        self._late_ticks = 0
         self._last_tick = None
-        self._nonfinite = 0
         self._q_msg = None
-        self._rate_warned = False
-        self.loop = None                    # the steady-clock pacing of timer mode
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, QOS)
-        if self.trajectory_source == "topic":
-            self.create_subscription(JointTrajectory, topics.JOINT_TRAJECTORY,
-                                     self._on_trajectory, QOS)
-        if self.mode == "timer" and self.get_parameter("use_sim_time").value:
-            self.create_timer(self.h, self._on_tick)        # ROS time: ticks on /clock
-        elif self.mode == "timer":
-            self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
+        self._outputs.last_answer = None
+
+    def _activate(self):
+        """Efforts on; the motion starts again from the next valid state."""
+        self._reset_motion()
+        self.ctrl.restart_filters()
+        if self.loop is not None:
             self.loop.start()
-        else:
-            self.create_timer(min(self.state_timeout / 2.0, 0.01), self._on_watchdog)
-        self.add_post_set_parameters_callback(self._apply_parameters)
-        self.get_logger().info(
-            f"{self.mode} mode, model {self.model.name} (n={n}), trajectory "
-            f"{self.trajectory_source}, h={self.h * 1e3:g} ms, joints {list(self.joints)}")
+        self.get_logger().info("active: publishing efforts")
+
+    def _deactivate(self):
+        """One zero effort, then silence (the lifecycle publishers are disabled next)."""
+        if self.loop is not None:
+            self.loop.stop()
+        if self._fjt is not None:
+            self._fjt.abort("the controller was deactivated")
+        self._outputs.zero_effort()
+        self.get_logger().info("inactive: one zero effort sent, then silence")
+
+    def on_interrupt(self):
+        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered."""
+        if self.running:
+            self.running = False
+            self._deactivate()
+
+    def follow(self, parsed):
+        """Follow a parsed trajectory (:func:`parse_trajectory`) from the desired state now.
+
+        The entry point of every trajectory source (the topic, an action server). Returns
+        ``False`` (nothing started) before the first joint state or when not active.
+        """
+        if not self.running:
+            return False
+        return self._motion.follow(parsed, self._time_now_ns(), self._q)
+
+    def hold_position(self):
+        """Stop any trajectory and hold the measured position (``False``: no state yet)."""
+        if not self.running or self._q is None:
+            return False
+        self._motion.hold(self._q)
+        return True
 
     # ------------------------------------------------------------------ parameters
-    def _read_parameters(self, v):
-        n = self.model.n
-        self.mode = v["mode"]
-        self.h = 1.0 / v["rate"]
-        self.trajectory_source = v["trajectory"]
-        self.paper = None if v["trajectory"] != "paper" else dict(
-            reading=v["paper.reading"], amplitude=v["paper.amplitude"], period=v["paper.period"])
-        q0 = params.per_joint("paper.q0", v["paper.q0"], n, None)
-        self.paper_q0 = None if q0 is None else q0[self._order]   # joints -> model order
-        self.state_timeout = v["state_timeout"]
-        limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
-        self.effort_limit = (self.model.effort_limit.copy() if limit is None
-                             else limit[self._order])
-        self.safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
-                                   -self.effort_limit[self._out], self.effort_limit[self._out])
-        self.velocity_cutoff = v["velocity_filter_cutoff"]
-        self.publish_every = v["monitor_decimation"]
-        try:
-            self.ctrl = RecursiveCompositeController(
-                self.model, K_D=v["K_D"], Lambda=v["Lambda"], P=v["P"], gamma=v["gamma"],
-                lam=v["lambda"], h=self.h)
-        except RcacError as err:
-            raise ConfigError(f"gains: {err}") from None
-
     def _apply_parameters(self, changed):
         """Post-set callback: the run-time parameters take effect."""
         for p in changed:
@@ -114,17 +153,13 @@ class ControllerNode(RcacNode):
             elif p.name == "monitor_decimation":
                 self.publish_every = int(p.value)
 
-    def _warm_up(self):
-        """Run the compiled step once so the first real step is not slow, then reset."""
-        z = np.zeros(self.model.n)
-        self.ctrl.step(z, z, z, z, z)
-        self.ctrl.reset()
-
     # ------------------------------------------------------------------ inputs
     def _now_ns(self):
         return self.get_clock().now().nanoseconds
 
     def _on_state(self, msg):
+        if not self.running:
+            return
         try:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
@@ -168,12 +203,18 @@ class ControllerNode(RcacNode):
             self._control(t_ns, msg.header.stamp)
 
     def _on_trajectory(self, msg):
-        try:
-            parsed = parse_trajectory(msg, self.model.joint_names)
-        except TrajectoryRejected as err:
-            return self._throttle.warn(f"trajectory {err.kind}", str(err))
-        if not self._motion.follow(parsed, self._time_now_ns(), self._q):
-            self._throttle.warn("trajectory early", "no joint state received yet")
+        if not msg.points:                  # as JTC: an empty trajectory holds the position
+            if not self.hold_position():
+                return self._throttle.warn("trajectory early", "no joint state received yet")
+        else:
+            try:
+                parsed = parse_trajectory(msg, self.model.joint_names)
+            except TrajectoryRejected as err:
+                return self._throttle.warn(f"trajectory {err.kind}", str(err))
+            if not self.follow(parsed):
+                return self._throttle.warn("trajectory early", "no joint state received yet")
+        if self._fjt is not None:
+            self._fjt.abort("replaced by a ~/joint_trajectory message")
 
     def _time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
@@ -207,8 +248,10 @@ class ControllerNode(RcacNode):
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
-            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, q_d, qd_d, qdd_d,
-                                   stamp)
+            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, self._q, self._qd, q_d,
+                                   qd_d, qdd_d, tau, stamp)
+        if self._fjt is not None:
+            self._fjt.update(t_ns, self._q, self._qd, q_d, qd_d, qdd_d)
 
     def _state_is_stale(self):
         if self._last_rx is None:
@@ -225,12 +268,14 @@ class ControllerNode(RcacNode):
 
     def _on_watchdog(self):
         """Lockstep: a periodic check; publishes the safe effort while the state is stale."""
-        if self._state_is_stale():
+        if self.running and self._state_is_stale():
             self._trip()
             self._outputs.effort(self.safe_effort, watchdog=True)
 
     def _on_tick(self):
         """Timer mode: one control step on the latest valid state."""
+        if not self.running:
+            return
         now = self._now_ns()
         if self.loop is None and self._last_tick is not None \
                 and now - self._last_tick > 1.5 * self.h * 1e9:
@@ -245,37 +290,29 @@ class ControllerNode(RcacNode):
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
-        count, p50, p99, worst = self._stats.pop()
-        skipped = 0 if self.loop is None else self.loop.skipped
-        level = DiagnosticStatus.OK
-        message = "running"
-        if self._watchdog:
-            level, message = DiagnosticStatus.WARN, "watchdog: safe effort (no valid state)"
-        values = {
-            "mode": self.mode, "steps": self._steps, "steps_in_window": count,
-            "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
-            "compute_time_max_us": f"{worst:.1f}",
-            "compute_time_max_all_us": f"{self._stats.max_all * 1e6:.1f}",
-            "deadline_us": f"{self.h * 1e6:.1f}",
-            "deadline_misses": self._deadline_misses + skipped,
-            "compute_overruns": self._deadline_misses,
-            "late_ticks": self._late_ticks if self.loop is None else self.loop.late,
-            "skipped_ticks": skipped,
-            "watchdog": "tripped" if self._watchdog else "ok",
-            "watchdog_trips": self._watchdog_trips,
-            "rejected_messages": self._throttle.total,
-            "non_finite_efforts": self._nonfinite,
-            "prediction_error": f"{self.ctrl.E[0]:.6g}",
-        }
-        for kind, c in sorted(self._throttle.counts.items()):
-            values[f"rejected_{kind.replace(' ', '_')}"] = c
-        return self.status(level, "control loop", message, values)
+        return diagnostics(self)
 
-    # ------------------------------------------------------------------ shutdown
-    def on_shutdown(self):
-        """Publish one zero-effort command (called on SIGINT/SIGTERM) and wait for delivery."""
-        self._outputs.zero_effort()
-        self.get_logger().info("shutdown: published a zero effort")
+
+class _ActionSink:
+    """What the FollowJointTrajectory server drives: the controller's desired motion."""
+
+    def __init__(self, node):
+        self.node = node
+        self.joint_names = node.model.joint_names
+
+    def refusal(self):
+        if not self.node.running:
+            return "the controller is not active"
+        return None if self.node._q is not None else "no joint state received yet"
+
+    def now_ns(self):
+        return self.node._time_now_ns()
+
+    def follow(self, parsed):
+        return self.node._motion.active if self.node.follow(parsed) else None
+
+    def hold(self):
+        self.node.hold_position()
 
 
 def main(args=None):

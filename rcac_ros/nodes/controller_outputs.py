@@ -3,6 +3,7 @@
 Arrays arrive in model order and leave in the order of the ``joints`` parameter. In
 lockstep each effort is tagged with the stamp of the state it answers
 (:func:`rcac_ros.topics.effort_label`); in timer mode one message object is reused.
+They are lifecycle publishers: silent unless the node is active.
 """
 
 import numpy as np
@@ -12,6 +13,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiA
 
 from rcac_ros import topics
 from rcac_ros.nodes.base import QOS, QOS_MONITOR
+from rcac_ros.nodes.controller_state import ControllerStatePublisher
 
 
 def effort_layout(n, stamp=None, watchdog=False):
@@ -32,6 +34,9 @@ class ControllerOutputs:
         Model order -> ``joints`` order.
     tagged : bool
         Lockstep: tag each effort with the stamp of the state it answers.
+
+    The publishers are the managed node's lifecycle publishers (enabled while active);
+    :meth:`destroy` removes them (cleanup).
     """
 
     def __init__(self, node, joints, out, tagged):
@@ -40,13 +45,13 @@ class ControllerOutputs:
         self._node = node
         self._out = out
         self._tagged = tagged
-        self._effort = node.create_publisher(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
-        self._theta = node.create_publisher(Float64MultiArray, topics.PARAMETER_ESTIMATES,
-                                            QOS_MONITOR)
-        self._e = node.create_publisher(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
-        self._track = node.create_publisher(Float64MultiArray, topics.TRACKING_ERROR,
-                                            QOS_MONITOR)
-        self._desired = node.create_publisher(JointState, topics.DESIRED_STATE, QOS_MONITOR)
+        create = node.create_lifecycle_publisher
+        self._effort = create(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
+        self._theta = create(Float64MultiArray, topics.PARAMETER_ESTIMATES, QOS_MONITOR)
+        self._e = create(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
+        self._track = create(Float64MultiArray, topics.TRACKING_ERROR, QOS_MONITOR)
+        self._desired = create(JointState, topics.DESIRED_STATE, QOS_MONITOR)
+        self._state = ControllerStatePublisher(node, joints, create)
         self._theta_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="link", size=n, stride=13 * n),
             MultiArrayDimension(label="parameter", size=13, stride=13)])
@@ -81,8 +86,15 @@ class ControllerOutputs:
         """Publish the last answer again (lockstep: the same state came twice)."""
         self._effort.publish(self.last_answer)
 
-    def monitors(self, theta_hat, E, q, q_d, qd_d, qdd_d, stamp=None):
-        """Publish the estimates, E, the tracking error and the desired state (model order)."""
+    def destroy(self):
+        """Destroy every publisher (the node's cleanup)."""
+        for pub in [self._effort, self._theta, self._e, self._track, self._desired] \
+                + self._state.publishers:
+            self._node.destroy_lifecycle_publisher(pub)
+
+    def monitors(self, theta_hat, E, q, qd, q_d, qd_d, qdd_d, tau, stamp=None):
+        """Publish the estimates, E, the tracking error, the desired state and
+        ``~/controller_state`` (arrays in model order)."""
         out = self._out
         self._theta.publish(Float64MultiArray(layout=self._theta_layout,
                                               data=theta_hat.ravel().tolist()))
@@ -95,6 +107,8 @@ class ControllerOutputs:
         ds.effort = qdd_d[out].tolist()
         ds.header.stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
         self._desired.publish(ds)
+        self._state.publish(ds.header.stamp, q_d[out], qd_d[out], qdd_d[out], q[out], qd[out],
+                            tau[out])
 
     def zero_effort(self, timeout=0.5):
         """Publish one zero effort (tagged watchdog) and wait up to ``timeout`` s for delivery."""

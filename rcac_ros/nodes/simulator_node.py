@@ -237,7 +237,7 @@ class SimulatorNode(RcacNode):
         return self.status(level, "simulation",
                            "waiting for a controller" if not self.started else "running", values)
 
-    def on_shutdown(self):
+    def on_interrupt(self):
         """Nothing to send on an interrupt: just report."""
         self.get_logger().info(f"interrupted after {self.k} steps")
 

@@ -204,6 +204,13 @@ class DesiredMotion:
         self.last = desired[:2]
         return desired
 
+    def hold(self, q):
+        """Stop any trajectory and hold ``q`` (at rest) from now on."""
+        self.active = None
+        if self._t0 is not None:    # (before the first sample, that sample holds anyway)
+            zero = np.zeros_like(q)
+            self._hold = (np.array(q, dtype=float), zero, zero.copy())
+
     def follow(self, parsed, now_ns, q):
         """Follow a parsed trajectory from the last desired state (or ``q`` at rest).
 

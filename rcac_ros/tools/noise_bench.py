@@ -64,7 +64,7 @@ def run_law(model, channels, duration, robust, seed=2, progress=None):
             q_d, qd_d, qdd_d = traj(k * ctrl.h)
             err.append(np.sqrt(np.mean((sim.q - q_d) ** 2)))
             sim.step(ctrl.step(*noisy(rng, sim.q, sim.qd), q_d, qd_d, qdd_d))
-            tracking, channels_on = ctrl.adapting
+            tracking, channels_on = ctrl.adapted
             adapting += tracking or channels_on.any()
             if k % every == 0:
                 norm.append(float(np.linalg.norm(ctrl.theta_hat)))

@@ -102,7 +102,7 @@ def test_dead_zone_on_E_above_every_error_is_the_direct_law():
     a, _ = run(model, 400, traj, dead_zone_E=1e30, channels=[1, "power"])
     b, _ = run(model, 400, traj, gamma=0.0, channels=[1, "power"])
     assert np.array_equal(a.theta_hat, b.theta_hat)
-    assert not a.adapting[1].any() and a.adapting[0]
+    assert not a.adapted[1].any() and a.adapted[0]
 
 
 def test_dead_zones_above_every_signal_stop_adaptation():

@@ -28,6 +28,10 @@ def install(tmp_path_factory):
            "--build-base", str(tmp / "build"), "--install-base", str(tmp / "install")]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=str(tmp))
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    # a quiet build: no Python warning (a setuptools deprecation...) from setup.py, neither
+    # while colcon reads the metadata nor in the build ("--- stderr" on a terminal)
+    assert "--- stderr" not in proc.stdout and "Warning" not in proc.stderr, \
+        proc.stdout + proc.stderr
     return tmp / "install"
 
 
@@ -81,3 +85,92 @@ def test_installed_node_refuses_bad_parameter(install):
                               timeout=120)
     assert proc.returncode == 2
     assert "controller: error: P:" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_launch_file_is_installed(install):
+    launch_file = install / "rcac_ros" / "share" / "rcac_ros" / "launch" / "rcac.launch.py"
+    assert launch_file.is_file()
+    compile(launch_file.read_text(), str(launch_file), "exec")     # valid Python
+
+
+def ros_launch():
+    """``(launch, launch_ros)``, or skip: neither is a PyPI wheel."""
+    why = "ROS 2's launch is not installed: not a PyPI wheel (apt: ros-jazzy-launch-ros)"
+    launch = pytest.importorskip("launch", reason=why)
+    if not hasattr(launch, "LaunchDescription"):    # the repository's launch/ folder, or
+        pytest.skip(why)                            # PyPI's unrelated 'launch'
+    launch_ros = pytest.importorskip(
+        "launch_ros", reason="launch_ros is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
+    return launch, launch_ros
+
+
+def test_launch_description(install, monkeypatch):
+    """The installed launch file: its arguments, two nodes, the optional recorder."""
+    launch, launch_ros = ros_launch()
+    from launch.launch_description_sources import get_launch_description_from_python_launch_file
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(install / "rcac_ros"))
+    share = install / "rcac_ros" / "share" / "rcac_ros"
+    ld = get_launch_description_from_python_launch_file(str(share / "launch" / "rcac.launch.py"))
+    args = {a.name: a for a in ld.get_launch_arguments()}
+    assert set(args) == {"controller_params", "simulator_params", "simulator", "record", "bag",
+                         "use_sim_time"}
+    context = launch.LaunchContext()
+    defaults = {name: launch.utilities.perform_substitutions(context, a.default_value)
+                for name, a in args.items()}
+    assert defaults["controller_params"] == str(share / "config" / "controller.yaml")
+    assert defaults["simulator_params"] == str(share / "config" / "simulator.yaml")
+    assert (defaults["simulator"], defaults["record"]) == ("true", "false")
+    nodes = [e for e in ld.entities if isinstance(e, launch_ros.actions.Node)]
+    assert len(nodes) == 2
+    recorders = [e for e in ld.entities if type(e) is launch.actions.ExecuteProcess]
+    assert len(recorders) == 1 and recorders[0].condition is not None
+
+
+def test_launch_runs_the_nodes_and_the_recorder(install, tmp_path, monkeypatch):
+    """``ros2 launch rcac_ros rcac.launch.py record:=true``, run by a LaunchService: the
+    simulator runs 0.4 s in lockstep with the controller, the bag holds every step."""
+    launch, _ = ros_launch()
+    from launch.actions import EmitEvent, IncludeLaunchDescription, RegisterEventHandler
+    from launch.event_handlers import OnProcessExit, OnProcessIO
+    from launch.events import Shutdown
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+    from rosbags.highlevel import AnyReader
+    share = install / "rcac_ros" / "share" / "rcac_ros"
+    sim_params = tmp_path / "simulator.yaml"
+    # the shipped file, 0.4 s, and a start only once the recorder listens too
+    sim_params.write_text((share / "config" / "simulator.yaml").read_text().replace(
+        "duration: 0.0", "duration: 0.4").replace("min_subscribers: 1", "min_subscribers: 2"))
+    assert "duration: 0.4" in sim_params.read_text()
+    assert "min_subscribers: 2" in sim_params.read_text()
+    bag = tmp_path / "bag"
+    text, exits = [], []
+
+    def on_exit(event, _):
+        exits.append((event.action.name, event.returncode))
+        return [EmitEvent(event=Shutdown())]
+    env = env_for(install)
+    for key in ("PYTHONPATH", "AMENT_PREFIX_PATH"):
+        monkeypatch.setenv(key, env[key])
+    with ros_domain():
+        service = launch.LaunchService()
+        service.include_launch_description(launch.LaunchDescription([
+            IncludeLaunchDescription(
+                PythonLaunchDescriptionSource(str(share / "launch" / "rcac.launch.py")),
+                launch_arguments={"simulator_params": str(sim_params), "record": "true",
+                                  "bag": str(bag)}.items()),
+            RegisterEventHandler(OnProcessIO(
+                on_stdout=lambda e: text.append(e.text.decode()),
+                on_stderr=lambda e: text.append(e.text.decode()))),
+            # the simulator's exit (after its duration) ends the launch: SIGINT to the others
+            RegisterEventHandler(OnProcessExit(on_exit=on_exit)),
+        ]))
+        assert service.run() == 0
+    text = "".join(text)
+    assert exits[0][0].startswith("simulator") and exits[0][1] == 0, (exits, text[-3000:])
+    assert "finished: 200 steps" in text and "lockstep misses 0" in text, text[-3000:]
+    # the controller and the recorder stopped cleanly on the launch's SIGINT
+    assert all(code == 0 for _, code in exits) and len(exits) == 3, exits
+    with AnyReader([bag]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts.get("/joint_states", 0) >= 200, counts
+    assert counts.get("/effort_controller/commands", 0) >= 200, counts

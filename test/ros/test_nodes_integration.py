@@ -208,12 +208,17 @@ def test_bad_parameter_file_is_refused_cleanly(tmp_path, module, text, name):
 
 
 def test_simulator_realtime_mode_paces_on_the_steady_clock():
-    """Realtime: free-running at about 1/dt, with no controller (and use_sim_time set)."""
+    """Realtime: free-running at about 1/dt, with no effort (and use_sim_time set).
+
+    The probe offers an effort publisher that never publishes, so the simulator starts
+    only once the probe is matched (else its 1 s can pass before the probe subscribes).
+    """
     with ros_context() as (ctx, ex):
         probe = Probe(ctx)
+        probe.create_publisher(Float64MultiArray, "/effort_controller/commands", DEEP)
         ex.add_node(probe)
         sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
-                             "mode:=realtime", "wait_for_controller:=false",
+                             "mode:=realtime", "wait_for_controller:=true",
                              "duration:=1.0", "use_sim_time:=true"))
         try:
             assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)

@@ -1,0 +1,33 @@
+"""The controller's diagnostics (diagnostic_msgs/DiagnosticStatus on /diagnostics)."""
+
+from diagnostic_msgs.msg import DiagnosticStatus
+
+
+def diagnostics(node):
+    """The controller ``node``'s current status (and restart its timing window)."""
+    count, p50, p99, worst = node._stats.pop()
+    skipped = 0 if node.loop is None else node.loop.skipped
+    level = DiagnosticStatus.OK
+    message = "running" if node.running else "inactive: no effort published"
+    if node.running and node._watchdog:
+        level, message = DiagnosticStatus.WARN, "watchdog: safe effort (no valid state)"
+    values = {
+        "mode": node.mode, "steps": node._steps, "steps_in_window": count,
+        "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
+        "compute_time_max_us": f"{worst:.1f}",
+        "compute_time_max_all_us": f"{node._stats.max_all * 1e6:.1f}",
+        "deadline_us": f"{node.h * 1e6:.1f}",
+        "deadline_misses": node._deadline_misses + skipped,
+        "compute_overruns": node._deadline_misses,
+        "late_ticks": node._late_ticks if node.loop is None else node.loop.late,
+        "skipped_ticks": skipped,
+        "watchdog": "tripped" if node._watchdog else "ok",
+        "watchdog_trips": node._watchdog_trips,
+        "rejected_messages": node._throttle.total,
+        "non_finite_efforts": node._nonfinite,
+        "prediction_error": f"{node.ctrl.E[0]:.6g}",
+        "adaptation": "on" if node.ctrl.adapting else "frozen",
+    }
+    for kind, c in sorted(node._throttle.counts.items()):
+        values[f"rejected_{kind.replace(' ', '_')}"] = c
+    return node.status(level, "control loop", message, values)

@@ -1,0 +1,98 @@
+"""Estimate files: YAML round trip, URDF inertials checked by Pinocchio, inconsistent links."""
+
+import os
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from conftest import random_chain
+
+from rcac_ros.core.model import css_arm
+from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.nodes.estimates import (initial_estimates, load, rigid_body, save,
+                                      urdf_child_links, urdf_path)
+
+URDF_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf")
+with open(URDF_PATH, encoding="utf-8") as _f:
+    URDF = _f.read()
+
+
+def test_rigid_body_recovers_mass_com_and_inertia():
+    model = random_chain(np.random.default_rng(4), 5)
+    for i, row in enumerate(model.theta()):
+        m, c, I_c, reason = rigid_body(row)
+        assert reason is None
+        assert m == pytest.approx(model.mass[i], rel=1e-14)
+        np.testing.assert_allclose(c, model.com[i], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(I_c, model.inertia[i], rtol=1e-10, atol=1e-12)
+
+
+def test_saved_urdf_inertials_match_the_original_in_pinocchio(tmp_path):
+    """The fragment's <inertial> blocks, put into the URDF in place of the originals, give
+    Pinocchio the same bodies (an independent URDF parser and inertia algebra)."""
+    pin = pytest.importorskip("pinocchio")
+    model = model_from_urdf(URDF)
+    _, fragment, problems = save(str(tmp_path / "est.yaml"), model.theta(), model.joint_names,
+                                 model.name, links=urdf_child_links(URDF, model.joint_names))
+    assert problems == []
+    blocks = {link.get("name"): link.find("inertial") for link in ET.parse(fragment).getroot()}
+    assert sorted(blocks) == ["fore", "hand", "upper"]
+    robot = ET.fromstring(URDF)
+    for link in robot.findall("link"):
+        if link.get("name") in blocks:
+            link.remove(link.find("inertial"))
+            link.append(blocks[link.get("name")])
+    original = pin.buildModelFromXML(URDF)
+    rebuilt = pin.buildModelFromXML(ET.tostring(robot, encoding="unicode"))
+    for j in range(1, original.njoints):
+        a, b = original.inertias[j], rebuilt.inertias[j]
+        assert b.mass == pytest.approx(a.mass, rel=1e-8)
+        np.testing.assert_allclose(b.lever, a.lever, atol=1e-8)
+        np.testing.assert_allclose(b.inertia, a.inertia, atol=1e-8)
+
+
+def test_yaml_round_trip_and_initial_estimates(tmp_path):
+    model = random_chain(np.random.default_rng(6), 4)
+    theta = np.random.default_rng(7).normal(size=(4, 13))
+    path, _, _ = save(str(tmp_path / "sub" / "est.yaml"), theta, model.joint_names)
+    np.testing.assert_array_equal(load(path, model.joint_names), theta)
+    np.testing.assert_array_equal(initial_estimates(path, model), theta)
+    np.testing.assert_array_equal(initial_estimates("model", model), model.theta())
+    np.testing.assert_array_equal(initial_estimates("zero", model), np.zeros((4, 13)))
+    # saved in another joint order, read back in the model's
+    order = [2, 0, 3, 1]
+    path2, _, _ = save(str(tmp_path / "perm.yaml"), theta[order],
+                       [model.joint_names[k] for k in order])
+    np.testing.assert_array_equal(load(path2, model.joint_names), theta)
+
+
+def test_inconsistent_links_are_named_with_the_reason(tmp_path):
+    model = css_arm()
+    theta = model.theta()
+    theta[1, 0] = -2.0                      # joint2's link: negative mass
+    theta[3, 10] = -50.0                    # joint4's link: Ixx < 0
+    path, fragment, problems = save(str(tmp_path / "e.yaml"), theta, model.joint_names)
+    text = "\n".join(problems)
+    assert "joint2" in text and "mass m = -2 is not > 0" in text
+    assert "joint4" in text and "not positive definite" in text
+    # the paper's own Table 1 (diag[2 2 200]) is no real rigid body either
+    assert "triangle inequality" in text
+    links = [link.get("name") for link in ET.parse(fragment).getroot()]
+    assert "joint2_link" not in links and "joint4_link" not in links
+    assert urdf_path(path) == fragment
+
+
+@pytest.mark.parametrize("content, text", [
+    (None, "no such file"),
+    ("format: other\n", "not an estimates file"),
+    ("format: rcac_ros/estimates 1\nlinks:\n- {joint: a, theta: [1]}\n", "do not match"),
+])
+def test_bad_estimate_files_name_the_parameter(tmp_path, content, text):
+    from rcac_ros.errors import ConfigError
+    path = tmp_path / "bad.yaml"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(ConfigError) as err:
+        initial_estimates(str(path), css_arm())
+    assert str(err.value).startswith("initial_estimates:") and text in str(err.value)
+    assert "\n" not in str(err.value)

@@ -1,0 +1,115 @@
+"""The operator's estimate services (std_srvs) on the running controller, from another process."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from test_nodes_support import DEEP, ros_context, spin_until
+
+from rclpy.node import Node  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+
+from rcac_ros.nodes.estimates import load  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+NODE = "/rcac_controller"
+JOINTS = [f"joint{i}" for i in range(1, 8)]
+
+
+def start(module, *params):
+    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
+    for p in params:
+        cmd += ["-p", p]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            cwd=ROOT)
+
+
+def stop(proc, timeout=20.0):
+    if proc.poll() is None:
+        proc.send_signal(2)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return proc.returncode, out
+
+
+class Operator(Node):
+    """Calls the controller's services and records its estimates."""
+
+    def __init__(self, context, executor):
+        super().__init__("operator", context=context)
+        self.ex = executor
+        self.theta = []
+        self.sub = self.create_subscription(
+            Float64MultiArray, f"{NODE}/parameter_estimates",
+            lambda m: self.theta.append(np.reshape(m.data, (7, 13))), DEEP)
+        self.services_ = {name: self.create_client(kind, f"{NODE}/{name}") for name, kind in (
+            ("reset_estimates", Trigger), ("set_adaptation", SetBool),
+            ("save_estimates", Trigger))}
+        executor.add_node(self)
+
+    def call(self, name, **fields):
+        client = self.services_[name]
+        assert spin_until(self.ex, client.service_is_ready, timeout=60.0), name
+        future = client.call_async(client.srv_type.Request(**fields))
+        assert spin_until(self.ex, future.done, timeout=60.0), name
+        return future.result()
+
+    def wait_steps(self, count):
+        n = len(self.theta)
+        assert spin_until(self.ex, lambda: len(self.theta) >= n + count, timeout=60.0)
+        return self.theta[n:]
+
+
+def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
+    path = str(tmp_path / "est.yaml")
+    with ros_context() as (ctx, ex):
+        op = Operator(ctx, ex)
+        ctrl = start("controller_node", f"estimates_file:={path}")
+        sim = start("simulator_node")
+        try:
+            assert spin_until(ex, lambda: op.sub.get_publisher_count() > 0, timeout=60.0)
+            op.wait_steps(200)
+            assert not np.allclose(op.theta[-1], 0.0)        # it adapts
+            # freeze: the estimates stop moving, control goes on
+            res = op.call("set_adaptation", data=False)
+            assert res.success and "frozen" in res.message
+            frozen = op.wait_steps(100)[-50:]
+            assert all(np.array_equal(t, frozen[0]) for t in frozen)
+            # save: YAML at estimates_file, the response names it
+            res = op.call("save_estimates")
+            assert res.success and path in res.message, res.message
+            saved = load(path, JOINTS)
+            np.testing.assert_array_equal(saved, frozen[0])
+            # resume: they move again
+            assert op.call("set_adaptation", data=True).success
+            assert spin_until(ex, lambda: not np.array_equal(op.theta[-1], frozen[0]),
+                              timeout=30.0)
+            # reset (while frozen, so nothing moves after it): back to the initial zero
+            assert op.call("set_adaptation", data=False).success
+            res = op.call("reset_estimates")
+            assert res.success, res.message
+            assert spin_until(ex, lambda: np.array_equal(op.theta[-1], np.zeros((7, 13))),
+                              timeout=30.0)
+            np.testing.assert_array_equal(op.wait_steps(20)[-1], np.zeros((7, 13)))
+        finally:
+            stop(sim)
+            code, out = stop(ctrl)
+        assert code == 0, out
+        # restart from the file (no simulator: nothing steps): the same estimates come back
+        again = str(tmp_path / "again.yaml")
+        ctrl = start("controller_node", f"initial_estimates:={path}",
+                     f"estimates_file:={again}")
+        try:
+            res = op.call("save_estimates")
+            assert res.success and again in res.message, res.message
+        finally:
+            code, out = stop(ctrl)
+    assert code == 0, out
+    np.testing.assert_array_equal(load(again, JOINTS), saved)
+    assert again.replace(".yaml", ".inertial.urdf") in res.message     # the URDF fragment
