@@ -186,3 +186,45 @@ def test_bad_channels_at_start_up_give_one_line_and_exit_2():
     errors = [ln for ln in proc.stderr.splitlines() if "error" in ln]
     assert len(errors) == 1 and "error: channels: 'torque' is not a joint number" in errors[0], \
         proc.stderr
+
+
+CORE_OPTIONS = dict(channels=(2, "power"), update="explicit", adaptation="least_squares",
+                    forgetting=0.5, P_max=900.0, dead_zone_s=0.02, dead_zone_E=100.0,
+                    theta_bounds="mass")
+CORE_DEFAULTS = dict(channels=(1,), update="implicit", adaptation="gradient", forgetting=0.0,
+                     P_max=None, dead_zone_s=0.0, dead_zone_E=0.0, theta_bounds=None)
+
+
+def core_run(ctrl, steps=200):
+    """Step ``ctrl`` on small random states about q0 (the dead zones act in part of them)."""
+    rng = np.random.default_rng(8)
+    E = []
+    for _ in range(steps):
+        q, qd = PAPER_Q0 + 0.005 * rng.standard_normal(7), 0.005 * rng.standard_normal(7)
+        ctrl.step(q, qd, PAPER_Q0, np.zeros(7), np.zeros(7))
+        E.append(ctrl.E)
+    return np.array(E), ctrl.theta_hat
+
+
+def test_every_option_reaches_the_core_controller():
+    """The node's core controller steps exactly as one built offline with the same options,
+    and differs from one built without any single one of them (so each one reached it)."""
+    params = dict(CORE_OPTIONS, channels=["2", "power"])
+    with ros_context() as (ctx, _):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter(k, value=v) for k, v in params.items()])
+        try:
+            E, theta = core_run(node.ctrl)
+        finally:
+            node.destroy_node()
+
+    def offline(**options):
+        return core_run(RecursiveCompositeController(css_arm(), **dict(PAPER_GAINS, h=H),
+                                                     **options))
+    E_ref, theta_ref = offline(**CORE_OPTIONS)
+    np.testing.assert_array_equal(E, E_ref)
+    np.testing.assert_array_equal(theta, theta_ref)
+    assert np.all(theta[:, 0] >= 0.0)                   # the mass projection
+    for name, default in CORE_DEFAULTS.items():
+        other = offline(**dict(CORE_OPTIONS, **{name: default}))[1]
+        assert np.max(np.abs(other - theta)) > 1e-3, name
