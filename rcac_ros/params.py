@@ -60,6 +60,9 @@ class Param:
         An array of 1 (broadcast) or n values, in the order of ``joints``.
     size : int, optional
         The exact length of an array.
+    syntax : callable, optional
+        A further check of the value, ``syntax(name, value)``, raising :class:`ConfigError`
+        (e.g. the syntax of ``channels``; what needs the robot is checked at configure).
     """
 
     name: str
@@ -73,6 +76,7 @@ class Param:
     read_only: bool = True
     per_joint: bool = False
     size: int = None
+    syntax: object = None
 
     @property
     def constraints(self):
@@ -87,6 +91,16 @@ class Param:
         if self.size:
             parts.append(f"{self.size} values")
         return "; ".join(parts)
+
+
+def _channels_syntax(name, value):
+    """The syntax of ``channels`` (the joint numbers are checked against n at configure)."""
+    from rcac_ros.core.channels import parse_channels
+    from rcac_ros.errors import GainError
+    try:
+        parse_channels(list(value), None)
+    except GainError as err:
+        raise ConfigError(f"{name}: {str(err).partition(': ')[2]}") from None
 
 
 def _robot(node):
@@ -148,6 +162,33 @@ CONTROLLER = _robot("controller") + (
           "weight of the prediction error (eq 24); 0 = direct adaptive law", lo=0.0, hi=BIG),
     Param("lambda", "double", PAPER_GAINS["lam"],
           "bandwidth of the filter lambda/(p+lambda), rad/s", lo=0.0, hi=BIG, strict=True),
+    # issue 8: prediction channels, discretisation, least squares, robust adaptation
+    Param("channels", "string_array", ("1",),
+          "predicted filtered torques (eqs 21-24): joint numbers (1-based) and 'power', or "
+          "['all'] (= 1..n, Slotine-Li's information); ['1'] is the paper's law; "
+          "doc/nodes.md", syntax=_channels_syntax),
+    Param("update", "string", "implicit",
+          "discretisation of the prediction-error term: 'implicit' (backward Euler, stable "
+          "for any gain) or 'explicit' (forward Euler)", choices=("implicit", "explicit")),
+    Param("adaptation", "string", "gradient",
+          "adaptation gain: 'gradient' (P_i fixed, the paper's), 'least_squares' (bounded-"
+          "gain forgetting) or 'least_squares_prediction' (least squares on E only)",
+          choices=("gradient", "least_squares", "least_squares_prediction")),
+    Param("forgetting", "double", 0.0,
+          "least squares: forgetting rate lambda_0 of the bounded-gain forgetting, 1/s",
+          lo=0.0, hi=BIG),
+    Param("P_max", "double", None,
+          "least squares: bound k_0 on every trace(P_i) (unset: each link's trace(P_i(0)))",
+          lo=0.0, hi=BIG, strict=True),
+    Param("dead_zone_s", "double", 0.0,
+          "no adaptation from the tracking term while max_j |qd_j - qd_rj| <= this, rad/s "
+          "(0: no dead zone)", lo=0.0, hi=BIG),
+    Param("dead_zone_E", "double", 0.0,
+          "no adaptation from channel c while |E_c| <= this (N m; W for 'power'; 0: no dead "
+          "zone)", lo=0.0, hi=BIG),
+    Param("theta_bounds", "string", "none",
+          "projection of theta_hat after each step: 'none' or 'mass' (every link mass >= 0)",
+          choices=("none", "mass")),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),
@@ -324,6 +365,8 @@ def check(p, value):
                 bound = ">" if p.strict else ">="
                 raise ConfigError(f"{p.name}: every value must be {bound} {p.lo:g}, got "
                                   f"{list(value)}")
+        if p.syntax is not None:
+            p.syntax(p.name, value)
         return value
     if p.type == "double" and not math.isfinite(value):
         raise ConfigError(f"{p.name}: must be finite, got {value}")

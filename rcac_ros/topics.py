@@ -17,8 +17,11 @@ EFFORT_COMMANDS = "effort_controller/commands"
 JOINT_TRAJECTORY = "~/joint_trajectory"
 #: std_msgs/Float64MultiArray, theta_hat with layout dims ("link", n), ("parameter", 13)
 PARAMETER_ESTIMATES = "~/parameter_estimates"
-#: std_msgs/Float64, the scalar prediction error E of eq 24
+#: std_msgs/Float64, the prediction error E of eq 24 of the first channel (joint 1 by default)
 PREDICTION_ERROR = "~/prediction_error"
+#: std_msgs/Float64MultiArray, every channel's prediction error E_c (m values), one layout
+#: dimension of size m labelled with the channel names (:func:`channels_label`)
+PREDICTION_ERRORS = "~/prediction_errors"
 #: std_msgs/Float64MultiArray, q - q_d per joint (rad), in the order of ``joints``
 TRACKING_ERROR = "~/tracking_error"
 #: sensor_msgs/JointState, the desired q_d, qd_d (effort = qdd_d) the controller used
@@ -27,6 +30,18 @@ DESIRED_STATE = "~/desired_state"
 DIAGNOSTICS = "/diagnostics"
 #: rosgraph_msgs/Clock, published by the simulator
 CLOCK = "/clock"
+
+
+def channels_label(names):
+    """The label of ``~/prediction_errors``'s dimension: the channel names, comma-separated
+    (``"joint1,power"``; ``joint<k>`` is the model's k-th joint, 1-based)."""
+    return ",".join(names)
+
+
+def channel_names(label):
+    """The channel names of a ``~/prediction_errors`` label (:func:`channels_label`)."""
+    return [name for name in label.split(",") if name]
+
 
 # ------------------------------------------------------------------ quality of service
 #: keep-last depth of the control topics: reliable, keep-last 10, what ros2_control uses (a

@@ -7,6 +7,7 @@ def diagnostics(node):
     """The controller ``node``'s current status (and restart its timing window)."""
     count, p50, p99, worst = node._stats.pop()
     skipped = 0 if node.loop is None else node.loop.skipped
+    E = node.ctrl.E
     level = DiagnosticStatus.OK
     message = "running" if node.running else "inactive: no effort published"
     if node.running and node._watchdog:
@@ -27,9 +28,12 @@ def diagnostics(node):
         "stamp_restarts": node.failsafe.gate.restarts,
         "desired_limited": node.failsafe.limiter.limited,
         "non_finite_efforts": node._nonfinite,
-        "prediction_error": f"{node.ctrl.E:.6g}",
+        "prediction_error": f"{E[0]:.6g}",        # the first channel's (joint 1 by default)
+        "channels": ",".join(node.channel_names),
         "adaptation": "on" if node.ctrl.adapting else "frozen",
     }
+    for name, e in zip(node.channel_names, E):     # every channel's E_c
+        values[f"prediction_error_{name}"] = f"{e:.6g}"
     for kind, c in sorted(node._throttle.counts.items()):
         values[f"rejected_{kind.replace(' ', '_')}"] = c
     return node.status(level, "control loop", message, values)

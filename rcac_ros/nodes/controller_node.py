@@ -75,7 +75,8 @@ class ControllerNode(ManagedNode):
             else StatePredictor(self.model, values["timer.lookahead"])
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
-            self, self.joints, self._out, tagged=self.mode == "lockstep"))
+            self, self.joints, self._out, tagged=self.mode == "lockstep",
+            channels=self.channel_names))
         self._reader = JointStateReader(self.model.joint_names)
         self._steps = self._watchdog_trips = self._deadline_misses = 0
         self._late_ticks = self._nonfinite = 0

@@ -34,12 +34,14 @@ class ControllerOutputs:
         Model order -> ``joints`` order.
     tagged : bool
         Lockstep: tag each effort with the stamp of the state it answers.
+    channels : sequence of str
+        The prediction channels' names (``joint1``, ``power``, ...), the order of ``E``.
 
     The publishers are the managed node's lifecycle publishers (enabled while active);
     :meth:`destroy` removes them (cleanup).
     """
 
-    def __init__(self, node, joints, out, tagged):
+    def __init__(self, node, joints, out, tagged, channels=("joint1",)):
         n = len(joints)
         self.n = n
         self._node = node
@@ -49,12 +51,16 @@ class ControllerOutputs:
         self._effort = create(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
         self._theta = create(Float64MultiArray, topics.PARAMETER_ESTIMATES, QOS_MONITOR)
         self._e = create(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
+        self._es = create(Float64MultiArray, topics.PREDICTION_ERRORS, QOS_MONITOR)
         self._track = create(Float64MultiArray, topics.TRACKING_ERROR, QOS_MONITOR)
         self._desired = create(JointState, topics.DESIRED_STATE, QOS_MONITOR)
         self._state = ControllerStatePublisher(node, joints, create)
         self._theta_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="link", size=n, stride=13 * n),
             MultiArrayDimension(label="parameter", size=13, stride=13)])
+        m = len(channels)
+        self._channel_layout = MultiArrayLayout(dim=[MultiArrayDimension(
+            label=topics.channels_label(channels), size=m, stride=m)])
         self._joint_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="joint", size=n, stride=n)])
         # timer mode reuses its messages (publish serialises at once)
@@ -88,17 +94,18 @@ class ControllerOutputs:
 
     def destroy(self):
         """Destroy every publisher (the node's cleanup)."""
-        for pub in [self._effort, self._theta, self._e, self._track, self._desired] \
+        for pub in [self._effort, self._theta, self._e, self._es, self._track, self._desired] \
                 + self._state.publishers:
             self._node.destroy_lifecycle_publisher(pub)
 
     def monitors(self, theta_hat, E, q, qd, q_d, qd_d, qdd_d, tau, stamp=None):
-        """Publish the estimates, E, the tracking error, the desired state and
-        ``~/controller_state`` (arrays in model order)."""
+        """Publish the estimates, E (channel 1's, and every channel's), the tracking error,
+        the desired state and ``~/controller_state`` (arrays in model order)."""
         out = self._out
         self._theta.publish(Float64MultiArray(layout=self._theta_layout,
                                               data=theta_hat.ravel().tolist()))
-        self._e.publish(Float64(data=float(E)))
+        self._e.publish(Float64(data=float(E[0])))   # the first channel (joint 1 by default)
+        self._es.publish(Float64MultiArray(layout=self._channel_layout, data=E.tolist()))
         self._track.publish(Float64MultiArray(layout=self._joint_layout,
                                               data=(q - q_d)[out].tolist()))
         ds = self._desired_msg

@@ -8,6 +8,7 @@ estimates (:mod:`rcac_ros.nodes.estimates`) and the core controller.
 import numpy as np
 
 from rcac_ros import params
+from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import declare
@@ -53,14 +54,34 @@ def read_parameters(node, v):
     node.urdf_links = urdf_child_links(node._description or v["robot_description"],
                                        node.model.joint_names)
     try:
+        channels = parse_channels(list(v["channels"]), n)
+    except RcacError as err:            # already "channels: ..."
+        raise ConfigError(str(err)) from None
+    try:
         node.ctrl = RecursiveCompositeController(
             node.model, K_D=gains["K_D"], Lambda=gains["Lambda"], P=gains["P"],
-            gamma=v["gamma"], lam=v["lambda"], h=node.h, theta_hat0=node.theta0)
+            gamma=v["gamma"], lam=v["lambda"], h=node.h, theta_hat0=node.theta0,
+            **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
+    node.channel_names = channel_names(channels)
     z = np.zeros(n)             # warm up: one compiled step, so the first real one is not slow
     node.ctrl.step(z, z, z, z, z)
     node.ctrl.reset(node.theta0)
+
+
+def adaptation_options(v, channels):
+    """The core controller's issue-8 options from the checked parameters ``v``."""
+    return dict(channels=channels, update=v["update"], adaptation=v["adaptation"],
+                forgetting=v["forgetting"], P_max=v["P_max"], dead_zone_s=v["dead_zone_s"],
+                dead_zone_E=v["dead_zone_E"],
+                theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"])
+
+
+def channel_names(channels):
+    """The label of each prediction channel: ``joint<k>`` (the model's k-th joint) or
+    ``power``; the order of ``E``."""
+    return tuple("power" if c == "power" else f"joint{c}" for c in channels)
 
 
 def _gain_overrides(node):

@@ -476,6 +476,15 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if pr is not None and pr.count:
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
         metrics.update(measure.prediction(pr.values))
+    prs = data.get(priv + topics.PREDICTION_ERRORS[2:])    # every channel (older bags: none)
+    if prs is not None and prs.count and isinstance(prs.values, np.ndarray) \
+            and prs.values.ndim == 2:
+        names = topics.channel_names(prs.dims[0][0]) if prs.dims else []
+        if len(names) != prs.values.shape[1]:
+            names = [f"channel {c + 1}" for c in range(prs.values.shape[1])]
+        series["prediction_errors"] = (tl.controller_time(prs), prs.values, names)
+        for name, e in zip(names, prs.values[-1]):
+            metrics[f"final_abs_prediction_error_{name.replace(' ', '_')}"] = float(abs(e))
     js = data.get("/" + topics.JOINT_STATES)
     resent_states = 0
     if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -610,6 +619,13 @@ def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="
         path = os.path.join(out_dir, "prediction_error.png")
         plots.plot_series(t, {label: np.asarray(pr).reshape(-1, 1)}, path,
                           "prediction error |E| (eq 24), log scale", "|E| (N m)", logy=True)
+        written.append(path)
+    if "prediction_errors" in series:
+        t, prs, channels = series["prediction_errors"]
+        path = os.path.join(out_dir, "prediction_errors.png")
+        plots.plot_series(t, {label: prs}, path,
+                          "prediction error |E_c| per channel (eq 24), log scale",
+                          "|E_c| (N m; W for power)", logy=True, legend=channels)
         written.append(path)
     if "timing" in series:
         path = os.path.join(out_dir, "loop_timing.png")

@@ -41,6 +41,7 @@ TOPIC_TYPES = (
     (topics.CLOCK, "rosgraph_msgs/msg/Clock"),
     (topics.PARAMETER_ESTIMATES, "std_msgs/msg/Float64MultiArray"),
     (topics.PREDICTION_ERROR, "std_msgs/msg/Float64"),
+    (topics.PREDICTION_ERRORS, "std_msgs/msg/Float64MultiArray"),
     (topics.TRACKING_ERROR, "std_msgs/msg/Float64MultiArray"),
     (topics.DESIRED_STATE, "sensor_msgs/msg/JointState"),
     (topics.DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),

@@ -353,7 +353,7 @@ class Loop:
         from rcac_ros.nodes.controller_node import ControllerNode
         # no watchdog trip on a slow step: a trip restarts the filters (not deterministic)
         self.node = ControllerNode(context=ctx, parameter_overrides=[
-            Parameter("trajectory", value="topic"), Parameter("state_timeout", value=60.0)])
+            Parameter("trajectory", value="topic"), Parameter("state_timeout", value=1.0)])
         self.probe = Probe(ctx, record=("efforts",))
         self.ex = ex
         ex.add_node(self.node)

@@ -62,6 +62,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
         ctrl + "tracking_error": "std_msgs/msg/Float64MultiArray",
         ctrl + "parameter_estimates": "std_msgs/msg/Float64MultiArray",
         ctrl + "prediction_error": "std_msgs/msg/Float64",
+        ctrl + "prediction_errors": "std_msgs/msg/Float64MultiArray",
         ctrl + "desired_state": "sensor_msgs/msg/JointState",
         "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     }
@@ -70,6 +71,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
     torques = rng.normal(0.0, 5.0, (steps, N))
     estimates = truth * np.linspace(0.0, 0.9, steps)[:, None, None]
     pred = rng.normal(0.0, 1.0, steps)
+    preds = np.column_stack([pred, rng.normal(0.0, 10.0, steps)])  # channels joint1, power
     writer = Writer(path, version=9,
                     storage_plugin=StoragePlugin.MCAP if storage == "mcap"
                     else StoragePlugin.SQLITE3)
@@ -95,6 +97,8 @@ def write_synthetic_bag(path, steps, storage="mcap"):
         put(ctrl + "parameter_estimates", r - 30_000,
             _multiarray(ts, estimates[k].ravel(), [("link", N), ("parameter", 13)]))
         put(ctrl + "prediction_error", r - 20_000, types["std_msgs/msg/Float64"](data=pred[k]))
+        put(ctrl + "prediction_errors", r - 20_000,
+            _multiarray(ts, preds[k], [("joint1,power", 2)]))
         tag = f"joint stamp={sim // 1_000_000_000}.{sim % 1_000_000_000:09d}"
         put("/effort_controller/commands", r, _multiarray(ts, torques[k], [(tag, N)]))
         if k == 0:   # the simulator re-sends its first state; the controller answers again
@@ -108,7 +112,7 @@ def write_synthetic_bag(path, steps, storage="mcap"):
                 types["diagnostic_msgs/msg/DiagnosticArray"](header=header, status=[]))
     writer.close()
     return {"errors": errors, "torques": torques, "estimates": estimates, "pred": pred,
-            "truth": truth, "spec": spec}
+            "preds": preds, "truth": truth, "spec": spec}
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
@@ -149,6 +153,9 @@ def test_inspect_synthetic_bag(tmp_path, storage, capsys):
     assert m["link7_parameter_error_norm_end"] == pytest.approx(
         np.linalg.norm(est[-1, 6] - truth[6]), rel=1e-12)
     assert m["final_abs_prediction_error"] == pytest.approx(abs(known["pred"][-1]))
+    # every channel's E (~/prediction_errors), named by the layout's label
+    assert m["final_abs_prediction_error_joint1"] == abs(known["preds"][-1, 0])
+    assert m["final_abs_prediction_error_power"] == abs(known["preds"][-1, 1])
     assert m["state_to_effort_latency_p50_ms"] == pytest.approx(LAT_NS * 1e-6, abs=1e-6)
     assert m["state_period_p50_ms"] == pytest.approx(DT_NS * 1e-6, abs=1e-6)
     assert m["unanswered_states"] == 0
@@ -160,7 +167,7 @@ def test_inspect_synthetic_bag(tmp_path, storage, capsys):
 
     # the figures exist and are PNG images
     for name in ("tracking_errors.png", "efforts.png", "estimates_link7.png",
-                 "prediction_error.png", "loop_timing.png"):
+                 "prediction_error.png", "prediction_errors.png", "loop_timing.png"):
         path = plots / name
         assert path.is_file(), name
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

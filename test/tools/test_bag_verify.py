@@ -188,6 +188,8 @@ def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     names = [f"j{k}" for k in range(7)]
     series = {"effort": (t, np.ones((50, 7))),
               "prediction_error": (t, np.exp(-5.0 * t) * np.cos(20.0 * t)),
+              "prediction_errors": (t, np.column_stack([np.exp(-t), -np.exp(-2.0 * t)]),
+                                    ["joint1", "power"]),
               "timing": {"period_ms": np.full(49, 2.0), "latency_ms": np.full(49, 0.3),
                          "unanswered": 0, "clock": "receive"}}
     write_plots(series, str(tmp_path), names=names)
@@ -197,6 +199,10 @@ def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     assert ax.get_yscale() == "log"
     y = ax.get_lines()[0].get_ydata()
     assert np.allclose(y, np.abs(series["prediction_error"][1]))
+    ax = figures["prediction_errors.png"].axes[0]      # log |E_c|, one line per channel
+    assert ax.get_yscale() == "log"
+    assert [x.get_text() for x in ax.get_legend().get_texts()] == ["joint1", "power"]
+    assert np.allclose(ax.get_lines()[1].get_ydata(), np.exp(-2.0 * t))
     caption = " ".join(x.get_text() for x in figures["loop_timing.png"].texts)
     assert "receive stamps" in caption and "cluster near 0 ms" in caption
 
