@@ -517,3 +517,47 @@ def test_controller_deactivate_aborts_the_goal_and_inactive_rejects():
         assert not loop.send(_arm_goal(PAPER_Q0, 0)).accepted     # no state since: rejected
         loop.step(15)
         assert loop.send(_arm_goal(PAPER_Q0, 0)).accepted
+
+
+@needs_control_msgs
+def test_controller_topic_trajectory_replaces_the_goal_in_the_executor_thread():
+    """A ~/joint_trajectory message aborts the running goal and takes over. It is checked in
+    its own thread, but the motion and the action server change only in the executor's
+    thread (here the test's), where the goal's callbacks and the control step run too."""
+    import threading
+    from action_msgs.msg import GoalStatus
+    from test_nodes_support import PAPER_Q0
+    with ros_context() as (ctx, ex):
+        loop = Loop(ctx, ex)
+        node = loop.node
+        pub = loop.probe.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory",
+                                          10)
+        assert loop.wait(lambda: pub.get_subscription_count() > 0)
+        for k in range(5):
+            loop.step(k)
+        handle = loop.send(_arm_goal(PAPER_Q0, 0))
+        assert handle.accepted
+        result = handle.get_result_async()
+        goal_motion = node._motion.active
+        threads = []
+        for name in ("follow", "hold_position"):
+            def spy(*args, _f=getattr(node, name)):
+                threads.append(threading.current_thread())
+                return _f(*args)
+            setattr(node, name, spy)
+        replacement = _arm_goal(PAPER_Q0 + AMPLITUDE, 0).trajectory
+        for _ in range(20):
+            pub.publish(replacement)
+            if loop.wait(lambda: node._motion.active is not goal_motion, timeout=1.0):
+                break
+        assert loop.wait(result.done)
+        assert result.result().status == GoalStatus.STATUS_ABORTED
+        assert result.result().result.error_code == result.result().result.INVALID_GOAL
+        assert "replaced by a ~/joint_trajectory message" in result.result().result.error_string
+        np.testing.assert_array_equal(node._motion.active.pos[-1],
+                                      replacement.points[-1].positions)
+        assert threads and all(t is threading.current_thread() for t in threads)
+        empty = JointTrajectory(joint_names=[f"joint{i}" for i in range(1, 8)])
+        pub.publish(empty)                  # empty: hold, in the executor thread too
+        assert loop.wait(lambda: node._motion.active is None)
+        assert len(threads) >= 2 and all(t is threading.current_thread() for t in threads)
