@@ -1,4 +1,4 @@
-"""The O(n) recursive composite adaptive controller (eqs 18-24, doc/design.md §3-4).
+"""The recursive composite adaptive controller (eqs 18-24, doc/design.md §3-4), with m channels.
 
 Per control period ``h``, with ``s_i = V_i - V_ri``:
 
@@ -7,104 +7,264 @@ Per control period ``h``, with ``s_i = V_i - V_ri``:
     Vdot_ri = T Vdot_r,i-1 + Tdot V_r,i-1 + z6 qdd_ri         (Tdot with the actual qd_i)
     F_ri = (i+1 T_i)^T F_r,i+1 + Y_ri theta_hat_i + K_Di (V_ri - V_i)              (eq 19b)
     tau_i = z6^T F_ri                                                               (eq 20)
-    a_1 = z6,  a_j = T_j a_j-1,  adot_j = Tdot_j a_j-1 + T_j adot_j-1     (joint 1's axis, frame j)
-    phi_j = a_j^T Ym_j(V_j),  psi_j = -adot_j^T Ym_j(V_j) + a_j^T Yc_j(V_j)   (eqs 21-22, O(n))
-    W_j = lambda (phi_j - phi_j^f) + psi_j^f,  y = tau_1^f,  E = sum_j W_j theta_hat_j - y
-    theta_hat_dot_i = -P_i (Y_ri^T s_i + gamma W_i^T E)                              (eq 24)
+    W_cj, y_c, E_c = sum_j W_cj theta_hat_j - y_c      for each channel c (eqs 21-23, channels.py)
+    theta_hat_dot_i = -P_i (Y_ri^T s_i + gamma sum_c W_ci^T E_c)                     (eq 24)
 
-Discretisation (the paper leaves it open): the filter ``lambda / (p + lambda)`` is
-discretised exactly, with a zero-order hold for the applied torque (held over the
-period, as it is) and a first-order hold for the sampled ``phi`` and ``psi``;
-``theta_hat`` takes one step of ``h`` after the torque is computed: explicit
-Euler in the tracking term ``Y_ri^T s_i``, implicit (backward Euler) in the
-prediction-error term. The latter is a rank-one system in the stacked
-``theta_hat``, solved in O(n) by Sherman-Morrison. It matters: with the paper's
-``P_i = 100 I`` and ``gamma = 0.1`` the explicit step is unstable at 2 ms
-(``h gamma W P W^T`` is far above 2), while the implicit one is stable for any
-gain and tends to eq 24 as ``h -> 0``.
-``gamma = 0`` is the direct adaptive controller, the paper's baseline.
+The paper predicts one channel, the filtered torque of joint 1 (``channels=[1]``, the
+default). More channels (:mod:`rcac_ros.core.channels`) predict more filtered torques;
+``channels="all"`` is the Slotine-Li composite law, computed recursively.
+
+Discretisation (the paper leaves it open): filters exact (zero-order hold on the applied
+torque, first-order hold on ``phi``, ``psi``); ``theta_hat`` takes one step of ``h`` after
+the torque is computed, explicit Euler in the tracking term ``Y_ri^T s_i``, and in the
+prediction-error term either
+
+- ``update="implicit"`` (default): backward Euler, ``(I + h gamma P W^T W) theta+ = r``,
+  solved by Woodbury with an m x m Cholesky factorisation, O(m^2 n + m^3); for m = 1
+  Sherman-Morrison, O(n). It is stable for any gain and tends to eq 24 as ``h -> 0``;
+  with the paper's ``P_i = 100 I`` and ``gamma = 0.1`` the explicit step is unstable at
+  2 ms (``h gamma W P W^T`` is far above 2).
+- ``update="explicit"``: forward Euler, O(m n).
+
+Options beyond the paper: a least-squares gain with bounded-gain forgetting
+(:mod:`rcac_ros.core.least_squares`), a dead zone on ``s`` and on each ``E_c``, and the
+projection of ``theta_hat`` onto bounds (mass >= 0, an optional box). With the defaults
+the law is the paper's, to the last bit. ``gamma = 0`` is the direct adaptive controller.
 """
-
-import math
 
 import numpy as np
 from numba import njit
 
-from ._validate import as_array, per_link_matrix, positive_vector, scalar
-from rcac_ros.errors import GainError, InputError
-from .regressor import bias_row, momentum_row, reference_wrench, regressor_row
-from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_force_T, \
-    transform_motion
+from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_wrench,
+                      gain_apply, gain_step, input_error, reference_motion)
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
+                       CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
+                       I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA, I_H,
+                       I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
+                       LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
+                       new_data)
+from ._validate import as_array, scalar
+from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_terms,
+                       parse_channels, power_terms)
+from rcac_ros.errors import GainError
+from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
+                            potter_update)
+from .regressor import reference_wrench, regressor_row
+from .spatial import P0, transform_force_T
 
-# packed constants per link: p (3), R_fix (9), Lambda (1), K_D (36), P (169)
-LAM, KD0, PG0, CONST_COLS = 12, 13, 49, 218
-# state per link: theta_hat, phi^f, psi^f, previous phi, previous psi (13 each), s_i (6)
-TH, PHF, PSF, PHP, PSP, S0, STATE_COLS = 0, 13, 26, 39, 52, 65, 71
-# scalars: gravity (3), lambda, h, gamma, exp(-lambda h), b0, b1, y, tau_1 applied,
-# k (steps since the filters started), E, error,
-# and two flags: every K_Di diagonal, every P_i diagonal (then the kernel skips the zeros)
-I_G = 0
-(I_LAM, I_H, I_GAMMA, I_FE, I_FB0, I_FB1, I_Y, I_TAU1, I_K, I_E, I_ERR, I_KD_DIAG, I_P_DIAG,
- SCAL_LEN) = range(3, 17)
-
-INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
+RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
+                  f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+UPDATES = ("implicit", "explicit")
+ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
+               "least_squares_prediction": ADAPT_LS_PREDICTION}
 
 
-@njit(cache=True)
-def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
-    """Link i's ``V_i`` (eq 9), ``V_ri``, ``Vdot_ri`` (eq 18) and gravity from link i-1's.
+@njit(cache=True, inline="always")
+def channel_start(chan, c):
+    """The first link (0-based) channel c reaches."""
+    return 0 if chan[c, CH_JOINT] == POWER else int(chan[c, CH_JOINT])
 
-    Writes ``C[i]`` (eq 10's rotation); ``q ... qdd_d`` are joint i's scalars, ``row`` its
-    packed constants. Returns ``(V, V_r, Vdot_r, g)`` as tuples.
+
+@njit(cache=True, inline="always")
+def start_channels(chan, state, scal, q, first):
+    """Each ``y_c`` for this step (the filtered applied output), ``E_c`` reset to 0."""
+    for c in range(chan.shape[0]):
+        chan[c, CH_Y] = filtered_output(chan, c, state, scal, q, first)
+        chan[c, CH_E] = 0.0
+
+
+@njit(cache=True, inline="always")
+def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
+    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
+    for c in range(chan.shape[0]):
+        if chan[c, CH_JOINT] == POWER:
+            phi, psi = power_terms(V, g)
+        elif channel_axis(chan, c, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
+            phi, psi = joint_terms(chan, c, V, g)
+        else:
+            continue
+        chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
+
+
+@njit(cache=True, inline="always")
+def close_channels(chan, scal):
+    """``E_c -= y_c`` and the dead zone on E: a channel adapts only if ``|E_c| > dz``."""
+    dz = scal[I_DZ_E]
+    for c in range(chan.shape[0]):
+        chan[c, CH_E] -= chan[c, CH_Y]
+        chan[c, CH_ACTIVE] = 1.0 if dz <= 0.0 or abs(chan[c, CH_E]) > dz else 0.0
+    scal[I_E] = chan[0, CH_E]
+    scal[I_Y] = chan[0, CH_Y]
+
+
+@njit(cache=True, inline="always")
+def tracking_active(const, scal, q, qd, q_d, qd_d):
+    """The dead zone on s: the tracking term adapts only if ``max |qd - qd_r| > dz``."""
+    dz = scal[I_DZ_S]
+    if dz <= 0.0:
+        return True
+    worst = 0.0
+    for i in range(q.shape[0]):
+        worst = max(worst, abs(qd[i] - (qd_d[i] - const[i, LAM] * (q[i] - q_d[i]))))
+    return worst > dz
+
+
+@njit(cache=True, inline="always")
+def prediction_gradient(chan, filt, i, grad, gamma, implicit):
+    """Add the prediction term to ``grad``: ``- gamma W_ci^T y_c`` (implicit: the rest is
+    solved) or ``+ gamma W_ci^T E_c`` (explicit), over the active channels."""
+    for c in range(chan.shape[0]):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+            continue
+        if implicit:
+            y = chan[c, CH_Y]
+            for k in range(13):
+                grad[k] -= gamma * filt[c, i, WR + k] * y
+        else:
+            e = chan[c, CH_E]
+            for k in range(13):
+                grad[k] += gamma * filt[c, i, WR + k] * e
+
+
+@njit(cache=True, inline="always")
+def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
+    """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + prediction part)``,
+    and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares)."""
+    h, gamma = scal[I_H], scal[I_GAMMA]
+    implicit = scal[I_IMPLICIT] != 0.0
+    mode = scal[I_ADAPT]
+    p_diag = scal[I_P_DIAG] != 0.0
+    for k in range(13):
+        grad[k] = G[i, k] if tracking else 0.0
+    if mode == ADAPT_GRADIENT:
+        prediction_gradient(chan, filt, i, grad, gamma, implicit)
+        gain_step(row, p_diag, st, grad, h, R, i)
+    elif mode == ADAPT_LS:
+        prediction_gradient(chan, filt, i, grad, gamma, implicit)
+        apply_factored(st, SQ, grad, Pg, t)
+        for k in range(13):
+            R[i, k] = st[TH + k] - h * Pg[k]
+    else:                               # fixed P on the tracking term, least squares on E
+        gain_step(row, p_diag, st, grad, h, R, i)
+        for k in range(13):
+            grad[k] = 0.0
+        prediction_gradient(chan, filt, i, grad, gamma, implicit)
+        apply_factored(st, SQ, grad, Pg, t)
+        for k in range(13):
+            R[i, k] -= h * Pg[k]
+    if not implicit:
+        return
+    for c in range(chan.shape[0]):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+            continue
+        if mode == ADAPT_GRADIENT:
+            gain_apply(row, p_diag, filt, c, i)
+        else:
+            for k in range(13):
+                grad[k] = filt[c, i, WR + k]
+            apply_factored(st, SQ, grad, Pg, t)
+            for k in range(13):
+                filt[c, i, UR + k] = Pg[k]
+
+
+@njit(cache=True, inline="always")
+def implicit_solve(chan, filt, state, R, scal):
+    """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
+
+    ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R``; for one channel Sherman-Morrison.
     """
-    joint_rotation(row, RF0, q, C, i)
-    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
-    qdr = qd_d - row[LAM] * (q - q_d)
-    qddr = qdd_d - row[LAM] * (qd - qd_d)
-    vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, V[0], V[1], V[2], V[3], V[4],
-                                              V[5])
-    Vr, Vdr = propagate(C, i, px, py, pz, qd, Vr, Vdr, qdr, qddr)   # Tdot with the actual qd
-    return (vx, vy, vz, wx, wy, wz + qd), Vr, Vdr, rotate(C, i, g[0], g[1], g[2])
-
-
-@njit(cache=True)
-def check_vectors(n, a, b, c, d, e):
-    """0 if all five vectors have length n and are finite; else 1-5 (length) or 11-15 (NaN/Inf)."""
-    vecs = (a, b, c, d, e)
-    for k in range(5):
-        if vecs[k].shape[0] != n:
-            return k + 1
-    for k in range(5):
-        v = vecs[k]
+    n, m = R.shape[0], chan.shape[0]
+    hg = scal[I_H] * scal[I_GAMMA]
+    active = np.empty(m, np.int64)
+    na = 0
+    for c in range(m):
+        if chan[c, CH_ACTIVE] != 0.0:
+            active[na] = c
+            na += 1
+    if na == 1:
+        c = active[0]
+        c0 = channel_start(chan, c)
+        WR_ = 0.0
+        WU = 0.0
+        for i in range(c0, n):
+            for k in range(13):
+                WR_ += filt[c, i, WR + k] * R[i, k]
+                WU += filt[c, i, WR + k] * filt[c, i, UR + k]
+        kc = scal[I_H] * scal[I_GAMMA] * WR_ / (1.0 + scal[I_H] * scal[I_GAMMA] * WU)
         for i in range(n):
-            if not math.isfinite(v[i]):
-                return k + 11
-    return 0
+            for k in range(13):
+                state[i, TH + k] = R[i, k] if i < c0 else R[i, k] - kc * filt[c, i, UR + k]
+        return
+    for i in range(n):
+        for k in range(13):
+            state[i, TH + k] = R[i, k]
+    if na == 0:
+        return
+    # link by link (the m rows of W_i and U_i are at hand), lower triangle only: A is
+    # symmetric and the Cholesky factorisation reads no more
+    start = np.empty(na, np.int64)
+    for a in range(na):
+        start[a] = channel_start(chan, active[a])
+    A = np.zeros((na, na), R.dtype)
+    z = np.zeros(na, R.dtype)
+    for i in range(n):
+        for a in range(na):
+            if i < start[a]:
+                continue
+            ca = active[a]
+            acc = z[a]
+            for k in range(13):
+                acc += filt[ca, i, WR + k] * R[i, k]
+            z[a] = acc
+            for b in range(a + 1):
+                if i < start[b]:
+                    continue
+                cb = active[b]
+                acc = A[a, b]
+                for k in range(13):
+                    acc += filt[ca, i, WR + k] * filt[cb, i, UR + k]
+                A[a, b] = acc
+    for a in range(na):
+        for b in range(a + 1):
+            A[a, b] *= hg
+        A[a, a] += 1.0
+    cholesky_solve(A, z)
+    for i in range(n):
+        for a in range(na):
+            if i < start[a]:
+                continue
+            za = hg * z[a]
+            ca = active[a]
+            for k in range(13):
+                state[i, TH + k] -= za * filt[ca, i, UR + k]
 
 
-def filter_coefficients(lam, h):
-    """Exact discretisation of ``lambda/(p+lambda)``.
+@njit(cache=True, inline="always")
+def update_least_squares(chan, filt, const, state, scal, f, Sf):
+    """The least-squares gain of each link: Potter's update with the active channels'
+    rows, then bounded-gain forgetting (:mod:`rcac_ros.core.least_squares`)."""
+    h = scal[I_H]
+    for i in range(state.shape[0]):
+        S = state[i, SQ:SQ + 169]
+        for c in range(chan.shape[0]):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan, c):
+                potter_update(S, filt[c, i, WR:WR + 13], h, f, Sf)
+        bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
-    ``x^f_k = e x^f_k-1 + b0 x_k-1 + b1 (x_k - x_k-1)``.
 
-    ``b1 = 0`` is the zero-order hold; the first-order hold adds ``b1 = 1 - b0 / (lambda h)``.
-    """
-    e = math.exp(-lam * h)
-    return e, 1.0 - e, 1.0 - (1.0 - e) / (lam * h)
-
-
-#: The only signature the step kernels are compiled for: anything else is a TypeError at
-#: dispatch (never a silent recompilation), which the Python entry point converts once.
-VEC = "float64[::1]"
-RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
+@njit(cache=True, inline="always")
+def project(const, state):
+    """Projection: ``theta_hat_i`` clipped to ``[theta_min_i, theta_max_i]``."""
+    for i in range(state.shape[0]):
+        for k in range(13):
+            state[i, TH + k] = min(max(state[i, TH + k], const[i, TLO + k]), const[i, THI + k])
 
 
 @njit(RCAC_SIGNATURE, cache=True)
-def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
+def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
 
-    ``data`` (n + 1, CONST_COLS + STATE_COLS) holds, per link, the constants then the state,
-    and in its last row the scalars: one argument and one scratch allocation keep the call cheap.
+    ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`.
     """
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
@@ -114,46 +274,30 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    work = np.empty(n * 67 + 39, q.dtype)
-    C = work[:9 * n].reshape((n, 9))
+    work = np.empty(n * 41 + 84, q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
-    Wm = work[28 * n:41 * n].reshape((n, 13))
-    Rn = work[41 * n:54 * n].reshape((n, 13))
-    Un = work[54 * n:67 * n].reshape((n, 13))
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
+        work[41 * n + 65:41 * n + 78]
+    F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
-    phi_row = work[67 * n:67 * n + 13]
-    psi_row = work[67 * n + 13:67 * n + 26]
-    tmp_row = work[67 * n + 26:67 * n + 39]
-    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
-    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
-    kd_diag = scal[I_KD_DIAG] != 0.0
-    p_diag = scal[I_P_DIAG] != 0.0
-    y = 0.0 if first else fe * scal[I_Y] + fb0 * scal[I_TAU1]
+    start_channels(chan, state, scal, q, first)
     zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
-    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
     g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
-    E = 0.0
     for i in range(n):
         row = const[i]
-        qdi = qd[i]
-        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+        st = state[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qd[i], q_d[i], qd_d[i], qdd_d[i],
                                          V, Vr, Vdr, g)
         vx, vy, vz, wx, wy, wz = V
         rvx, rvy, rvz, rwx, rwy, rwz = Vr
         dvx, dvy, dvz, dwx, dwy, dwz = Vdr
         gx, gy, gz = g
-        px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
-        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
-        if i == 0:
-            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-        else:
-            A, Ad = propagate(C, i, px, py, pz, qdi, A, Ad, 0.0, 0.0)
-        avx, avy, avz, awx, awy, awz = A
-        bvx, bvy, bvz, bwx, bwy, bwz = Ad
-        st = state[i]
         st[S0], st[S0 + 1], st[S0 + 2] = vx - rvx, vy - rvy, vz - rvz
         st[S0 + 3], st[S0 + 4], st[S0 + 5] = wx - rwx, wy - rwy, wz - rwz
         # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
@@ -164,94 +308,45 @@ def rcac_step_kernel(data, q, qd, q_d, qd_d, qdd_d):
         regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
                       dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                       wx, wy, wz, gx, gy, gz)
-        # a_j^T Ym(V_j), adot_j^T Ym(V_j), a_j^T Yc(V_j) for the filtered joint-1 torque
-        momentum_row(phi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz)
-        momentum_row(tmp_row, bvx, bvy, bvz, bwx, bwy, bwz, vx, vy, vz, wx, wy, wz)
-        bias_row(psi_row, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
-        for c in range(13):
-            phi = phi_row[c]
-            psi = psi_row[c] - tmp_row[c]
-            if first:
-                st[PHF + c] = phi
-                st[PSF + c] = 0.0
-            else:
-                st[PHF + c] = (fe * st[PHF + c] + fb0 * st[PHP + c]
-                               + fb1 * (phi - st[PHP + c]))
-                st[PSF + c] = (fe * st[PSF + c] + fb0 * st[PSP + c]
-                               + fb1 * (psi - st[PSP + c]))
-            st[PHP + c] = phi
-            st[PSP + c] = psi
-            w_c = lam * (phi - st[PHF + c]) + st[PSF + c]
-            Wm[i, c] = w_c
-            E += w_c * st[TH + c]
-    E -= y
-    fx = fy = fz = nx = ny = nz = 0.0
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first)
+    close_channels(chan, scal)
+    frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
+    tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
+    scal[I_TRACKING] = 1.0 if tracking else 0.0
+    for k in range(6):
+        F[k] = 0.0
     for i in range(n - 1, -1, -1):
         row = const[i]
         st = state[i]
         if i < n - 1:
             r = const[i + 1]
-            fx, fy, fz, nx, ny, nz = transform_force_T(C, i + 1, r[P0], r[P0 + 1], r[P0 + 2],
-                                                       fx, fy, fz, nx, ny, nz)
-        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
-        for r6 in range(6):
-            acc = Fs[i, r6]
-            if kd_diag:
-                acc -= row[KD0 + 7 * r6] * st[S0 + r6]
-            else:
-                for k in range(6):
-                    acc -= row[KD0 + 6 * r6 + k] * st[S0 + k]
-            if r6 == 0:
-                fx += acc
-            elif r6 == 1:
-                fy += acc
-            elif r6 == 2:
-                fz += acc
-            elif r6 == 3:
-                nx += acc
-            elif r6 == 4:
-                ny += acc
-            else:
-                nz += acc
-        tau[i] = nz
-        # eq 24, step 1: r_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), u_i = P_i W_i^T
-        grad = G[i]
-        for c in range(13):
-            grad[c] -= gamma * Wm[i, c] * y
-        if p_diag:
-            for a in range(13):
-                Rn[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]
-                Un[i, a] = row[PG0 + 14 * a] * Wm[i, a]
-        else:
-            for a in range(13):
-                acc_r = 0.0
-                acc_u = 0.0
-                for c in range(13):
-                    acc_r += row[PG0 + 13 * a + c] * grad[c]
-                    acc_u += row[PG0 + 13 * a + c] * Wm[i, c]
-                Rn[i, a] = st[TH + a] - h * acc_r
-                Un[i, a] = acc_u
-    # eq 24, step 2: the prediction-error term taken implicitly (Sherman-Morrison, O(n)):
-    # (I + h gamma u W) theta_hat+ = r  =>  theta_hat+ = r - h gamma u (W r) / (1 + h gamma W u)
-    Wr = 0.0
-    Wu = 0.0
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
+        feedback_wrench(row, Fs[i], st[S0:S0 + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
+        tau[i] = F[5]                                                              # eq 20
+        if not frozen:
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
+    if frozen:
+        pass
+    elif scal[I_IMPLICIT] != 0.0:
+        implicit_solve(chan, filt, state, R, scal)
+    else:
+        for i in range(n):
+            for k in range(13):
+                state[i, TH + k] = R[i, k]
+    if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
+        update_least_squares(chan, filt, const, state, scal, grad, Pg)
+    if not frozen and scal[I_PROJECT] != 0.0:
+        project(const, state)
     for i in range(n):
-        for c in range(13):
-            Wr += Wm[i, c] * Rn[i, c]
-            Wu += Wm[i, c] * Un[i, c]
-    k = h * gamma * Wr / (1.0 + h * gamma * Wu)
-    for i in range(n):
-        for c in range(13):
-            state[i, TH + c] = Rn[i, c] - k * Un[i, c]
-    scal[I_Y] = y
-    scal[I_TAU1] = tau[0]
+        state[i, TAU] = tau[i]
+        state[i, QPREV] = q[i]
     scal[I_K] += 1.0
-    scal[I_E] = E
     return tau
 
 
 class RecursiveCompositeController:
-    """The recursive composite adaptive controller of eqs 18-24, O(n) per step.
+    """The recursive composite adaptive controller of eqs 18-24, O(m n) per step.
 
     Parameters
     ----------
@@ -263,50 +358,143 @@ class RecursiveCompositeController:
     Lambda : float, (n,) or diagonal (n, n)
         ``Lambda`` of eq 18, positive (per joint).
     P : float, (13,), (13, 13) or (n, 13, 13)
-        Adaptation gains ``P_i`` (eq 24), symmetric positive definite.
+        Adaptation gains ``P_i`` (eq 24), symmetric positive definite; with least squares,
+        their initial value.
     gamma : float
-        Weight of the prediction error (eq 24); ``0`` gives the direct adaptive law.
+        Weight of the prediction errors (eq 24); ``0`` gives the direct adaptive law.
     lam : float
         Bandwidth ``lambda`` of the filter ``lambda / (p + lambda)``, rad/s (the paper gives none).
     h : float
         Control period, s.
     theta_hat0 : array_like (n, 13), optional
         Initial estimates (default zero, as in the paper).
+    channels : int, str or sequence, optional
+        The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
+        ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
+    update : {"implicit", "explicit"}
+        Discretisation of the prediction-error term (module docstring).
+    adaptation : {"gradient", "least_squares", "least_squares_prediction"}
+        ``P_i`` fixed (default), least squares with bounded-gain forgetting on both terms,
+        or least squares on the prediction term only (the tracking term keeps ``P``).
+    forgetting : float
+        ``lambda_0`` of the bounded-gain forgetting, 1/s (least squares).
+    P_max : float, optional
+        ``k_0``: bound on every ``trace(P_i)`` (default: each link's ``trace(P_i(0))``).
+    dead_zone_s, dead_zone_E : float
+        No adaptation of the tracking term while ``max_j |qd_j - qd_rj| <= dead_zone_s``, and
+        none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
+    theta_bounds : None, "mass" or (theta_min, theta_max)
+        Projection after each step: none (default), mass >= 0, or a box (each bound a
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
 
     Raises
     ------
     GainError
-        On a gain of wrong shape, not finite, or not (symmetric) positive definite.
+        On a gain or option of wrong shape or value, naming the field.
     InputError
         On a ``theta_hat0`` of wrong shape or not finite.
     """
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
-                 theta_hat0=None):
+                 theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
+                 forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
+                 theta_bounds=None):
         self.model = model
-        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, const,
-         scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
         n = model.n
-        self._data = np.zeros((n + 1, CONST_COLS + STATE_COLS))
-        self._data[:n, :CONST_COLS] = const
-        self._data[n, :SCAL_LEN] = scal
+        gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
+        self.K_D, self.P, self.Lambda = gains.K_D, gains.P, gains.Lambda
+        self.gamma, self.lam, self.h = gains.gamma, gains.lam, gains.h
+        self.channels = parse_channels(channels, n)
+        self._data = new_data(n)
+        gains.pack(model, self._data)
+        self._const = self._data[:n, :CONST_COLS]
         self._state = self._data[:n, CONST_COLS:]       # views into the one kernel argument
         self._scal = self._data[n]
+        self._configure(update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
+                        theta_bounds)
+        m = len(self.channels)
+        self._filt = np.zeros((m, n, FILT_COLS))
+        self._chan = np.zeros((m, CHAN_COLS))
+        self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
         self.reset(theta_hat0)
+
+    def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
+                   theta_bounds):
+        if update not in UPDATES:
+            raise GainError(f"update: expected 'implicit' or 'explicit', got {update!r}")
+        if adaptation not in ADAPTATIONS:
+            raise GainError(f"adaptation: expected one of {', '.join(ADAPTATIONS)}, "
+                            f"got {adaptation!r}")
+        self.update, self.adaptation = update, adaptation
+        scal = self._scal
+        scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
+        scal[I_ADAPT] = ADAPTATIONS[adaptation]
+        scal[I_FORGET] = scalar(forgetting, "forgetting", GainError, minimum=0.0)
+        self._const[:, PMAX] = np.trace(self.P, axis1=1, axis2=2) if P_max is None else \
+            scalar(P_max, "P_max", GainError, minimum=0.0, strict=True)
+        scal[I_DZ_S] = scalar(dead_zone_s, "dead_zone_s", GainError, minimum=0.0)
+        scal[I_DZ_E] = scalar(dead_zone_E, "dead_zone_E", GainError, minimum=0.0)
+        self.theta_min, self.theta_max = self._bounds(theta_bounds)
+        if self.theta_min is not None:
+            self._const[:, block("theta_lo")] = self.theta_min
+            self._const[:, block("theta_hi")] = self.theta_max
+            scal[I_PROJECT] = 1.0
+
+    def _bounds(self, theta_bounds):
+        n = self.n
+        if theta_bounds is None:
+            return None, None
+        if isinstance(theta_bounds, str):
+            if theta_bounds != "mass":
+                raise GainError(f"theta_bounds: expected None, 'mass' or (theta_min, "
+                                f"theta_max), got {theta_bounds!r}")
+            lo, hi = np.full((n, 13), -np.inf), np.full((n, 13), np.inf)
+        else:
+            try:
+                lo, hi = theta_bounds
+            except (TypeError, ValueError):
+                raise GainError("theta_bounds: expected None, 'mass' or (theta_min, "
+                                "theta_max)") from None
+            lo = self._bound(lo, "theta_min")
+            hi = self._bound(hi, "theta_max")
+            if np.any(lo > hi):
+                raise GainError("theta_bounds: theta_min > theta_max somewhere")
+        lo[:, 0] = np.maximum(lo[:, 0], 0.0)          # mass >= 0
+        if np.any(hi[:, 0] < 0.0):
+            raise GainError("theta_bounds: theta_max of a mass is < 0")
+        return lo, hi
+
+    def _bound(self, value, name):
+        try:
+            arr = np.broadcast_to(np.asarray(value, dtype=float), (self.n, 13)).copy()
+        except (TypeError, ValueError):
+            raise GainError(f"{name}: expected a scalar, (13,) or ({self.n}, 13) values") \
+                from None
+        if np.any(np.isnan(arr)):
+            raise GainError(f"{name}: contains NaN")
+        return arr
 
     @property
     def n(self):
         """Number of joints."""
         return self.model.n
 
+    @property
+    def m(self):
+        """Number of prediction channels."""
+        return len(self.channels)
+
     def reset(self, theta_hat0=None):
-        """Restart: estimates to ``theta_hat0`` (default zero), filters and step count to zero."""
+        """Restart: estimates to ``theta_hat0`` (default 0), filters, gains and step count."""
         th = np.zeros((self.n, 13)) if theta_hat0 is None else \
             as_array(theta_hat0, (self.n, 13), "theta_hat0")
         self._state[:] = 0.0
         self._state[:, TH:TH + 13] = th
-        self._scal[I_Y:I_ERR + 1] = 0.0
+        self._state[:, SQ:SQ + 169] = initial_factor(self.P)
+        self._filt[:] = 0.0
+        self._chan[:, CH_Y:] = 0.0
+        self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period: returns the joint torques ``tau`` (eq 20) and adapts (eq 24).
@@ -328,11 +516,11 @@ class RecursiveCompositeController:
             If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         try:
-            tau = rcac_step_kernel(self._data, q, qd, q_d, qd_d, qdd_d)
+            tau = rcac_step_kernel(self._data, self._filt, self._chan, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = rcac_step_kernel(self._data, *args)
+            tau = rcac_step_kernel(self._data, self._filt, self._chan, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
@@ -340,27 +528,26 @@ class RecursiveCompositeController:
     def set_adaptation(self, enabled):
         """Freeze (``False``) or resume (``True``) the adaptation of eq 24, keeping ``theta_hat``.
 
-        Frozen, every ``P_i`` acts as zero: ``theta_hat`` stays where it is, the torque of
-        eqs 19-20 uses it, and the filters and ``E`` keep running (``E`` then measures the
+        Frozen, ``theta_hat`` (and a least-squares gain) stay where they are, the torque of
+        eqs 19-20 uses them, and the filters and ``E`` keep running (``E`` then measures the
         frozen estimates).
         """
-        n = self.n
-        self._data[:n, PG0:PG0 + 169] = self.P.reshape(n, 169) if enabled else 0.0
+        self._scal[I_FROZEN] = 0.0 if enabled else 1.0
         self.adapting = bool(enabled)
 
     def set_applied_torque(self, tau):
-        """Tell the filter ``y = tau_1^f`` (eq 22) the torque really applied after the last step.
+        """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.
 
         By default ``y`` filters the torque :meth:`step` returned. When the arm receives
         another one (clipped to an effort limit, or a safe effort), pass it here, or the
-        prediction error ``E`` compares the model with a torque the arm never felt.
+        prediction errors ``E`` compare the model with a torque the arm never felt.
 
         Raises
         ------
         InputError
             If ``tau`` has the wrong length or holds NaN/Inf.
         """
-        self._scal[I_TAU1] = as_array(tau, (self.n,), "tau")[0]
+        self._state[:, TAU] = as_array(tau, (self.n,), "tau")
 
     def restart_filters(self):
         """Restart the filters of eqs 21-24 at the next step, keeping ``theta_hat``.
@@ -377,13 +564,13 @@ class RecursiveCompositeController:
 
     @property
     def E(self):
-        """Prediction error ``E = sum_j W_j theta_hat_j - y`` of the last step (eq 24)."""
-        return float(self._scal[I_E])
+        """Prediction errors ``E_c = sum_j W_cj theta_hat_j - y_c`` of the last step, (m,)."""
+        return self._chan[:, CH_E].copy()
 
     @property
     def y(self):
-        """Filtered applied joint-1 torque ``y = tau_1^f`` at the last step."""
-        return float(self._scal[I_Y])
+        """Filtered applied outputs ``y_c`` (e.g. ``tau_1^f``) at the last step, (m,)."""
+        return self._chan[:, CH_Y].copy()
 
     @property
     def link_velocity_error(self):
@@ -392,9 +579,21 @@ class RecursiveCompositeController:
 
     @property
     def W(self):
-        """The filtered regressor rows ``W_j`` (n, 13) of the last step."""
-        st = self._state
-        return self.lam * (st[:, PHP:PHP + 13] - st[:, PHF:PHF + 13]) + st[:, PSF:PSF + 13]
+        """The filtered regressor rows ``W_cj`` of the last step, (m, n, 13) (a copy)."""
+        return self._filt[:, :, WR:WR + 13].copy()
+
+    @property
+    def gain(self):
+        """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares."""
+        if self.adaptation == "gradient":
+            return self.P.copy()
+        S = self._state[:, SQ:SQ + 169].reshape(self.n, 13, 13)
+        return S @ S.transpose(0, 2, 1)
+
+    @property
+    def adapted(self):
+        """Whether the tracking term and each channel adapted at the last step (dead zones)."""
+        return bool(self._scal[I_TRACKING]), self._chan[:, CH_ACTIVE] != 0.0
 
     def lyapunov(self, theta):
         """Eqs 25-26: ``sum_i (s_i^T M_i s_i + theta_tilde_i^T P_i^-1 theta_tilde_i) / 2``.
@@ -405,51 +604,9 @@ class RecursiveCompositeController:
         theta = as_array(theta, (self.n, 13), "theta")
         s = self.link_velocity_error
         tt = self.theta_hat - theta
+        P = self.gain
         total = 0.0
         for i in range(self.n):
             M = link_matrices(theta[i], np.zeros(3))[0]
-            total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(self.P[i], tt[i])
+            total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(P[i], tt[i])
         return float(total)
-
-
-def pack_gains(model, K_D, Lambda, P, gamma, lam, h):
-    """Validate the gains (GainError naming the field) and pack them for the step kernels.
-
-    Returns ``K_D (n,6,6), P (n,13,13), Lambda (n,), gamma, lam, h, const, scal``.
-    """
-    n = model.n
-    K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
-    P = per_link_matrix(P, n, 13, "P", GainError)
-    Lambda = positive_vector(Lambda, n, "Lambda", GainError)
-    gamma = scalar(gamma, "gamma", GainError, minimum=0.0)
-    lam = scalar(lam, "lam", GainError, minimum=0.0, strict=True)
-    h = scalar(h, "h", GainError, minimum=0.0, strict=True)
-    const = np.zeros((n, CONST_COLS))
-    const[:, P0:P0 + 3] = model.p
-    const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
-    const[:, LAM] = Lambda
-    const[:, KD0:KD0 + 36] = K_D.reshape(n, 36)
-    const[:, PG0:PG0 + 169] = P.reshape(n, 169)
-    scal = np.zeros(SCAL_LEN)
-    scal[I_G:I_G + 3] = model.gravity
-    scal[I_LAM], scal[I_H], scal[I_GAMMA] = lam, h, gamma
-    scal[I_FE:I_FB1 + 1] = filter_coefficients(lam, h)
-    scal[I_KD_DIAG] = float(is_diagonal(K_D))
-    scal[I_P_DIAG] = float(is_diagonal(P))
-    return K_D, P, Lambda, gamma, lam, h, const, scal
-
-
-def input_error(scal, n, values):
-    """The InputError for the code a kernel left in ``scal[I_ERR]``."""
-    code = int(scal[I_ERR])
-    scal[I_ERR] = 0.0
-    name = INPUT_NAMES[(code - 1) % 10]
-    if code < 10:
-        return InputError(f"{name}: expected length {n}, got {np.shape(values[code - 1])}")
-    return InputError(f"{name}: contains NaN or Inf")
-
-
-def is_diagonal(stack):
-    """True if every matrix of the (n, k, k) ``stack`` is diagonal."""
-    k = stack.shape[-1]
-    return not np.any(stack * (1.0 - np.eye(k)))

@@ -180,24 +180,31 @@ def inertia_row(ax, ay, az, wx, wy, wz):
 
 
 @njit(cache=True)
-def momentum_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz):
-    """``a^T Ym(V)`` (1 x 13) without forming Ym: the gradient of ``a^T M(theta) V``.
+def momentum_terms(avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz):
+    """``a^T Ym(V)`` (13-tuple) without forming Ym: the gradient of ``a^T M(theta) V``.
 
     ``M V = [m v - h x w; h x v + I_o w]``.
     """
-    out[0] = avx * vx + avy * vy + avz * vz
-    # h . (v x a_w - w x a_v)
-    out[1] = (vy * awz - vz * awy) - (wy * avz - wz * avy)
-    out[2] = (vz * awx - vx * awz) - (wz * avx - wx * avz)
-    out[3] = (vx * awy - vy * awx) - (wx * avy - wy * avx)
     t = inertia_row(awx, awy, awz, wx, wy, wz)
-    for k in range(9):
-        out[4 + k] = t[k]
+    return (avx * vx + avy * vy + avz * vz,
+            # h . (v x a_w - w x a_v)
+            (vy * awz - vz * awy) - (wy * avz - wz * avy),
+            (vz * awx - vx * awz) - (wz * avx - wx * avz),
+            (vx * awy - vy * awx) - (wx * avy - wy * avx),
+            t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8])
 
 
 @njit(cache=True)
-def bias_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
-    """``a^T Yc(V)`` (1 x 13) without forming Yc: the gradient of ``a^T (C(w) V + G)``.
+def momentum_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz):
+    """:func:`momentum_terms` written into ``out`` (13)."""
+    t = momentum_terms(avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz)
+    for k in range(13):
+        out[k] = t[k]
+
+
+@njit(cache=True)
+def bias_terms(avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
+    """``a^T Yc(V)`` (13-tuple) without forming Yc: the gradient of ``a^T (C(w) V + G)``.
 
     With ``u = w x v - g``: ``C V + G = [m u - w x (h x w); h x u + w x (I_o w)]``.
     """
@@ -206,15 +213,22 @@ def bias_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, 
     uz = wx * vy - wy * vx - gz
     ww = wx * wx + wy * wy + wz * wz
     aw = avx * wx + avy * wy + avz * wz
-    out[0] = avx * ux + avy * uy + avz * uz
-    # h . (u x a_w - (w.w) a_v + (a_v.w) w)
-    out[1] = (uy * awz - uz * awy) - ww * avx + aw * wx
-    out[2] = (uz * awx - ux * awz) - ww * avy + aw * wy
-    out[3] = (ux * awy - uy * awx) - ww * avz + aw * wz
     # a_w . (w x I_o w) = (a_w x w) . (I_o w)
     t = inertia_row(awy * wz - awz * wy, awz * wx - awx * wz, awx * wy - awy * wx, wx, wy, wz)
-    for k in range(9):
-        out[4 + k] = t[k]
+    return (avx * ux + avy * uy + avz * uz,
+            # h . (u x a_w - (w.w) a_v + (a_v.w) w)
+            (uy * awz - uz * awy) - ww * avx + aw * wx,
+            (uz * awx - ux * awz) - ww * avy + aw * wy,
+            (ux * awy - uy * awx) - ww * avz + aw * wz,
+            t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8])
+
+
+@njit(cache=True)
+def bias_row(out, avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz):
+    """:func:`bias_terms` written into ``out`` (13)."""
+    t = bias_terms(avx, avy, avz, awx, awy, awz, vx, vy, vz, wx, wy, wz, gx, gy, gz)
+    for k in range(13):
+        out[k] = t[k]
 
 
 @njit(cache=True)

@@ -17,58 +17,51 @@ torques (eq 6), the recursive one that of joint 1 only (eqs 21-24).
 
 Discretisation matches :mod:`rcac_ros.core.rcac`: exact filters (zero-order hold
 for the applied torque, first-order hold for Phi and Psi), explicit Euler in the
-tracking term and implicit Euler in the prediction-error term, here solved by
-the Woodbury identity with an n x n Cholesky factorisation.
+tracking term and, in the prediction-error term, implicit Euler (``update="implicit"``,
+the default), solved by the Woodbury identity with an n x n Cholesky factorisation, or
+explicit Euler (``update="explicit"``). With the same choice the recursive law with
+``channels="all"`` is this law, step by step.
 Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
 """
 
 import numpy as np
 from numba import njit
 
+from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_error, \
+    reference_motion
+from ._packing import (CONST_COLS, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H,
+                       I_IMPLICIT, I_K, I_LAM, I_Y, KD0, LAM, PG0, Gains, new_data)
 from ._validate import as_array
-from .rcac import (I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H, I_K, I_LAM, I_Y, INPUT_NAMES,
-                   KD0, LAM, PG0, VEC, check_vectors, input_error, pack_gains,
-                   reference_motion)
+from rcac_ros.errors import GainError
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
 
 @njit(cache=True)
-def cholesky_solve(A, b):
-    """Solve ``A x = b`` in place (``b`` becomes x) for symmetric positive definite A."""
-    n = A.shape[0]
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= A[j, k] * A[j, k]
-        d = np.sqrt(d)
-        A[j, j] = d
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= A[i, k] * A[j, k]
-            A[i, j] = v / d
-    for i in range(n):
-        v = b[i]
-        for k in range(i):
-            v -= A[i, k] * b[k]
-        b[i] = v / A[i, i]
-    for i in range(n - 1, -1, -1):
-        v = b[i]
-        for k in range(i + 1, n):
-            v -= A[k, i] * b[k]
-        b[i] = v / A[i, i]
+def finish(filt, scal, tau, y, e, m):
+    """Store y, the torque (the applied one unless told otherwise) and e; count the step."""
+    for k in range(tau.shape[0]):
+        filt[0, k, m] = y[k]
+        filt[1, k, m] = tau[k]
+        filt[2, k, m] = e[k]
+    scal[I_K] += 1.0
+    scal[I_E] = e[0]
+    scal[I_Y] = y[0]
+    return tau
 
 
-@njit(f"{VEC}(float64[:, ::1], {VEC}, {VEC}, float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, "
-      f"{VEC})", cache=True)
-def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
+@njit(f"{VEC}(float64[:, ::1], {VEC}, float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})",
+      cache=True)
+def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
     """One period of eqs 2 and 7 with explicit joint-space matrices.
 
-    ``filt`` is (4, n, 13n + 1): Phi^f, Psi^f, previous Phi, previous Psi, with the
-    filtered applied torque y in column 13n of filt[0] and the applied torque in filt[1].
+    ``data`` holds the gains in the layout of :mod:`rcac_ros.core._packing`; ``filt`` is
+    (4, n, 13n + 1): Phi^f, Psi^f, previous Phi, previous Psi, with the filtered applied
+    torque y in column 13n of filt[0], the applied torque in filt[1] and e in filt[2].
     """
-    n = const.shape[0]
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    scal = data[n]
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
@@ -164,13 +157,18 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
             acc -= K[k, b] * s[b]
         tau[k] = acc
         e[k] = pe - y[k]
-    # eq 7: r = theta_hat - h P (Y^T s - gamma W^T y); (I + h gamma P W^T W) theta+ = r
+    # eq 7, implicit: r = theta_hat - h P (Y^T s - gamma W^T y); (I + h gamma P W^T W) theta+ = r
     # Woodbury: theta+ = r - h gamma P W^T (I + h gamma W P W^T)^-1 W r
+    # explicit: theta+ = theta_hat - h P (Y^T s + gamma W^T e)
+    implicit = scal[I_IMPLICIT] != 0.0
     g = np.empty(m, q.dtype)
     for col in range(m):
         acc = 0.0
         for k in range(n):
-            acc += Yj[k, col] * s[k] - gamma * W[k, col] * y[k]
+            if implicit:
+                acc += Yj[k, col] * s[k] - gamma * W[k, col] * y[k]
+            else:
+                acc += Yj[k, col] * s[k] + gamma * W[k, col] * e[k]
         g[col] = acc
     PWt = np.empty((m, n), q.dtype)          # P W^T, P block diagonal (13 x 13 per link)
     r = np.empty(m, q.dtype)
@@ -180,11 +178,14 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
             for c in range(13):
                 acc += const[i, PG0 + 13 * a + c] * g[13 * i + c]
             r[13 * i + a] = theta_hat[13 * i + a] - h * acc
-            for k in range(n):
+            for k in range(n if implicit else 0):
                 acc = 0.0
                 for c in range(13):
                     acc += const[i, PG0 + 13 * a + c] * W[k, 13 * i + c]
                 PWt[13 * i + a, k] = acc
+    if not implicit:
+        theta_hat[:] = r
+        return finish(filt, scal, tau, y, e, m)
     A = np.empty((n, n), q.dtype)
     for k in range(n):
         for b in range(n):
@@ -205,29 +206,32 @@ def slotine_li_step_kernel(const, scal, theta_hat, filt, q, qd, q_d, qd_d, qdd_d
         for k in range(n):
             acc += PWt[col, k] * z[k]
         theta_hat[col] = r[col] - h * gamma * acc
-    for k in range(n):
-        filt[0, k, m] = y[k]
-        filt[1, k, m] = tau[k]
-    scal[I_K] += 1.0
-    scal[I_E] = e[0]
-    scal[I_Y] = y[0]
-    return tau
+    return finish(filt, scal, tau, y, e, m)
 
 
 class SlotineLiCompositeController:
     """The composite adaptive controller of Slotine and Li (eqs 2, 7), non-recursive.
 
-    Same parameters, defaults and exceptions as
+    Same parameters (up to ``update``), defaults and exceptions as
     :class:`~rcac_ros.core.rcac.RecursiveCompositeController`; ``K_D`` are the link
-    gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``.
+    gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
+    filtered joint torques (``E`` has n entries).
     """
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
-                 theta_hat0=None):
+                 theta_hat0=None, update="implicit"):
         self.model = model
-        (self.K_D, self.P, self.Lambda, self.gamma, self.lam, self.h, self._const,
-         self._scal) = pack_gains(model, K_D, Lambda, P, gamma, lam, h)
         n = model.n
+        gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
+        self.K_D, self.P, self.Lambda = gains.K_D, gains.P, gains.Lambda
+        self.gamma, self.lam, self.h = gains.gamma, gains.lam, gains.h
+        self._data = new_data(n)
+        gains.pack(model, self._data)
+        self._scal = self._data[n]
+        if update not in ("implicit", "explicit"):
+            raise GainError(f"update: expected 'implicit' or 'explicit', got {update!r}")
+        self.update = update
+        self._scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
         self._theta = np.zeros(13 * n)
         self._filt = np.zeros((4, n, 13 * n + 1))
         self.reset(theta_hat0)
@@ -242,18 +246,17 @@ class SlotineLiCompositeController:
         self._theta[:] = 0.0 if theta_hat0 is None else \
             as_array(theta_hat0, (self.n, 13), "theta_hat0").ravel()
         self._filt[:] = 0.0
-        self._scal[I_Y:I_ERR + 1] = 0.0
+        self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
         try:
-            tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
-                                         q, qd, q_d, qd_d, qdd_d)
+            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, q, qd, q_d,
+                                         qd_d, qdd_d)
         except TypeError:
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = slotine_li_step_kernel(self._const, self._scal, self._theta, self._filt,
-                                         *args)
+            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
@@ -269,5 +272,10 @@ class SlotineLiCompositeController:
 
     @property
     def E(self):
-        """Prediction error of joint 1's filtered torque at the last step (``e[0]``)."""
-        return float(self._scal[I_E])
+        """Prediction errors ``e`` of the n filtered joint torques at the last step (eq 6)."""
+        return self._filt[2, :, 13 * self.n].copy()
+
+    @property
+    def y(self):
+        """Filtered applied joint torques ``y = tau^f`` at the last step, (n,)."""
+        return self._filt[0, :, 13 * self.n].copy()

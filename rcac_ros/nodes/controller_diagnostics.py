@@ -27,7 +27,7 @@ def diagnostics(node):
         "stamp_restarts": node.failsafe.gate.restarts,
         "desired_limited": node.failsafe.limiter.limited,
         "non_finite_efforts": node._nonfinite,
-        "prediction_error": f"{node.ctrl.E:.6g}",
+        "prediction_error": f"{node.ctrl.E[0]:.6g}",
         "adaptation": "on" if node.ctrl.adapting else "frozen",
     }
     for kind, c in sorted(node._throttle.counts.items()):

@@ -98,7 +98,7 @@ class ControllerOutputs:
         out = self._out
         self._theta.publish(Float64MultiArray(layout=self._theta_layout,
                                               data=theta_hat.ravel().tolist()))
-        self._e.publish(Float64(data=float(E)))
+        self._e.publish(Float64(data=float(E[0])))   # the first channel (joint 1 by default)
         self._track.publish(Float64MultiArray(layout=self._joint_layout,
                                               data=(q - q_d)[out].tolist()))
         ds = self._desired_msg

@@ -4,6 +4,10 @@ Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
 median over blocks of the mean time per call (µs), measured in one run on this
 machine; the ratios are what the targets are about. The operation count is
 exact (:mod:`rcac_ros.tools.opcount`).
+
+Besides the paper's law (channels ``[1]``) the table times the recursive law with the
+channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with the
+least-squares gain (channels ``[1]``), against n.
 """
 
 import json
@@ -16,6 +20,14 @@ from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCom
 from rcac_ros.tools.args import non_negative_float, positive_float
 
 SIZES = (7, 14, 28, 56, 112, 224)
+
+#: column -> options of the recursive law timed besides the paper's default
+VARIANTS = {
+    "power_us": dict(channels=[1, "power"]),
+    "all_us": dict(channels="all"),
+    "all_explicit_us": dict(channels="all", update="explicit"),
+    "least_squares_us": dict(adaptation="least_squares", forgetting=1.0),
+}
 
 
 def median_us(fn, budget_s=0.3, blocks=7):
@@ -32,6 +44,63 @@ def median_us(fn, budget_s=0.3, blocks=7):
             fn()
         samples.append((time.perf_counter() - t0) / reps * 1e6)
     return float(np.median(samples))
+
+
+def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
+    """Median over blocks of ``time(fa) / time(fb)``, the two timed alternately.
+
+    On a shared machine the load changes between cells; timed side by side, block by
+    block, the ratio is far steadier than the ratio of two medians.
+    """
+    fa(), fb()
+    t0 = time.perf_counter()
+    fa()
+    fb()
+    once = max(time.perf_counter() - t0, 1e-7)
+    reps = max(1, int(budget_s / blocks / once))
+    ratios = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fa()
+        ta = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fb()
+        ratios.append(ta / (time.perf_counter() - t0))
+    return float(np.median(ratios))
+
+
+def goal_ratios(budget_s=1.0):
+    """The issue's cost goals, each measured side by side (:func:`interleaved_ratio`)."""
+    rng = np.random.default_rng(0)
+    out = {}
+    for n in (7, 56):
+        model = css_arm().repeated(n // 7)
+        args = tuple(rng.normal(size=(5, n)) * 0.1)
+        paper = RecursiveCompositeController(model, theta_hat0=model.theta())
+        every = RecursiveCompositeController(model, theta_hat0=model.theta(), channels="all")
+        if n == 7:
+            rnea = _pin_rnea(model)
+            if rnea is not None:
+                out["paper_over_pin_rnea_n7"] = interleaved_ratio(
+                    lambda: paper.step(*args), lambda: rnea(args[0], args[1], args[4]), budget_s)
+            out["all_over_paper_n7"] = interleaved_ratio(lambda: every.step(*args),
+                                                         lambda: paper.step(*args), budget_s)
+            for key, kwargs in VARIANTS.items():
+                if key != "all_us":
+                    c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+                    out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
+                        lambda: c.step(*args), lambda: paper.step(*args), budget_s)
+        else:
+            sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
+            out["all_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: every.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+            expl = RecursiveCompositeController(model, theta_hat0=model.theta(),
+                                                channels="all", update="explicit")
+            out["all_explicit_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: expl.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+    return out
 
 
 def _pin_rnea(model):
@@ -58,6 +127,10 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
     ctrl = RecursiveCompositeController(model, theta_hat0=model.theta())
     row = {"model": label, "n": model.n,
            "controller_us": median_us(lambda: ctrl.step(q, qd, q_d, qd_d, qdd_d), budget_s)}
+    for key, kwargs in VARIANTS.items():
+        c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+        row[key] = median_us(lambda: c.step(q, qd, q_d, qd_d, qdd_d), budget_s,
+                             blocks=3 if model.n > 100 else 7)
     rnea = _pin_rnea(model)
     row["pin_rnea_us"] = None if rnea is None else median_us(lambda: rnea(q, qd, qdd_d), budget_s)
     if baseline:
@@ -108,11 +181,17 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
     if 56 in by_n and by_n[56]["slotine_li_us"]:
         ratios["slotine_li_over_controller_n56"] = (by_n[56]["slotine_li_us"]
                                                     / by_n[56]["controller_us"])
+        ratios["all_over_slotine_li_n56"] = by_n[56]["all_us"] / by_n[56]["slotine_li_us"]
+        ratios["all_explicit_over_slotine_li_n56"] = (by_n[56]["all_explicit_us"]
+                                                      / by_n[56]["slotine_li_us"])
+    if 7 in by_n:
+        for key in VARIANTS:
+            ratios[f"{key[:-3]}_over_paper_n7"] = by_n[7][key] / by_n[7]["controller_us"]
     for r in rows:
         if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
             ratio = r["controller_us"] / r["pin_rnea_us"]
             ratios[f"controller_over_pin_rnea_{r['model']}"] = ratio
-    result = {"rows": rows, "ratios": ratios}
+    result = {"rows": rows, "ratios": ratios, "goals": goal_ratios()}
     if ops:
         from rcac_ros.tools.opcount import count_step
         c7, c14 = count_step("rcac", 7), count_step("rcac", 14)
@@ -123,6 +202,16 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
             "slotine_li_n7": count_step("slotine_li", 7),
             "paper_per_link": {"mul": 606, "add": 501},
         }
+        # the all-channel law: a n^2 + b n + c multiplications, fitted on n = 7, 14, 21
+        counts = {k: count_step("rcac_all", k) for k in (7, 14, 21)}
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            result["operations"][f"{kind}_n7"] = count_step(kind, 7)
+        ns = np.array([7.0, 14.0, 21.0])
+        mul = np.array([counts[k]["mul"] + counts[k]["div"] for k in (7, 14, 21)])
+        a, b, c = np.linalg.solve(np.vander(ns, 3), mul)
+        result["operations"]["rcac_all"] = {str(k): v for k, v in counts.items()}
+        result["operations"]["rcac_all_mul_fit"] = {"n2": a, "n": b, "1": c,
+                                                    "wang_n2": 7730}
     return result
 
 
@@ -130,7 +219,8 @@ def _format_row(r):
     def f(v):
         return f"{v:12.2f}" if v is not None else f"{'-':>12s}"
     return (f"{r['model']:>10s} {r['n']:5d} {f(r['controller_us'])} {f(r['pin_rnea_us'])} "
-            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}")
+            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}"
+            + "".join(f"     {f(r[k])}" for k in VARIANTS))
 
 
 def add_arguments(parser):
@@ -166,6 +256,12 @@ def add_arguments(parser):
     parser.add_argument("--delay-margin", action="store_true",
                         help="instead: offline, tracking RMS against K_D with the effort 0-2 "
                              "periods late (the stable range of timer mode)")
+    parser.add_argument("--noise", action="store_true",
+                        help="instead: 10-minute closed loops with sensor noise, plain and with "
+                             "dead zones + projection (are the estimates bounded?)")
+    parser.add_argument("--noise-duration", type=positive_float, default=600.0,
+                        help="seconds of each --noise run (default 600)")
+    parser.add_argument("--out", default="results/noise", help="--noise: output directory")
 
 
 #: the controller's real-time options of ``--rt``
@@ -174,6 +270,10 @@ RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
 
 
 def run(args):
+    if args.noise:
+        from rcac_ros.tools.noise_bench import run_noise_bench
+        run_noise_bench(args.noise_duration, args.out)
+        return 0
     over = dict(RT_OPTIONS) if args.rt else {}
     if args.K_D is not None:
         over["K_D"] = float(args.K_D)
@@ -200,16 +300,28 @@ def run(args):
     except ImportError:
         print("pinocchio (pip package 'pin') is not installed: the pin.rnea column is skipped")
     print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
-          f"{'SlotineLi us':>12s} {'sim step us':>12s}")
+          f"{'SlotineLi us':>12s} {'sim step us':>12s}"
+          + "".join(f" {k[:-3] + ' us':>16s}" for k in VARIANTS))
     result = run_bench(budget_s=args.budget)
-    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20):")
+    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
+          "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
+    print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2 "
+          "at n = 7; all/SlotineLi <= 0.1 at n = 56):")
+    for k, v in result["goals"].items():
+        print(f"  {k:40s} {v:8.3f}")
     ops = result.get("operations")
     if ops:
         print(f"\noperations per step (counted): n=7 {ops['rcac_n7']}; per link "
               f"{ops['rcac_per_link_mul']:.0f} mul + {ops['rcac_per_link_add']:.0f} add "
               f"(paper: 606 mul + 501 add); Slotine-Li n=7 {ops['slotine_li_n7']}")
+        fit = ops["rcac_all_mul_fit"]
+        print(f"channels='all': {fit['n2']:.0f} n^2 + {fit['n']:.0f} n + {fit['1']:.0f} "
+              f"multiplications (Wang's O(n^2) law, as the paper cites: 7730 n^2); "
+              f"n=7 {ops['rcac_all']['7']}")
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            print(f"{kind} n=7: {ops[kind + '_n7']}")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(result, f, indent=2)

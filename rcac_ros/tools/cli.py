@@ -22,6 +22,8 @@ SUBCOMMANDS = {
     "payload-demo": ("rcac_ros.tools.payload_demo",
                      "panda with an unknown 2 kg payload attached"),
     "sweep": ("rcac_ros.tools.sweep", "Monte Carlo campaigns of closed-loop runs on Dask"),
+    "compare": ("rcac_ros.tools.compare",
+                "every adaptive law on the paper's run and the payload demo"),
 }
 
 

@@ -25,14 +25,15 @@ def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=N
     Returns
     -------
     dict
-        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T,).
+        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T, m):
+        the prediction error of each channel.
     """
     h = controller.h
     steps = int(round(duration / h)) + 1
     n = model.n
     out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
                tau=np.empty((steps, n)), theta_hat=np.empty((steps, n, 13)),
-               E=np.empty(steps))
+               E=np.empty((steps, np.size(controller.E))))
     sim = Simulator(model, dt=h, q0=q0, substeps=substeps)
     with Progress(steps, progress or "", enabled=progress is not None) as bar:
         for k in range(steps):
@@ -55,15 +56,19 @@ def metrics(run, theta_true, last_seconds=LAST_WINDOW):
             **prediction(run["E"]), **torque(run["tau"])}
 
 
-def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True):
-    """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics."""
+def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True,
+                   channels=(1,)):
+    """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics.
+
+    ``channels``: the composite law's prediction channels (default the paper's, joint 1).
+    """
     model = css_arm()
     g = dict(PAPER_GAINS, **(gains or {}))
     q0 = np.array(PAPER_Q0)
     trajectory = PaperTrajectory(q0, reading=reading)
     runs, report = {}, {}
     for law, gamma in (("direct", 0.0), ("composite", g["gamma"])):
-        ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma))
+        ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma), channels=channels)
         t0 = time.perf_counter()
         runs[law] = simulate(model, ctrl, trajectory, q0, duration, substeps,
                              progress=f"{law:>9s}" if progress else None)
@@ -88,6 +93,7 @@ def write_outputs(model, runs, report, out_dir, settings):
 
 
 def add_arguments(parser):
+    from rcac_ros.tools.compare import channel_list
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="seconds (default 20)")
     parser.add_argument("--out", default="results/experiment", help="output directory")
@@ -104,6 +110,9 @@ def add_arguments(parser):
                             help=f"{text} (default {PAPER_GAINS[name]:g})")
     parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
+    parser.add_argument("--channels", type=channel_list, default=(1,),
+                        help="prediction channels of the composite law, e.g. 1,power or all "
+                             "(default 1, the paper's)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -111,8 +120,9 @@ def run(args):
     gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
                  h=args.h)
     model, runs, report = run_experiment(args.duration, args.trajectory, gains, args.substeps,
-                                         progress=not args.quiet)
+                                         progress=not args.quiet, channels=args.channels)
     settings = dict(gains, duration=args.duration, trajectory=args.trajectory,
+                    channels=[str(c) for c in args.channels],
                     substeps=args.substeps, model="css_arm", q0=list(PAPER_Q0))
     write_outputs(model, runs, report, args.out, settings)
     keys = [k for k in report["direct"] if k != "wall_time_s"]

@@ -78,6 +78,17 @@ def _counting(kernel):
     return run
 
 
+#: kind -> options of the recursive controller ("slotine_li": the baseline)
+KINDS = {
+    "rcac": {},
+    "rcac_power": {"channels": [1, "power"]},
+    "rcac_all": {"channels": "all"},
+    "rcac_all_explicit": {"channels": "all", "update": "explicit"},
+    "rcac_least_squares": {"adaptation": "least_squares", "forgetting": 0.5},
+    "slotine_li": None,
+}
+
+
 def _count_in_process(kind, n_links):
     from rcac_ros.core import css_arm, rcac, slotine_li
     model = css_arm().repeated(max(1, n_links // 7))
@@ -85,9 +96,9 @@ def _count_in_process(kind, n_links):
     vecs = rng.normal(size=(5, model.n)) * 0.1
     theta_hat0 = rng.normal(size=(model.n, 13))
     # the controllers call their kernel by its module name: count through the public step
-    if kind == "rcac":
+    if KINDS[kind] is not None:
         rcac.rcac_step_kernel = _counting(rcac.rcac_step_kernel)
-        c = rcac.RecursiveCompositeController(model, theta_hat0=theta_hat0)
+        c = rcac.RecursiveCompositeController(model, theta_hat0=theta_hat0, **KINDS[kind])
     else:
         slotine_li.slotine_li_step_kernel = _counting(slotine_li.slotine_li_step_kernel)
         c = slotine_li.SlotineLiCompositeController(model, theta_hat0=theta_hat0)
@@ -103,7 +114,8 @@ def count_step(kind="rcac", n_links=7):
 
     Parameters
     ----------
-    kind : {"rcac", "slotine_li"}
+    kind : str
+        A key of :data:`KINDS`.
     n_links : int
         A multiple of 7 (the CSS arm repeated).
     """

@@ -124,13 +124,14 @@ def simulate(model, loaded, controller, trajectory, duration, jump, progress=Non
     -------
     dict
         ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_last`` (T, 13) (last link's
-        estimates), ``E`` (T,).
+        estimates), ``E`` (T, m).
     """
     h = controller.h
     steps = int(round(duration / h)) + 1
     n = model.n
     out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
-               tau=np.empty((steps, n)), theta_last=np.empty((steps, 13)), E=np.empty(steps))
+               tau=np.empty((steps, n)), theta_last=np.empty((steps, 13)),
+               E=np.empty((steps, np.size(controller.E))))
     q_d0, qd_d0, _ = trajectory(0.0)
     sim = Simulator(model, dt=h, q0=q_d0, qd0=qd_d0)
     attached = False

@@ -1,0 +1,136 @@
+"""Compiled building blocks shared by the recursive law and the Slotine-Li baseline.
+
+Each block is one equation of doc/design.md §3-4 over one link, reading the packed layout of
+:mod:`rcac_ros.core._packing`.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._packing import I_ERR, KD0, LAM, PG0, TH, UR, WR
+from rcac_ros.errors import InputError
+from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
+
+INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
+
+#: The only signatures the step kernels are compiled for: anything else is a TypeError at
+#: dispatch (never a silent recompilation), which the Python entry points convert once.
+VEC = "float64[::1]"
+
+
+@njit(cache=True)
+def check_vectors(n, a, b, c, d, e):
+    """0 if all five vectors have length n and are finite; else 1-5 (length) or 11-15 (NaN/Inf)."""
+    vecs = (a, b, c, d, e)
+    for k in range(5):
+        if vecs[k].shape[0] != n:
+            return k + 1
+    for k in range(5):
+        v = vecs[k]
+        for i in range(n):
+            if not math.isfinite(v[i]):
+                return k + 11
+    return 0
+
+
+def input_error(scal, n, values):
+    """The InputError for the code a kernel left in ``scal[I_ERR]``."""
+    code = int(scal[I_ERR])
+    scal[I_ERR] = 0.0
+    name = INPUT_NAMES[(code - 1) % 10]
+    if code < 10:
+        return InputError(f"{name}: expected length {n}, got {np.shape(values[code - 1])}")
+    return InputError(f"{name}: contains NaN or Inf")
+
+
+@njit(cache=True, inline="always")
+def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
+    """Link i's ``V_i`` (eq 9), ``V_ri``, ``Vdot_ri`` (eq 18) and gravity from link i-1's.
+
+    Writes ``C[i]`` (eq 10's rotation); ``q ... qdd_d`` are joint i's scalars, ``row`` its
+    packed constants. Returns ``(V, V_r, Vdot_r, g)`` as tuples.
+    """
+    joint_rotation(row, RF0, q, C, i)
+    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+    qdr = qd_d - row[LAM] * (q - q_d)
+    qddr = qdd_d - row[LAM] * (qd - qd_d)
+    vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, V[0], V[1], V[2], V[3], V[4],
+                                              V[5])
+    Vr, Vdr = propagate(C, i, px, py, pz, qd, Vr, Vdr, qdr, qddr)   # Tdot with the actual qd
+    return (vx, vy, vz, wx, wy, wz + qd), Vr, Vdr, rotate(C, i, g[0], g[1], g[2])
+
+
+@njit(cache=True, inline="always")
+def feedback_wrench(row, Fs, s, kd_diag, F):
+    """Eq 19b's link terms, added to ``F`` (6, in place): ``Y_ri theta_hat_i + K_Di (V_ri - V_i)``.
+
+    ``Fs`` = ``Y_ri theta_hat_i`` (6), ``s`` = ``s_i = V_i - V_ri`` (6).
+    """
+    for r in range(6):
+        acc = Fs[r]
+        if kd_diag:
+            acc -= row[KD0 + 7 * r] * s[r]
+        else:
+            for k in range(6):
+                acc -= row[KD0 + 6 * r + k] * s[k]
+        F[r] += acc
+
+
+@njit(cache=True, inline="always")
+def gain_step(row, p_diag, st, grad, h, R, i):
+    """``R_i = theta_hat_i - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part).
+
+    ``st`` is link i's state row (``theta_hat_i`` at ``TH``).
+    """
+    if p_diag:
+        for a in range(13):
+            R[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]
+    else:
+        for a in range(13):
+            acc = 0.0
+            for c in range(13):
+                acc += row[PG0 + 13 * a + c] * grad[c]
+            R[i, a] = st[TH + a] - h * acc
+
+
+@njit(cache=True, inline="always")
+def gain_apply(row, p_diag, filt, c, i):
+    """``U_ci = P_i W_ci^T`` with the fixed gain ``P_i``."""
+    if p_diag:
+        for a in range(13):
+            filt[c, i, UR + a] = row[PG0 + 14 * a] * filt[c, i, WR + a]
+    else:
+        for a in range(13):
+            acc = 0.0
+            for k in range(13):
+                acc += row[PG0 + 13 * a + k] * filt[c, i, WR + k]
+            filt[c, i, UR + a] = acc
+
+
+@njit(cache=True)
+def cholesky_solve(A, b):
+    """Solve ``A x = b`` in place (``b`` becomes x) for symmetric positive definite A."""
+    n = A.shape[0]
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        d = np.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= A[i, k] * A[j, k]
+            A[i, j] = v / d
+    for i in range(n):
+        v = b[i]
+        for k in range(i):
+            v -= A[i, k] * b[k]
+        b[i] = v / A[i, i]
+    for i in range(n - 1, -1, -1):
+        v = b[i]
+        for k in range(i + 1, n):
+            v -= A[k, i] * b[k]
+        b[i] = v / A[i, i]

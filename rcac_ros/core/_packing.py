@@ -1,0 +1,163 @@
+"""The named layout of the arrays the step kernels read, and the packing of the gains into it.
+
+A step kernel takes few arguments (each costs a dispatch check), so the controllers pack
+their constants, state and scalars into three float64 arrays:
+
+``data`` (n + 1, LINK_COLS)
+    row ``i < n``: link i's constants (``CONST``), then its state (``STATE``);
+    row ``n``: the scalars (``I_*``).
+``filt`` (m, n, FILT_COLS)
+    channel c, link j: the filters of eqs 21-23 (``phi^f``, ``psi^f``, the previous ``phi``,
+    ``psi``), the filtered regressor row ``W_cj`` and ``U_cj = P_j W_cj^T`` (eq 24).
+``chan`` (m, CHAN_COLS)
+    channel c: its joint (0-based, :data:`POWER` for the energy channel), ``y_c``, ``E_c``,
+    whether it adapts this step (dead zone), and its axis ``a_j``, ``adot_j`` while the
+    forward pass runs (doc/design.md §4).
+
+Every offset below is a module constant, so numba folds it; :func:`block` gives the
+slices the Python side reads.
+"""
+
+import math
+
+import numpy as np
+
+from ._validate import per_link_matrix, positive_vector, scalar
+from rcac_ros.errors import GainError
+from .spatial import P0, RF0
+
+# ---- per-link constants: data[i, :CONST_COLS] ----------------------------------------------
+#: p_i (3) and R_fix_i (9) at the columns of :mod:`rcac_ros.core.spatial` (P0, RF0)
+LAM = 12            #: Lambda_i (eq 18)
+KD0 = 13            #: K_Di, 6x6 row-major (eq 19b)
+PG0 = 49            #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain
+TLO = 218           #: lower bounds of theta_i (13): projection
+THI = 231           #: upper bounds of theta_i (13)
+PMAX = 244          #: k_0 of link i: the bound on trace(P_i) (least squares)
+CONST_COLS = 245
+
+# ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
+TH = 0              #: theta_hat_i (13)
+S0 = 13             #: s_i = V_i - V_ri (6)
+TAU = 19            #: the torque of joint i applied over the last period
+QPREV = 20          #: q_i at the last step (the power channel's tau^T dq)
+SQ = 21             #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
+STATE_COLS = 190
+LINK_COLS = CONST_COLS + STATE_COLS
+
+# ---- scalars: data[n, :] -------------------------------------------------------------------
+I_G = 0             #: gravity in the base frame (3)
+I_LAM = 3           #: filter bandwidth lambda
+I_H = 4             #: control period h
+I_GAMMA = 5         #: gamma, weight of the prediction errors (eq 24)
+I_FE = 6            #: exp(-lambda h)
+I_FB0 = 7           #: 1 - exp(-lambda h)            (zero-order hold)
+I_FB1 = 8           #: 1 - (1 - exp(-lambda h)) / (lambda h)   (first-order hold)
+I_K = 9             #: steps since the filters started
+I_ERR = 10          #: input error code left by the kernel
+I_KD_DIAG = 11      #: 1 if every K_Di is diagonal (the kernel skips the zeros)
+I_P_DIAG = 12       #: 1 if every P_i is diagonal
+I_IMPLICIT = 13     #: 1: implicit Euler in the prediction-error term, 0: explicit
+I_ADAPT = 14        #: ADAPT_GRADIENT, ADAPT_LS or ADAPT_LS_PREDICTION
+I_FORGET = 15       #: lambda_0 of the bounded-gain forgetting, 1/s
+I_FROZEN = 16       #: 1: adaptation frozen (set_adaptation(False)): theta_hat and P held
+I_DZ_S = 17         #: dead zone on max |qd - qd_r| (0: none)
+I_DZ_E = 18         #: dead zone on |E_c| (0: none)
+I_PROJECT = 19      #: 1: clip theta_hat to [TLO, THI] after each step
+I_E = 20            #: E of the first channel (the paper's scalar E)
+I_Y = 21            #: y of the first channel
+I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
+SCAL_LEN = 23
+
+ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
+
+# ---- channel c, link j: filt[c, j, :] ------------------------------------------------------
+PHF = 0             #: phi^f (13)
+PSF = 13            #: psi^f (13)
+PHP = 26            #: phi at the last step (13)
+PSP = 39            #: psi at the last step (13)
+WR = 52             #: W_cj (13)
+UR = 65             #: U_cj = P_j W_cj^T (13)
+FILT_COLS = 78
+
+# ---- channel c: chan[c, :] -----------------------------------------------------------------
+CH_JOINT = 0        #: 0-based joint k of the channel, or POWER
+CH_Y = 1            #: y_c: the filtered applied c^T tau
+CH_E = 2            #: E_c = sum_j W_cj theta_hat_j - y_c
+CH_ACTIVE = 3       #: 1 if E_c adapts at this step (outside the dead zone)
+CH_A = 4            #: a_j (6), the channel's axis in frame j, during the forward pass
+CH_AD = 10          #: adot_j (6)
+CHAN_COLS = 16
+POWER = -1.0
+
+#: Python-side slices of the blocks above (per-link state columns are relative to CONST_COLS).
+BLOCKS = {
+    "theta_hat": slice(CONST_COLS + TH, CONST_COLS + TH + 13),
+    "s": slice(CONST_COLS + S0, CONST_COLS + S0 + 6),
+    "S": slice(CONST_COLS + SQ, CONST_COLS + SQ + 169),
+    "W": slice(WR, WR + 13),
+    "theta_lo": slice(TLO, TLO + 13),
+    "theta_hi": slice(THI, THI + 13),
+}
+
+
+def block(name):
+    """The slice of a named block (see :data:`BLOCKS`)."""
+    return BLOCKS[name]
+
+
+def filter_coefficients(lam, h):
+    """Exact discretisation of ``lambda/(p+lambda)``.
+
+    ``x^f_k = e x^f_k-1 + b0 x_k-1 + b1 (x_k - x_k-1)``.
+
+    ``b1 = 0`` is the zero-order hold; the first-order hold adds ``b1 = 1 - b0 / (lambda h)``.
+    """
+    e = math.exp(-lam * h)
+    return e, 1.0 - e, 1.0 - (1.0 - e) / (lam * h)
+
+
+def is_diagonal(stack):
+    """True if every matrix of the (n, k, k) ``stack`` is diagonal."""
+    k = stack.shape[-1]
+    return not np.any(stack * (1.0 - np.eye(k)))
+
+
+class Gains:
+    """The validated gains of eqs 18-24 (GainError naming the field).
+
+    Attributes: ``K_D`` (n, 6, 6), ``P`` (n, 13, 13), ``Lambda`` (n,), ``gamma``, ``lam``, ``h``.
+    """
+
+    def __init__(self, model, K_D, Lambda, P, gamma, lam, h):
+        n = model.n
+        self.K_D = per_link_matrix(K_D, n, 6, "K_D", GainError)
+        self.P = per_link_matrix(P, n, 13, "P", GainError)
+        self.Lambda = positive_vector(Lambda, n, "Lambda", GainError)
+        self.gamma = scalar(gamma, "gamma", GainError, minimum=0.0)
+        self.lam = scalar(lam, "lam", GainError, minimum=0.0, strict=True)
+        self.h = scalar(h, "h", GainError, minimum=0.0, strict=True)
+
+    def pack(self, model, data):
+        """Write the constants into ``data[:n]`` and the scalars into ``data[n]``."""
+        n = model.n
+        const, scal = data[:n], data[n]
+        const[:, P0:P0 + 3] = model.p
+        const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
+        const[:, LAM] = self.Lambda
+        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
+        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
+        const[:, TLO:TLO + 13] = -np.inf
+        const[:, THI:THI + 13] = np.inf
+        scal[I_G:I_G + 3] = model.gravity
+        scal[I_LAM], scal[I_H], scal[I_GAMMA] = self.lam, self.h, self.gamma
+        scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)
+        scal[I_KD_DIAG] = float(is_diagonal(self.K_D))
+        scal[I_P_DIAG] = float(is_diagonal(self.P))
+        scal[I_IMPLICIT] = 1.0
+        scal[I_ADAPT] = ADAPT_GRADIENT
+
+
+def new_data(n):
+    """A zeroed ``data`` array for n links."""
+    return np.zeros((n + 1, LINK_COLS))

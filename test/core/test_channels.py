@@ -1,0 +1,205 @@
+"""Prediction channels: "all" is Slotine-Li computed recursively; every channel is exact."""
+
+import numpy as np
+import pytest
+from conftest import random_chain
+
+from rcac_ros.core import (GainError, PaperTrajectory, RecursiveCompositeController, Simulator,
+                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core.channels import parse_channels
+from rcac_ros.core.model import PAPER_Q0
+
+Q0 = np.array(PAPER_Q0)
+
+
+def panda():
+    from rcac_ros.tools.payload_demo import find_panda_urdf, load_panda
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data not installed")
+    return load_panda()
+
+
+def rel_err(a, b):
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def equal_to_slotine_li(model, q0, traj, steps, **gains):
+    """Closed loops of channels="all" and Slotine-Li, each on its own plant; the worst
+    relative differences of efforts, estimates and prediction errors over all steps."""
+    a = RecursiveCompositeController(model, channels="all", **gains)
+    b = SlotineLiCompositeController(model, **gains)
+    sa, sb = Simulator(model, q0=q0), Simulator(model, q0=q0)
+    worst = dict(tau=0.0, theta=0.0, E=0.0)
+    for k in range(steps):
+        q_d, qd_d, qdd_d = traj(k * a.h)
+        ta = a.step(sa.q, sa.qd, q_d, qd_d, qdd_d)
+        tb = b.step(sb.q, sb.qd, q_d, qd_d, qdd_d)
+        worst["tau"] = max(worst["tau"], rel_err(ta, tb))
+        worst["theta"] = max(worst["theta"], rel_err(a.theta_hat, b.theta_hat))
+        worst["E"] = max(worst["E"], float(np.max(np.abs(a.E - b.E))
+                                           / max(1.0, np.max(np.abs(b.y)))))
+        sa.step(ta)
+        sb.step(tb)
+    moved = np.max(np.abs(a.theta_hat - (gains.get("theta_hat0", 0.0))))
+    return worst, moved
+
+
+@pytest.mark.parametrize("update", ["implicit", "explicit"])
+def test_all_channels_equal_slotine_li_on_the_css_arm(update):
+    """2 s of closed loop, paper gains (explicit: a gain the explicit step keeps stable)."""
+    gains = dict(P=100.0) if update == "implicit" else dict(P=0.005)
+    traj = PaperTrajectory(Q0, reading="position", amplitude=0.2, period=4.0)
+    worst, moved = equal_to_slotine_li(css_arm(), Q0, traj, 1000, update=update, **gains)
+    assert max(worst.values()) < 1e-9, worst
+    assert moved > 1e-3                                   # it did adapt
+
+
+@pytest.mark.parametrize("update", ["implicit", "explicit"])
+def test_all_channels_equal_slotine_li_on_the_panda_with_gravity(update):
+    from rcac_ros.tools.payload_demo import AMPLITUDE, FREQUENCY, GAINS, READY, gains_for
+    model = panda()
+    # the explicit step diverges at the demo's rho = 30 (as Slotine-Li's does): rho = 0.3
+    gains = gains_for(model, adapt_all=True,
+                      **dict(GAINS, rho=GAINS["rho"] if update == "implicit" else 0.3))
+    gains["theta_hat0"] = 0.7 * model.theta()
+    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    worst, moved = equal_to_slotine_li(model, np.array(READY), traj, 1000, update=update,
+                                       **gains)
+    assert max(worst.values()) < 1e-9, worst
+    assert moved > 1e-3
+
+
+def test_all_channels_equal_slotine_li_on_a_random_chain_with_dense_gains():
+    rng = np.random.default_rng(21)
+    model = random_chain(rng, 5, gravity=(0.0, -9.81, 0.0))
+    A = rng.normal(size=(13, 13))
+    q0 = rng.normal(size=5) * 0.5
+    traj = PaperTrajectory(q0, reading="position", amplitude=0.3, period=3.0)
+    worst, moved = equal_to_slotine_li(model, q0, traj, 1000, K_D=np.diag(rng.uniform(20, 60, 6)),
+                                       P=A @ A.T / 13 + np.eye(13), gamma=0.5, lam=20.0)
+    assert max(worst.values()) < 1e-9, worst
+    assert moved > 1e-3
+
+
+def exact_run(model, h, steps, channels, traj, q0):
+    """theta_hat = theta, adaptation off (P = 1e-12): the worst |E_c| / max |y_c| per channel."""
+    ctrl = RecursiveCompositeController(model, P=1e-12, h=h, theta_hat0=model.theta(),
+                                        channels=channels)
+    sim = Simulator(model, dt=h, q0=q0)
+    E, y = [], []
+    for k in range(steps):
+        tau = ctrl.step(sim.q, sim.qd, *traj(k * h))
+        E.append(ctrl.E)
+        y.append(ctrl.y)
+        sim.step(tau)
+        ctrl.set_applied_torque(sim.applied)
+    E, y = np.abs(E), np.abs(y)
+    assert np.allclose(ctrl.theta_hat, model.theta(), rtol=1e-9)
+    return E.max(axis=0) / y.max(axis=0), y.max(axis=0)
+
+
+@pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
+def test_every_channel_is_exact_with_the_true_parameters(gravity):
+    """theta_hat = theta, no adaptation, the paper's motion. Joint 1 (axis fixed, parallel to
+    gravity: sum psi theta = 0 and phi theta is piecewise linear, so the first-order hold is
+    exact): rounding level. Every other channel, power included: the O(h^2) error of the
+    holds (channels.py), shown by its convergence: h / 2 divides it by about 4."""
+    model = css_arm(gravity)
+    traj = PaperTrajectory(Q0)
+    coarse, ymax = exact_run(model, 0.002, 1500, ["all", "power"], traj, Q0)
+    fine, _ = exact_run(model, 0.001, 3000, ["all", "power"], traj, Q0)
+    assert np.all(ymax > 1.0), ymax
+    assert coarse[0] < 1e-11, coarse                      # 3e-13 measured
+    assert np.all(coarse < 1e-5), coarse                  # 2e-6 at most, measured
+    # each channel: at rounding level, or second order (power without gravity is exact: the
+    # mean-power hold and the first-order hold of the kinetic energy are one interpolation)
+    assert np.all((coarse < 1e-11) | (coarse / fine > 3.5)), (coarse, coarse / fine)
+    assert (coarse[7] < 1e-11) == (gravity[2] == 0.0)
+
+
+def test_power_channel_alone_detects_a_wrong_model():
+    """The check can fail: with theta_hat off by 10% the power channel's E is large."""
+    model = css_arm((0.0, 0.0, -9.81))
+    traj = PaperTrajectory(Q0, reading="position")
+    ctrl = RecursiveCompositeController(model, P=1e-12, theta_hat0=0.9 * model.theta(),
+                                        channels="power")
+    sim = Simulator(model, q0=Q0)
+    worst = 0.0
+    for k in range(500):
+        sim.step(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+        worst = max(worst, abs(ctrl.E[0]) / max(1.0, abs(ctrl.y[0])))
+    assert worst > 1e-2
+
+
+def test_default_is_the_paper_law_and_joint_one_channel():
+    """channels=[1] (default), 1, "1" and [1] give identical runs; E has one entry."""
+    model = css_arm()
+    traj = PaperTrajectory(Q0)
+    runs = []
+    for channels in ((1,), 1, "1", [1]):
+        kwargs = {} if channels == (1,) else dict(channels=channels)
+        ctrl = RecursiveCompositeController(model, **kwargs)
+        sim = Simulator(model, q0=Q0)
+        for k in range(200):
+            sim.step(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+        assert ctrl.E.shape == (1,) and ctrl.channels == (1,)
+        runs.append(ctrl.theta_hat)
+    for r in runs[1:]:
+        assert np.array_equal(r, runs[0])
+
+
+def test_joint_channels_are_independent_of_their_order():
+    """[7, 1] predicts the same two filtered torques as [1, 7] (E swapped)."""
+    model = css_arm()
+    traj = PaperTrajectory(Q0, reading="position")
+    out = []
+    for channels in ([1, 7], [7, 1]):
+        ctrl = RecursiveCompositeController(model, channels=channels)
+        sim = Simulator(model, q0=Q0)
+        for k in range(300):
+            sim.step(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+        out.append((ctrl.E, ctrl.theta_hat))
+    assert np.allclose(out[0][0], out[1][0][::-1], rtol=1e-8)
+    assert np.allclose(out[0][1], out[1][1], rtol=1e-8, atol=1e-10)
+
+
+@pytest.mark.parametrize("value,expected", [
+    ("all", (1, 2, 3)), ("power", ("power",)), ("1,power", (1, "power")),
+    ([3, "power", "1"], (3, "power", 1)), (2, (2,)), (["all", "power"], (1, 2, 3, "power")),
+    (" 2 , POWER ", (2, "power")),
+])
+def test_parse_channels(value, expected):
+    assert parse_channels(value, 3) == expected
+
+
+@pytest.mark.parametrize("value,match", [
+    ("0", "channels: joint 0 is out of range 1..3"),
+    ([4], "channels: joint 4 is out of range 1..3"),
+    ("1,speed", "channels: 'speed' is not a joint number"),
+    ([], "channels: empty"),
+    ("1,1", "channels: listed twice: 1"),
+    ("all,2", "channels: listed twice: 2"),
+    ([1.5], "channels: 1.5 is not a joint number"),
+    (None, "channels: expected joint numbers"),
+    ([True], "channels: True is not a joint number"),
+])
+def test_parse_channels_errors(value, match):
+    with pytest.raises(GainError, match=match):
+        parse_channels(value, 3)
+
+
+def test_bad_options_raise_gain_error():
+    model = css_arm()
+    for kwargs, match in ((dict(channels="8"), "channels: joint 8"),
+                          (dict(update="trapezoid"), "update: expected"),
+                          (dict(adaptation="rls"), "adaptation: expected"),
+                          (dict(forgetting=-1.0), "forgetting: must be >= 0"),
+                          (dict(P_max=0.0), "P_max: must be > 0"),
+                          (dict(dead_zone_E=-1.0), "dead_zone_E: must be >= 0"),
+                          (dict(theta_bounds="box"), "theta_bounds: expected"),
+                          (dict(theta_bounds=(1.0, 0.0)), "theta_min > theta_max"),
+                          (dict(theta_bounds=(np.zeros(5), 1.0)), "theta_min: expected")):
+        with pytest.raises(GainError, match=match):
+            RecursiveCompositeController(model, **kwargs)
+    with pytest.raises(GainError, match="update: expected"):
+        SlotineLiCompositeController(model, update="x")
