@@ -29,7 +29,6 @@ import time
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import JointTrajectory
 
 from rcac_ros import params, topics
 from rcac_ros.errors import RcacError
@@ -37,17 +36,18 @@ from rcac_ros.nodes.base import Percentiles, QOS, run
 from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
 from rcac_ros.nodes.controller_params import read_parameters
+from rcac_ros.nodes.controller_trajectory import ActionSink, TrajectoryInput
 from rcac_ros.nodes.estimate_services import EstimateServices
 from rcac_ros.nodes.failsafe import ControllerGuards
 from rcac_ros.nodes.follow_joint_trajectory import create_server, FollowJointTrajectoryServer
-from rcac_ros.nodes.guards import Rejected, StampGate
+from rcac_ros.nodes.guards import StampGate
 from rcac_ros.nodes.inputs import capped, SideInput
 from rcac_ros.nodes.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                         VelocityEstimate)
 from rcac_ros.nodes.lookahead import StatePredictor
 from rcac_ros.nodes.managed import ManagedNode
 from rcac_ros.nodes.pacing import DeadlineLoop
-from rcac_ros.nodes.trajectory_msg import DesiredMotion, parse_trajectory, TrajectoryRejected
+from rcac_ros.nodes.trajectory_msg import DesiredMotion
 
 
 class ControllerNode(ManagedNode):
@@ -92,12 +92,9 @@ class ControllerNode(ManagedNode):
                 JointState, fs.max_state_bytes, "state", self._on_state, self._throttle.warn),
                 QOS, raw=True))
         self._fjt = None                    # the FollowJointTrajectory server, if any
-        if self.trajectory_source == "topic":   # parsed in their own thread
-            self.keep(SideInput.close, SideInput(
-                self, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_trajectory,
-                fs.max_trajectory_bytes, "trajectory",
-                lambda kind, text: self._throttle.warn(f"trajectory {kind}", text)))
-            self._fjt = create_server(self, _ActionSink(self), defaults=self.tolerances)
+        if self.trajectory_source == "topic":   # checked aside, applied in this thread
+            self.keep(TrajectoryInput.close, TrajectoryInput(self))
+            self._fjt = create_server(self, ActionSink(self), defaults=self.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
         if self.mode == "timer" and self.get_parameter("use_sim_time").value:
@@ -250,21 +247,6 @@ class ControllerNode(ManagedNode):
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
             self._control(t_ns, msg.header.stamp)
 
-    def _on_trajectory(self, msg):
-        if not msg.points:                  # as JTC: an empty trajectory holds the position
-            if not self.hold_position():
-                return self._throttle.warn("trajectory early", "no joint state received yet")
-        else:
-            try:
-                parsed = parse_trajectory(msg, self.model.joint_names)
-                self.failsafe.check_goal(parsed, self._time_now_ns())
-            except (TrajectoryRejected, Rejected) as err:
-                return self._throttle.warn(f"trajectory {err.kind}", str(err))
-            if not self.follow(parsed):
-                return self._throttle.warn("trajectory early", "no joint state received yet")
-        if self._fjt is not None:
-            self._fjt.abort("replaced by a ~/joint_trajectory message")
-
     def _time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
         if self.mode == "lockstep":
@@ -356,35 +338,6 @@ class ControllerNode(ManagedNode):
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
         return diagnostics(self)
-
-
-class _ActionSink:
-    """What the FollowJointTrajectory server drives: the controller's desired motion."""
-
-    def __init__(self, node):
-        self.node = node
-        self.joint_names = node.model.joint_names
-
-    def refusal(self):
-        if not self.node.running:
-            return "the controller is not active"
-        return None if self.node._q is not None else "no joint state received yet"
-
-    def now_ns(self):
-        return self.node._time_now_ns()
-
-    def check(self, parsed):
-        """The goal checks of ``~/joint_trajectory`` (limits, an end in the past)."""
-        try:
-            self.node.failsafe.check_goal(parsed, self.now_ns())
-        except Rejected as err:
-            raise TrajectoryRejected(err.kind, str(err)) from None
-
-    def follow(self, parsed):
-        return self.node._motion.active if self.node.follow(parsed) else None
-
-    def hold(self):
-        self.node.hold_position()
 
 
 def main(args=None):

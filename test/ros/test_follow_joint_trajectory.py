@@ -13,6 +13,7 @@ except the test of the fallback, which always runs.
 """
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -324,26 +325,39 @@ def test_without_control_msgs_the_server_is_off_with_one_line(monkeypatch):
 
 # ---------------------------------------------------------------------- the real controller
 H_NS = 2_000_000
-TARGET_T = [0.0, 0.2, 0.4]
+#: the goal: every joint by AMPLITUDE rad in 2 s (points at 0, 1, 2 s). The controller's
+#: css_arm preset clips efforts to CSS_EFFORT_LIMIT (2000 N m, 500 N m at the wrist); with
+#: the paper's gains and theta_hat(0) = 0 this motion needs at most ~700 N m (joint 2), so
+#: the arm follows it unclipped (0.1 rad in 0.4 s needed 2e5 N m: clipped, it never arrived)
+AMPLITUDE = 0.01
+TARGET_T = [0.0, 1.0, 2.0]
+GOAL_TOLERANCE = 0.001          # rad: a tenth of the motion
+START_STEP = 20                 # the goal is stamped to start at this step
 
 
 def _arm_goal(q0, start_ns, **tolerances):
-    """From the held q0 (at its first point, t = 0) to q0 + 0.1 rad in 0.4 s, stamped."""
-    pts = [q0, q0 + 0.05, q0 + 0.1]
-    vel = [np.zeros(7), np.full(7, 0.25), np.zeros(7)]
+    """From the held q0 (at its first point, t = 0) to q0 + AMPLITUDE in 2 s, stamped."""
+    pts = [q0, q0 + AMPLITUDE / 2, q0 + AMPLITUDE]
+    vel = [np.zeros(7), np.full(7, AMPLITUDE / TARGET_T[-1]), np.zeros(7)]
     traj = JointTrajectory(joint_names=[f"joint{i}" for i in range(1, 8)])
     traj.header.stamp.sec, traj.header.stamp.nanosec = divmod(start_ns, NS)
     for t, p, v in zip(TARGET_T, pts, vel):
+        sec, nanosec = divmod(round(t * NS), NS)
         traj.points.append(JointTrajectoryPoint(
             positions=[float(x) for x in p], velocities=[float(x) for x in v],
-            time_from_start=DurationMsg(sec=0, nanosec=round(t * NS))))
+            time_from_start=DurationMsg(sec=sec, nanosec=nanosec)))
     goal = goal_msg([], [], [], **tolerances)
     goal.trajectory = traj
     return goal
 
 
 class Loop:
-    """The controller node (trajectory: topic) in lockstep with the core simulator."""
+    """The controller node (trajectory: topic) in lockstep with the core simulator.
+
+    While the test waits (discovery, a goal's answer), :meth:`wait` re-sends the last state:
+    the controller answers a repeat without stepping, and its watchdog (``state_timeout``
+    is at most 1 s) does not trip; a trip restarts the filters, which is not deterministic.
+    """
 
     def __init__(self, ctx, ex):
         from rclpy.parameter import Parameter
@@ -361,6 +375,8 @@ class Loop:
         assert spin_until(ex, lambda: self.probe.pub_state.get_subscription_count() > 0)
         self.sim = Simulator(css_arm(), dt=H_NS / NS, q0=PAPER_Q0)
         self.qs = []
+        self.efforts = []           # per step, as received (joints order = model order)
+        self.last = None            # (stamp, q, qd) of the last state sent
         self.client = ActionClient(self.probe, fjt.FollowJointTrajectory,
                                    "/rcac_controller/follow_joint_trajectory")
         self.feedback = []
@@ -373,27 +389,40 @@ class Loop:
         def answer():
             found.extend(d for lab, d in self.probe.efforts[-3:] if label in lab)
             return bool(found)
+        self.last = (k * H_NS, self.sim.q.copy(), self.sim.qd.copy())
         for _ in range(40):     # re-sent if lost in discovery: a repeat is not stepped
-            self.probe.state(k * H_NS, self.sim.q, self.sim.qd)
+            self.probe.state(*self.last)
             if spin_until(self.ex, answer, timeout=0.5):
                 break
         assert found, f"no effort for step {k}"
         self.qs.append(self.sim.q.copy())
+        self.efforts.append(found[0])
         self.sim.step(found[0])
+
+    def wait(self, cond, timeout=20.0):
+        """Spin until ``cond()`` (within ``timeout`` s), re-sending the last state every
+        0.1 s."""
+        end = time.monotonic() + timeout
+        while not spin_until(self.ex, cond, timeout=0.1):
+            if time.monotonic() > end:
+                return False
+            if self.last is not None:
+                self.probe.state(*self.last)
+        return True
 
     def send(self, goal):
         """Send a goal; return its ClientGoalHandle (accepted or not)."""
-        assert spin_until(self.ex, self.client.server_is_ready, 20.0)
+        assert self.wait(self.client.server_is_ready)
         sent = self.client.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(
             m.feedback))
-        assert spin_until(self.ex, sent.done, 20.0)
+        assert self.wait(sent.done)
         return sent.result()
 
 
-def _closed_loop(via, steps=260, **tolerances):
-    """The trajectory, stamped to start at step 20, goes through ``via`` ("topic" or
-    "action") at step 5. Returns the simulated positions per step, the goal's
-    ``(status, result, feedback)`` for the action, and whether the controller holds.
+def _closed_loop(via, steps, **tolerances):
+    """The trajectory, stamped to start at step START_STEP, goes through ``via`` ("topic"
+    or "action") at step 5. Returns the simulated positions and the efforts per step, the
+    goal's ``(status, result, feedback)`` for the action, and whether the controller holds.
     """
     from test_nodes_support import PAPER_Q0
     with ros_context() as (ctx, ex):
@@ -401,14 +430,14 @@ def _closed_loop(via, steps=260, **tolerances):
         node, outcome = loop.node, None
         for k in range(5):
             loop.step(k)
-        goal = _arm_goal(PAPER_Q0, 20 * H_NS, **tolerances)
+        goal = _arm_goal(PAPER_Q0, START_STEP * H_NS, **tolerances)
         if via == "topic":
             pub = loop.probe.create_publisher(JointTrajectory,
                                               "/rcac_controller/joint_trajectory", 10)
-            assert spin_until(ex, lambda: pub.get_subscription_count() > 0)
+            assert loop.wait(lambda: pub.get_subscription_count() > 0)
             for _ in range(20):
                 pub.publish(goal.trajectory)
-                if spin_until(ex, lambda: node._motion.active is not None, timeout=1.0):
+                if loop.wait(lambda: node._motion.active is not None, timeout=1.0):
                     break
         else:
             handle = loop.send(goal)
@@ -417,11 +446,12 @@ def _closed_loop(via, steps=260, **tolerances):
         assert node._motion.active is not None
         for k in range(5, steps):
             loop.step(k)
+        assert node._watchdog_trips == 0, "the watchdog tripped: the loop is not deterministic"
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)
         held = node._motion.active is None
-    return np.array(loop.qs), outcome, held
+    return np.array(loop.qs), np.array(loop.efforts), outcome, held
 
 
 @needs_control_msgs
@@ -429,30 +459,39 @@ def test_controller_goal_gives_the_topic_trajectory_step_for_step():
     """Same stamped trajectory by goal and by topic: the same closed loop, to the bit."""
     from action_msgs.msg import GoalStatus
     from test_nodes_support import PAPER_Q0
-    by_topic, _, _ = _closed_loop("topic")
-    by_goal, (status, result, feedback), held = _closed_loop(
-        "action", goal=[(f"joint{i}", 0.01) for i in range(1, 8)], goal_time=0.2)
+    from rcac_ros.core.model import CSS_EFFORT_LIMIT
+    goal_time = 0.2
+    # to the end of the goal time: success or GOAL_TOLERANCE_VIOLATED is decided by then
+    steps = START_STEP + round((TARGET_T[-1] + goal_time) * NS / H_NS) + 10
+    by_topic, tau_topic, _, _ = _closed_loop("topic", steps)
+    by_goal, tau_goal, (status, result, feedback), held = _closed_loop(
+        "action", steps, goal=[(f"joint{i}", GOAL_TOLERANCE) for i in range(1, 8)],
+        goal_time=goal_time)
     np.testing.assert_array_equal(by_goal, by_topic)
+    np.testing.assert_array_equal(tau_goal, tau_topic)
+    # the arm followed the goal, the efforts were never clipped to the preset's limits
+    assert np.all(np.abs(tau_goal) < np.array(CSS_EFFORT_LIMIT))
     assert status == GoalStatus.STATUS_SUCCEEDED, result.error_string
     assert result.error_code == result.SUCCESSFUL
     assert feedback and list(feedback[-1].joint_names) == [f"joint{i}" for i in range(1, 8)]
     assert not held                                     # success keeps the last point
     # the arm is there: within the goal tolerance of the last point
-    assert np.max(np.abs(by_goal[-1] - (PAPER_Q0 + 0.1))) < 0.01
+    assert np.max(np.abs(by_goal[-1] - (PAPER_Q0 + AMPLITUDE))) < GOAL_TOLERANCE
 
 
 @needs_control_msgs
 def test_controller_path_violation_aborts_and_holds():
     """A path tolerance no real tracking meets: aborted as the motion starts, then held."""
     from action_msgs.msg import GoalStatus
-    qs, (status, result, _), held = _closed_loop(
-        "action", steps=60, path=[("joint3", 1e-9)])
+    # to the goal's midpoint (1 s), where the desired motion has moved AMPLITUDE / 2
+    qs, _, (status, result, _), held = _closed_loop(
+        "action", START_STEP + round(TARGET_T[1] * NS / H_NS), path=[("joint3", 1e-9)])
     assert status == GoalStatus.STATUS_ABORTED
     assert result.error_code == result.PATH_TOLERANCE_VIOLATED
     assert "joint3 position error" in result.error_string
     assert held
-    # held: the arm stops near where it was when aborted (step ~21), far from the goal
-    assert np.max(np.abs(qs[-1] - qs[22])) < 1e-3
+    # held: the arm stops near where it was when aborted (step ~21), far from the midpoint
+    assert np.max(np.abs(qs[-1] - qs[START_STEP + 2])) < AMPLITUDE / 10
 
 
 @needs_control_msgs
@@ -478,3 +517,47 @@ def test_controller_deactivate_aborts_the_goal_and_inactive_rejects():
         assert not loop.send(_arm_goal(PAPER_Q0, 0)).accepted     # no state since: rejected
         loop.step(15)
         assert loop.send(_arm_goal(PAPER_Q0, 0)).accepted
+
+
+@needs_control_msgs
+def test_controller_topic_trajectory_replaces_the_goal_in_the_executor_thread():
+    """A ~/joint_trajectory message aborts the running goal and takes over. It is checked in
+    its own thread, but the motion and the action server change only in the executor's
+    thread (here the test's), where the goal's callbacks and the control step run too."""
+    import threading
+    from action_msgs.msg import GoalStatus
+    from test_nodes_support import PAPER_Q0
+    with ros_context() as (ctx, ex):
+        loop = Loop(ctx, ex)
+        node = loop.node
+        pub = loop.probe.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory",
+                                          10)
+        assert loop.wait(lambda: pub.get_subscription_count() > 0)
+        for k in range(5):
+            loop.step(k)
+        handle = loop.send(_arm_goal(PAPER_Q0, 0))
+        assert handle.accepted
+        result = handle.get_result_async()
+        goal_motion = node._motion.active
+        threads = []
+        for name in ("follow", "hold_position"):
+            def spy(*args, _f=getattr(node, name)):
+                threads.append(threading.current_thread())
+                return _f(*args)
+            setattr(node, name, spy)
+        replacement = _arm_goal(PAPER_Q0 + AMPLITUDE, 0).trajectory
+        for _ in range(20):
+            pub.publish(replacement)
+            if loop.wait(lambda: node._motion.active is not goal_motion, timeout=1.0):
+                break
+        assert loop.wait(result.done)
+        assert result.result().status == GoalStatus.STATUS_ABORTED
+        assert result.result().result.error_code == result.result().result.INVALID_GOAL
+        assert "replaced by a ~/joint_trajectory message" in result.result().result.error_string
+        np.testing.assert_array_equal(node._motion.active.pos[-1],
+                                      replacement.points[-1].positions)
+        assert threads and all(t is threading.current_thread() for t in threads)
+        empty = JointTrajectory(joint_names=[f"joint{i}" for i in range(1, 8)])
+        pub.publish(empty)                  # empty: hold, in the executor thread too
+        assert loop.wait(lambda: node._motion.active is None)
+        assert len(threads) >= 2 and all(t is threading.current_thread() for t in threads)
