@@ -138,15 +138,13 @@ def channel_axis(chan, c, i, C, px, py, pz, qd):
     return True
 
 
-@njit(cache=True, inline="always")
-def joint_terms(chan, c, V, g):
-    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22),
-    as two 13-tuples."""
+@njit(cache=True)
+def axis_terms(A, Ad, V, g):
+    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22) for
+    the axis ``A = a_j``, ``Ad = adot_j`` (6-tuples), as two 13-tuples."""
     vx, vy, vz, wx, wy, wz = V
-    a0, a1, a2, a3, a4, a5 = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2],
-                              chan[c, CH_A + 3], chan[c, CH_A + 4], chan[c, CH_A + 5])
-    b0, b1, b2, b3, b4, b5 = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
-                              chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+    a0, a1, a2, a3, a4, a5 = A
+    b0, b1, b2, b3, b4, b5 = Ad
     phi = momentum_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz)
     d = momentum_terms(b0, b1, b2, b3, b4, b5, vx, vy, vz, wx, wy, wz)
     b = bias_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
@@ -154,6 +152,16 @@ def joint_terms(chan, c, V, g):
            b[6] - d[6], b[7] - d[7], b[8] - d[8], b[9] - d[9], b[10] - d[10], b[11] - d[11],
            b[12] - d[12])
     return phi, psi
+
+
+@njit(cache=True, inline="always")
+def joint_terms(chan, c, V, g):
+    """:func:`axis_terms` for joint channel c, its axis read from ``chan[c]``."""
+    A = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2], chan[c, CH_A + 3],
+         chan[c, CH_A + 4], chan[c, CH_A + 5])
+    Ad = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2], chan[c, CH_AD + 3],
+          chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+    return axis_terms(A, Ad, V, g)
 
 
 @njit(cache=True, inline="always")

@@ -41,16 +41,16 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE,
                        CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
                        I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA, I_H,
                        I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
-                       LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
-                       new_data)
+                       KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP, QPREV, S0, SQ, TAU, TH,
+                       THI, TLO, UR, WR, Gains, block, new_data)
 from ._validate import as_array, scalar
-from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_terms,
-                       parse_channels, power_terms)
+from .channels import (axis_terms, channel_axis, channel_codes, filter_rows, filtered_output,
+                       joint_terms, parse_channels, power_terms)
 from rcac_ros.errors import GainError
 from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
                             potter_update)
-from .regressor import reference_wrench, regressor_row
-from .spatial import P0, transform_force_T
+from .regressor import reference_wrench, regressor_row, regressor_terms
+from .spatial import P0, propagate, transform_force_T
 
 RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
                   f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
@@ -260,6 +260,143 @@ def project(const, state):
             state[i, TH + k] = min(max(state[i, TH + k], const[i, TLO + k]), const[i, THI + k])
 
 
+@njit(cache=True, inline="always")
+def is_paper_law(chan, scal):
+    """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
+    update, no dead zone, no projection, adapting. :func:`paper_step` then runs it."""
+    return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
+            and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0)
+
+
+@njit(cache=True)
+def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+    """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+
+    The same equations, in the same floating-point order, as the general kernel with
+    ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
+    are computed in place, with no per-link helper taking arrays (each such argument
+    costs an atomic reference count in the loop). One allocation besides ``tau``.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    work = np.empty(n * 41 + 6, q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
+    tau = np.empty(n, q.dtype)
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    kd_diag = scal[I_KD_DIAG] != 0.0
+    p_diag = scal[I_P_DIAG] != 0.0
+    y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
+    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    E = 0.0
+    for i in range(n):
+        row = data[i]                                  # link i: constants, then state
+        qdi = qd[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
+        if i == 0:
+            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            A, Ad = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qdi, A, Ad, 0.0, 0.0)
+        svx, svy, svz, swx, swy, swz = vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz
+        state[i, S0], state[i, S0 + 1], state[i, S0 + 2] = svx, svy, svz
+        state[i, S0 + 3], state[i, S0 + 4], state[i, S0 + 5] = swx, swy, swz
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(row, CONST_COLS + TH, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        gr = regressor_terms(svx, svy, svz, swx, swy, swz, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(13):
+            G[i, k] = gr[k]
+        phi, psi = axis_terms(A, Ad, V, g)                           # eq 22
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[0, i, PHF + k] = ph
+                filt[0, i, PSF + k] = 0.0
+            else:
+                php = filt[0, i, PHP + k]
+                psp = filt[0, i, PSP + k]
+                filt[0, i, PHF + k] = fe * filt[0, i, PHF + k] + fb0 * php + fb1 * (ph - php)
+                filt[0, i, PSF + k] = fe * filt[0, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHP + k] = ph
+            filt[0, i, PSP + k] = ps
+            w = lam * (ph - filt[0, i, PHF + k]) + filt[0, i, PSF + k]     # eq 23
+            filt[0, i, WR + k] = w
+            E += w * state[i, TH + k]
+    E -= y
+    chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
+    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        if i < n - 1:
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
+                F[0], F[1], F[2], F[3], F[4], F[5])
+        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
+        for r in range(6):
+            acc = Fs[i, r]
+            if kd_diag:
+                acc -= const[i, KD0 + 7 * r] * state[i, S0 + r]
+            else:
+                for k in range(6):
+                    acc -= const[i, KD0 + 6 * r + k] * state[i, S0 + k]
+            F[r] += acc
+        tau[i] = F[5]                                                        # eq 20
+        # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
+        for k in range(13):
+            G[i, k] -= gamma * filt[0, i, WR + k] * y
+        if p_diag:
+            for a in range(13):
+                R[i, a] = state[i, TH + a] - h * const[i, PG0 + 14 * a] * G[i, a]
+                filt[0, i, UR + a] = const[i, PG0 + 14 * a] * filt[0, i, WR + a]
+        else:
+            for a in range(13):
+                acc_r = 0.0
+                acc_u = 0.0
+                for c in range(13):
+                    acc_r += const[i, PG0 + 13 * a + c] * G[i, c]
+                    acc_u += const[i, PG0 + 13 * a + c] * filt[0, i, WR + c]
+                R[i, a] = state[i, TH + a] - h * acc_r
+                filt[0, i, UR + a] = acc_u
+    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
+    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
+    WR_ = 0.0
+    WU = 0.0
+    for i in range(n):
+        for k in range(13):
+            WR_ += filt[0, i, WR + k] * R[i, k]
+            WU += filt[0, i, WR + k] * filt[0, i, UR + k]
+    kc = h * gamma * WR_ / (1.0 + h * gamma * WU)
+    for i in range(n):
+        for k in range(13):
+            state[i, TH + k] = R[i, k] - kc * filt[0, i, UR + k]
+        state[i, TAU] = tau[i]
+        state[i, QPREV] = q[i]
+    scal[I_K] += 1.0
+    return tau
+
+
 @njit(RCAC_SIGNATURE, cache=True)
 def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
@@ -274,6 +411,8 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
+    if is_paper_law(chan, scal):
+        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
     work = np.empty(n * 41 + 84, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
