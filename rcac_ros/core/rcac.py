@@ -36,16 +36,16 @@ import numpy as np
 from numba import njit
 
 from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_wrench,
-                      gain_apply, gain_step, input_error, reference_motion)
-from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
-                       CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
-                       I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA, I_H,
-                       I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
-                       KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP, QPREV, S0, SQ, TAU, TH,
-                       THI, TLO, UR, WR, Gains, block, new_data)
+                      gain_step, input_error, reference_motion)
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_A, CH_ACTIVE, CH_AD,
+                       CH_E, CH_JOINT, CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E,
+                       I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA,
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING,
+                       I_Y, KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP, QPREV, S0, SQ, TAU,
+                       TH, THI, TLO, UR, WR, Gains, block, new_data)
 from ._validate import as_array, scalar
-from .channels import (axis_terms, channel_axis, channel_codes, filter_rows, filtered_output,
-                       joint_terms, parse_channels, power_terms)
+from .channels import (axis_terms, channel_codes, filtered_output, parse_channels,
+                       power_terms)
 from rcac_ros.errors import GainError
 from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
                             potter_update)
@@ -55,14 +55,16 @@ from .spatial import P0, propagate, transform_force_T
 RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
                   f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
 UPDATES = ("implicit", "explicit")
+AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
+AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
 
 @njit(cache=True, inline="always")
-def channel_start(chan, c):
-    """The first link (0-based) channel c reaches."""
-    return 0 if chan[c, CH_JOINT] == POWER else int(chan[c, CH_JOINT])
+def channel_start(code):
+    """The first link (0-based) the channel of ``CH_JOINT`` code ``code`` reaches."""
+    return 0 if code == POWER else int(code)
 
 
 @njit(cache=True, inline="always")
@@ -75,15 +77,53 @@ def start_channels(chan, state, scal, q, first):
 
 @njit(cache=True, inline="always")
 def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
-    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
+    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i`` (eqs 22-23).
+
+    A joint channel k carries its axis in ``chan[c]``: ``a_k = z6``, ``adot_k = 0``, then
+    ``a_j = T_j a_j-1``, ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (doc/design.md §4). The
+    filters use a first-order hold on the samples and start at ``phi(0)`` and 0, so that E
+    is exact from the first step. The channel loop calls no helper taking an array (each
+    would cost atomic reference counts per channel and link): it updates them in place.
+    """
+    fe, fb0, fb1, lam = coef
+    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
     for c in range(chan.shape[0]):
-        if chan[c, CH_JOINT] == POWER:
+        code = chan[c, CH_JOINT]
+        if code == POWER:
             phi, psi = power_terms(V, g)
-        elif channel_axis(chan, c, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
-            phi, psi = joint_terms(chan, c, V, g)
-        else:
+        elif i < code:
             continue
-        chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
+        else:
+            if i == code:
+                A, Ad = AXIS_Z, AXIS_0
+            else:
+                A = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2], chan[c, CH_A + 3],
+                     chan[c, CH_A + 4], chan[c, CH_A + 5])
+                Ad = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
+                      chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+                A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
+            for r in range(6):
+                chan[c, CH_A + r] = A[r]
+                chan[c, CH_AD + r] = Ad[r]
+            phi, psi = axis_terms(A, Ad, V, g)
+        E = chan[c, CH_E]
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[c, i, PHF + k] = ph
+                filt[c, i, PSF + k] = 0.0
+            else:
+                php = filt[c, i, PHP + k]
+                psp = filt[c, i, PSP + k]
+                filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (ph - php)
+                filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[c, i, PHP + k] = ph
+            filt[c, i, PSP + k] = ps
+            w = lam * (ph - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
+            filt[c, i, WR + k] = w
+            E += w * st[TH + k]
+        chan[c, CH_E] = E
 
 
 @njit(cache=True, inline="always")
@@ -114,7 +154,7 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
     """Add the prediction term to ``grad``: ``- gamma W_ci^T y_c`` (implicit: the rest is
     solved) or ``+ gamma W_ci^T E_c`` (explicit), over the active channels."""
     for c in range(chan.shape[0]):
-        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
         if implicit:
             y = chan[c, CH_Y]
@@ -155,10 +195,18 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
     if not implicit:
         return
     for c in range(chan.shape[0]):
-        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if mode == ADAPT_GRADIENT:
-            gain_apply(row, p_diag, filt, c, i)
+        if mode == ADAPT_GRADIENT:              # U_ci = P_i W_ci^T, fixed P_i
+            if p_diag:
+                for a in range(13):
+                    filt[c, i, UR + a] = row[PG0 + 14 * a] * filt[c, i, WR + a]
+            else:
+                for a in range(13):
+                    acc = 0.0
+                    for k in range(13):
+                        acc += row[PG0 + 13 * a + k] * filt[c, i, WR + k]
+                    filt[c, i, UR + a] = acc
         else:
             for k in range(13):
                 grad[k] = filt[c, i, WR + k]
@@ -183,7 +231,7 @@ def implicit_solve(chan, filt, state, R, scal):
             na += 1
     if na == 1:
         c = active[0]
-        c0 = channel_start(chan, c)
+        c0 = channel_start(chan[c, CH_JOINT])
         WR_ = 0.0
         WU = 0.0
         for i in range(c0, n):
@@ -204,7 +252,7 @@ def implicit_solve(chan, filt, state, R, scal):
     # symmetric and the Cholesky factorisation reads no more
     start = np.empty(na, np.int64)
     for a in range(na):
-        start[a] = channel_start(chan, active[a])
+        start[a] = channel_start(chan[active[a], CH_JOINT])
     A = np.zeros((na, na), R.dtype)
     z = np.zeros(na, R.dtype)
     for i in range(n):
@@ -247,7 +295,7 @@ def update_least_squares(chan, filt, const, state, scal, f, Sf):
     for i in range(state.shape[0]):
         S = state[i, SQ:SQ + 169]
         for c in range(chan.shape[0]):
-            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan, c):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c, CH_JOINT]):
                 potter_update(S, filt[c, i, WR:WR + 13], h, f, Sf)
         bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
