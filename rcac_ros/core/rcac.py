@@ -216,21 +216,21 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
 
 
 @njit(cache=True, inline="always")
-def implicit_solve(chan, filt, state, R, scal):
+def implicit_solve(chan, filt, state, R, A, z, scal):
     """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
 
     ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R``; for one channel Sherman-Morrison.
+    ``A`` (m, m) and ``z`` (m) are scratch.
     """
     n, m = R.shape[0], chan.shape[0]
     hg = scal[I_H] * scal[I_GAMMA]
-    active = np.empty(m, np.int64)
     na = 0
-    for c in range(m):
-        if chan[c, CH_ACTIVE] != 0.0:
-            active[na] = c
+    c = 0
+    for a in range(m):
+        if chan[a, CH_ACTIVE] != 0.0:
             na += 1
+            c = a
     if na == 1:
-        c = active[0]
         c0 = channel_start(chan[c, CH_JOINT])
         WR_ = 0.0
         WU = 0.0
@@ -248,43 +248,40 @@ def implicit_solve(chan, filt, state, R, scal):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    # link by link (the m rows of W_i and U_i are at hand), lower triangle only: A is
-    # symmetric and the Cholesky factorisation reads no more
-    start = np.empty(na, np.int64)
-    for a in range(na):
-        start[a] = channel_start(chan[active[a], CH_JOINT])
-    A = np.zeros((na, na), R.dtype)
-    z = np.zeros(na, R.dtype)
+    # A = sum_i W_i U_i^T, lower triangle only (A is symmetric and the Cholesky
+    # factorisation reads no more), link by link; the innermost loop runs over the
+    # channels b, independent sums the processor overlaps. A channel's rows W_ci, U_ci
+    # are zero on the links before it starts; an inactive channel's column is cleared after.
+    for a in range(m):
+        z[a] = 0.0
+        for b in range(m):
+            A[a, b] = 0.0
     for i in range(n):
-        for a in range(na):
-            if i < start[a]:
+        for a in range(m):
+            if chan[a, CH_ACTIVE] == 0.0 or i < channel_start(chan[a, CH_JOINT]):
                 continue
-            ca = active[a]
             acc = z[a]
             for k in range(13):
-                acc += filt[ca, i, WR + k] * R[i, k]
+                acc += filt[a, i, WR + k] * R[i, k]
             z[a] = acc
-            for b in range(a + 1):
-                if i < start[b]:
-                    continue
-                cb = active[b]
-                acc = A[a, b]
-                for k in range(13):
-                    acc += filt[ca, i, WR + k] * filt[cb, i, UR + k]
-                A[a, b] = acc
-    for a in range(na):
+            for k in range(13):
+                w = filt[a, i, WR + k]
+                for b in range(a + 1):
+                    A[a, b] += w * filt[b, i, UR + k]
+    for a in range(m):
         for b in range(a + 1):
+            if chan[a, CH_ACTIVE] == 0.0 or chan[b, CH_ACTIVE] == 0.0:
+                A[a, b] = 0.0
             A[a, b] *= hg
         A[a, a] += 1.0
     cholesky_solve(A, z)
     for i in range(n):
-        for a in range(na):
-            if i < start[a]:
+        for a in range(m):
+            if chan[a, CH_ACTIVE] == 0.0 or i < channel_start(chan[a, CH_JOINT]):
                 continue
             za = hg * z[a]
-            ca = active[a]
             for k in range(13):
-                state[i, TH + k] -= za * filt[ca, i, UR + k]
+                state[i, TH + k] -= za * filt[a, i, UR + k]
 
 
 @njit(cache=True, inline="always")
@@ -461,7 +458,8 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
     if is_paper_law(chan, scal):
         return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
-    work = np.empty(n * 41 + 84, q.dtype)
+    m = chan.shape[0]
+    work = np.empty(n * 41 + 84 + m * (m + 1), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -469,6 +467,8 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
         work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    A = work[41 * n + 84:41 * n + 84 + m * m].reshape((m, m))   # the implicit solve's
+    z = work[41 * n + 84 + m * m:41 * n + 84 + m * (m + 1)]     # m x m system
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -516,7 +516,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve(chan, filt, state, R, scal)
+        implicit_solve(chan, filt, state, R, A, z, scal)
     else:
         for i in range(n):
             for k in range(13):
