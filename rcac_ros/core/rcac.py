@@ -248,10 +248,9 @@ def implicit_solve(chan, filt, state, R, A, z, scal):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    # A = sum_i W_i U_i^T, lower triangle only (A is symmetric and the Cholesky
-    # factorisation reads no more), link by link; the innermost loop runs over the
-    # channels b, independent sums the processor overlaps. A channel's rows W_ci, U_ci
-    # are zero on the links before it starts; an inactive channel's column is cleared after.
+    # A = sum_i W_i U_i^T link by link (the m rows of W_i and U_i are at hand), lower
+    # triangle only: A is symmetric and the Cholesky factorisation reads no more. An
+    # inactive channel keeps a zero row and column, and a unit diagonal: z_c = 0.
     for a in range(m):
         z[a] = 0.0
         for b in range(m):
@@ -264,14 +263,15 @@ def implicit_solve(chan, filt, state, R, A, z, scal):
             for k in range(13):
                 acc += filt[a, i, WR + k] * R[i, k]
             z[a] = acc
-            for k in range(13):
-                w = filt[a, i, WR + k]
-                for b in range(a + 1):
-                    A[a, b] += w * filt[b, i, UR + k]
+            for b in range(a + 1):
+                if chan[b, CH_ACTIVE] == 0.0 or i < channel_start(chan[b, CH_JOINT]):
+                    continue
+                acc = A[a, b]
+                for k in range(13):
+                    acc += filt[a, i, WR + k] * filt[b, i, UR + k]
+                A[a, b] = acc
     for a in range(m):
         for b in range(a + 1):
-            if chan[a, CH_ACTIVE] == 0.0 or chan[b, CH_ACTIVE] == 0.0:
-                A[a, b] = 0.0
             A[a, b] *= hg
         A[a, a] += 1.0
     cholesky_solve(A, z)
