@@ -216,11 +216,11 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
 
 
 @njit(cache=True, inline="always")
-def implicit_solve(chan, filt, state, R, A, z, scal):
+def implicit_solve(chan, filt, state, R, A, z, idx, scal):
     """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
 
     ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R``; for one channel Sherman-Morrison.
-    ``A`` (m, m) and ``z`` (m) are scratch.
+    ``A`` (m, m), ``z`` and ``idx`` (m) are scratch.
     """
     n, m = R.shape[0], chan.shape[0]
     hg = scal[I_H] * scal[I_GAMMA]
@@ -256,20 +256,33 @@ def implicit_solve(chan, filt, state, R, A, z, scal):
         for b in range(m):
             A[a, b] = 0.0
     for i in range(n):
-        for a in range(m):
-            if chan[a, CH_ACTIVE] == 0.0 or i < channel_start(chan[a, CH_JOINT]):
-                continue
+        na = 0                                   # the channels that reach link i, active
+        for c in range(m):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c, CH_JOINT]):
+                idx[na] = c
+                na += 1
+        for ja in range(na):
+            a = int(idx[ja])
             acc = z[a]
             for k in range(13):
                 acc += filt[a, i, WR + k] * R[i, k]
             z[a] = acc
-            for b in range(a + 1):
-                if chan[b, CH_ACTIVE] == 0.0 or i < channel_start(chan[b, CH_JOINT]):
-                    continue
-                acc = A[a, b]
+            jb = 0
+            while jb + 2 <= ja + 1:              # two entries at once: two sums in flight
+                b0, b1 = int(idx[jb]), int(idx[jb + 1])
+                acc0, acc1 = A[a, b0], A[a, b1]
                 for k in range(13):
-                    acc += filt[a, i, WR + k] * filt[b, i, UR + k]
-                A[a, b] = acc
+                    w = filt[a, i, WR + k]
+                    acc0 += w * filt[b0, i, UR + k]
+                    acc1 += w * filt[b1, i, UR + k]
+                A[a, b0], A[a, b1] = acc0, acc1
+                jb += 2
+            if jb <= ja:
+                b0 = int(idx[jb])
+                acc0 = A[a, b0]
+                for k in range(13):
+                    acc0 += filt[a, i, WR + k] * filt[b0, i, UR + k]
+                A[a, b0] = acc0
     for a in range(m):
         for b in range(a + 1):
             A[a, b] *= hg
@@ -459,7 +472,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if is_paper_law(chan, scal):
         return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 84 + m * (m + 1), q.dtype)
+    work = np.empty(n * 41 + 84 + m * (m + 2), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -469,6 +482,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
     A = work[41 * n + 84:41 * n + 84 + m * m].reshape((m, m))   # the implicit solve's
     z = work[41 * n + 84 + m * m:41 * n + 84 + m * (m + 1)]     # m x m system
+    idx = work[41 * n + 84 + m * (m + 1):41 * n + 84 + m * (m + 2)]
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -516,7 +530,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve(chan, filt, state, R, A, z, scal)
+        implicit_solve(chan, filt, state, R, A, z, idx, scal)
     else:
         for i in range(n):
             for k in range(13):
