@@ -268,17 +268,20 @@ def implicit_solve(chan, filt, state, R, A, z, idx, scal):
                 acc += filt[a, i, WR + k] * R[i, k]
             z[a] = acc
             jb = 0
-            while jb + 2 <= ja + 1:              # two entries at once: two sums in flight
-                b0, b1 = int(idx[jb]), int(idx[jb + 1])
-                acc0, acc1 = A[a, b0], A[a, b1]
+            while jb + 4 <= ja + 1:              # four entries at once: four sums in flight
+                b0, b1, b2, b3 = int(idx[jb]), int(idx[jb + 1]), int(idx[jb + 2]), \
+                    int(idx[jb + 3])
+                acc0, acc1, acc2, acc3 = A[a, b0], A[a, b1], A[a, b2], A[a, b3]
                 for k in range(13):
                     w = filt[a, i, WR + k]
                     acc0 += w * filt[b0, i, UR + k]
                     acc1 += w * filt[b1, i, UR + k]
-                A[a, b0], A[a, b1] = acc0, acc1
-                jb += 2
-            if jb <= ja:
-                b0 = int(idx[jb])
+                    acc2 += w * filt[b2, i, UR + k]
+                    acc3 += w * filt[b3, i, UR + k]
+                A[a, b0], A[a, b1], A[a, b2], A[a, b3] = acc0, acc1, acc2, acc3
+                jb += 4
+            for j in range(jb, ja + 1):
+                b0 = int(idx[j])
                 acc0 = A[a, b0]
                 for k in range(13):
                     acc0 += filt[a, i, WR + k] * filt[b0, i, UR + k]
