@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._packing import I_ERR, KD0, LAM, PG0, TH, UR, WR
+from ._packing import I_ERR, KD0, LAM, PG0, TH
 from rcac_ros.errors import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
@@ -93,20 +93,6 @@ def gain_step(row, p_diag, st, grad, h, R, i):
             for c in range(13):
                 acc += row[PG0 + 13 * a + c] * grad[c]
             R[i, a] = st[TH + a] - h * acc
-
-
-@njit(cache=True, inline="always")
-def gain_apply(row, p_diag, filt, c, i):
-    """``U_ci = P_i W_ci^T`` with the fixed gain ``P_i``."""
-    if p_diag:
-        for a in range(13):
-            filt[c, i, UR + a] = row[PG0 + 14 * a] * filt[c, i, WR + a]
-    else:
-        for a in range(13):
-            acc = 0.0
-            for k in range(13):
-                acc += row[PG0 + 13 * a + k] * filt[c, i, WR + k]
-            filt[c, i, UR + a] = acc
 
 
 @njit(cache=True)

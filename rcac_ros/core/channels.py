@@ -36,11 +36,9 @@ Discretisation and its error (with the true parameters, E_c measures only this):
 import numpy as np
 from numba import njit
 
-from ._packing import (CH_A, CH_AD, CH_JOINT, CH_Y, I_FB0, I_FE, I_H, PHF, PHP, POWER, PSF,
-                       PSP, QPREV, TAU, TH, WR)
+from ._packing import CH_JOINT, CH_Y, I_FB0, I_FE, I_H, POWER, QPREV, TAU
 from rcac_ros.errors import GainError
 from .regressor import bias_terms, momentum_terms
-from .spatial import propagate
 
 #: The value of ``channels`` that gives every joint.
 ALL = "all"
@@ -111,42 +109,13 @@ def first_link(code):
     return 0 if code == POWER else int(code)
 
 
-@njit(cache=True, inline="always")
-def channel_axis(chan, c, i, C, px, py, pz, qd):
-    """Propagate joint channel c's ``a_j``, ``adot_j`` to link i; False if it has not begun.
-
-    ``a_k = z6``, ``adot_k = 0`` at the channel's joint k, then ``a_j = T_j a_j-1``,
-    ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (doc/design.md §4). Kept in ``chan[c]``.
-    """
-    k = int(chan[c, CH_JOINT])
-    if i < k:
-        return False
-    if i == k:
-        for r in range(6):
-            chan[c, CH_A + r] = 0.0
-            chan[c, CH_AD + r] = 0.0
-        chan[c, CH_A + 5] = 1.0
-        return True
-    A = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2], chan[c, CH_A + 3],
-         chan[c, CH_A + 4], chan[c, CH_A + 5])
-    Ad = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2], chan[c, CH_AD + 3],
-          chan[c, CH_AD + 4], chan[c, CH_AD + 5])
-    A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
-    for r in range(6):
-        chan[c, CH_A + r] = A[r]
-        chan[c, CH_AD + r] = Ad[r]
-    return True
-
-
-@njit(cache=True, inline="always")
-def joint_terms(chan, c, V, g):
-    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22),
-    as two 13-tuples."""
+@njit(cache=True)
+def axis_terms(A, Ad, V, g):
+    """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22) for
+    the axis ``A = a_j``, ``Ad = adot_j`` (6-tuples), as two 13-tuples."""
     vx, vy, vz, wx, wy, wz = V
-    a0, a1, a2, a3, a4, a5 = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2],
-                              chan[c, CH_A + 3], chan[c, CH_A + 4], chan[c, CH_A + 5])
-    b0, b1, b2, b3, b4, b5 = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
-                              chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+    a0, a1, a2, a3, a4, a5 = A
+    b0, b1, b2, b3, b4, b5 = Ad
     phi = momentum_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz)
     d = momentum_terms(b0, b1, b2, b3, b4, b5, vx, vy, vz, wx, wy, wz)
     b = bias_terms(a0, a1, a2, a3, a4, a5, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
@@ -171,34 +140,6 @@ def power_terms(V, g):
     psi = (-(vx * gx + vy * gy + vz * gz), wy * gz - wz * gy, wz * gx - wx * gz,
            wx * gy - wy * gx, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     return phi, psi
-
-
-@njit(cache=True, inline="always")
-def filter_rows(filt, c, i, phi, psi, first, coef, st, E):
-    """Filter link i's rows of channel c (eq 23) and return ``E + W_ci theta_hat_i``.
-
-    ``phi``, ``psi`` are 13-tuples, ``coef`` = (exp(-lambda h), b0, b1, lambda), ``st``
-    link i's state row. ``phi^f`` and ``psi^f`` use a first-order hold on the samples; they
-    start at ``phi(0)`` and 0 so that E is exact from the first step. Writes ``W_ci``.
-    """
-    fe, fb0, fb1, lam = coef
-    for k in range(13):
-        ph = phi[k]
-        ps = psi[k]
-        if first:
-            filt[c, i, PHF + k] = ph
-            filt[c, i, PSF + k] = 0.0
-        else:
-            php = filt[c, i, PHP + k]
-            psp = filt[c, i, PSP + k]
-            filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (ph - php)
-            filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
-        filt[c, i, PHP + k] = ph
-        filt[c, i, PSP + k] = ps
-        w = lam * (ph - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
-        filt[c, i, WR + k] = w
-        E += w * st[TH + k]
-    return E
 
 
 @njit(cache=True, inline="always")

@@ -36,33 +36,35 @@ import numpy as np
 from numba import njit
 
 from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_wrench,
-                      gain_apply, gain_step, input_error, reference_motion)
-from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
-                       CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E,
-                       I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA, I_H,
-                       I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING, I_Y,
-                       LAM, PMAX, POWER, QPREV, S0, SQ, TAU, TH, THI, TLO, UR, WR, Gains, block,
-                       new_data)
+                      gain_step, input_error, reference_motion)
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_A, CH_ACTIVE, CH_AD,
+                       CH_E, CH_JOINT, CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E,
+                       I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA,
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING,
+                       I_Y, KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP, QPREV, S0, SQ, TAU,
+                       TH, THI, TLO, UR, WR, Gains, block, new_data)
 from ._validate import as_array, scalar
-from .channels import (channel_axis, channel_codes, filter_rows, filtered_output, joint_terms,
-                       parse_channels, power_terms)
+from .channels import (axis_terms, channel_codes, filtered_output, parse_channels,
+                       power_terms)
 from rcac_ros.errors import GainError
 from .least_squares import (apply_factored, bounded_gain_forgetting, initial_factor,
                             potter_update)
-from .regressor import reference_wrench, regressor_row
-from .spatial import P0, transform_force_T
+from .regressor import reference_wrench, regressor_row, regressor_terms
+from .spatial import P0, propagate, transform_force_T
 
 RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
                   f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
 UPDATES = ("implicit", "explicit")
+AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
+AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
 
 @njit(cache=True, inline="always")
-def channel_start(chan, c):
-    """The first link (0-based) channel c reaches."""
-    return 0 if chan[c, CH_JOINT] == POWER else int(chan[c, CH_JOINT])
+def channel_start(code):
+    """The first link (0-based) the channel of ``CH_JOINT`` code ``code`` reaches."""
+    return 0 if code == POWER else int(code)
 
 
 @njit(cache=True, inline="always")
@@ -75,15 +77,53 @@ def start_channels(chan, state, scal, q, first):
 
 @njit(cache=True, inline="always")
 def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
-    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i``."""
+    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i`` (eqs 22-23).
+
+    A joint channel k carries its axis in ``chan[c]``: ``a_k = z6``, ``adot_k = 0``, then
+    ``a_j = T_j a_j-1``, ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (doc/design.md §4). The
+    filters use a first-order hold on the samples and start at ``phi(0)`` and 0, so that E
+    is exact from the first step. The channel loop calls no helper taking an array (each
+    would cost atomic reference counts per channel and link): it updates them in place.
+    """
+    fe, fb0, fb1, lam = coef
+    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
     for c in range(chan.shape[0]):
-        if chan[c, CH_JOINT] == POWER:
+        code = chan[c, CH_JOINT]
+        if code == POWER:
             phi, psi = power_terms(V, g)
-        elif channel_axis(chan, c, i, C, row[P0], row[P0 + 1], row[P0 + 2], qd):
-            phi, psi = joint_terms(chan, c, V, g)
-        else:
+        elif i < code:
             continue
-        chan[c, CH_E] = filter_rows(filt, c, i, phi, psi, first, coef, st, chan[c, CH_E])
+        else:
+            if i == code:
+                A, Ad = AXIS_Z, AXIS_0
+            else:
+                A = (chan[c, CH_A], chan[c, CH_A + 1], chan[c, CH_A + 2], chan[c, CH_A + 3],
+                     chan[c, CH_A + 4], chan[c, CH_A + 5])
+                Ad = (chan[c, CH_AD], chan[c, CH_AD + 1], chan[c, CH_AD + 2],
+                      chan[c, CH_AD + 3], chan[c, CH_AD + 4], chan[c, CH_AD + 5])
+                A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
+            for r in range(6):
+                chan[c, CH_A + r] = A[r]
+                chan[c, CH_AD + r] = Ad[r]
+            phi, psi = axis_terms(A, Ad, V, g)
+        E = chan[c, CH_E]
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[c, i, PHF + k] = ph
+                filt[c, i, PSF + k] = 0.0
+            else:
+                php = filt[c, i, PHP + k]
+                psp = filt[c, i, PSP + k]
+                filt[c, i, PHF + k] = fe * filt[c, i, PHF + k] + fb0 * php + fb1 * (ph - php)
+                filt[c, i, PSF + k] = fe * filt[c, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[c, i, PHP + k] = ph
+            filt[c, i, PSP + k] = ps
+            w = lam * (ph - filt[c, i, PHF + k]) + filt[c, i, PSF + k]
+            filt[c, i, WR + k] = w
+            E += w * st[TH + k]
+        chan[c, CH_E] = E
 
 
 @njit(cache=True, inline="always")
@@ -114,7 +154,7 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
     """Add the prediction term to ``grad``: ``- gamma W_ci^T y_c`` (implicit: the rest is
     solved) or ``+ gamma W_ci^T E_c`` (explicit), over the active channels."""
     for c in range(chan.shape[0]):
-        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
         if implicit:
             y = chan[c, CH_Y]
@@ -155,10 +195,18 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
     if not implicit:
         return
     for c in range(chan.shape[0]):
-        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan, c):
+        if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if mode == ADAPT_GRADIENT:
-            gain_apply(row, p_diag, filt, c, i)
+        if mode == ADAPT_GRADIENT:              # U_ci = P_i W_ci^T, fixed P_i
+            if p_diag:
+                for a in range(13):
+                    filt[c, i, UR + a] = row[PG0 + 14 * a] * filt[c, i, WR + a]
+            else:
+                for a in range(13):
+                    acc = 0.0
+                    for k in range(13):
+                        acc += row[PG0 + 13 * a + k] * filt[c, i, WR + k]
+                    filt[c, i, UR + a] = acc
         else:
             for k in range(13):
                 grad[k] = filt[c, i, WR + k]
@@ -168,22 +216,22 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
 
 
 @njit(cache=True, inline="always")
-def implicit_solve(chan, filt, state, R, scal):
+def implicit_solve(chan, filt, state, R, A, z, idx, scal):
     """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
 
     ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R``; for one channel Sherman-Morrison.
+    ``A`` (m, m), ``z`` and ``idx`` (m) are scratch.
     """
     n, m = R.shape[0], chan.shape[0]
     hg = scal[I_H] * scal[I_GAMMA]
-    active = np.empty(m, np.int64)
     na = 0
-    for c in range(m):
-        if chan[c, CH_ACTIVE] != 0.0:
-            active[na] = c
+    c = 0
+    for a in range(m):
+        if chan[a, CH_ACTIVE] != 0.0:
             na += 1
+            c = a
     if na == 1:
-        c = active[0]
-        c0 = channel_start(chan, c)
+        c0 = channel_start(chan[c, CH_JOINT])
         WR_ = 0.0
         WU = 0.0
         for i in range(c0, n):
@@ -200,43 +248,56 @@ def implicit_solve(chan, filt, state, R, scal):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    # link by link (the m rows of W_i and U_i are at hand), lower triangle only: A is
-    # symmetric and the Cholesky factorisation reads no more
-    start = np.empty(na, np.int64)
-    for a in range(na):
-        start[a] = channel_start(chan, active[a])
-    A = np.zeros((na, na), R.dtype)
-    z = np.zeros(na, R.dtype)
+    # A = sum_i W_i U_i^T link by link (the m rows of W_i and U_i are at hand), lower
+    # triangle only: A is symmetric and the Cholesky factorisation reads no more. An
+    # inactive channel keeps a zero row and column, and a unit diagonal: z_c = 0.
+    for a in range(m):
+        z[a] = 0.0
+        for b in range(m):
+            A[a, b] = 0.0
     for i in range(n):
-        for a in range(na):
-            if i < start[a]:
-                continue
-            ca = active[a]
+        na = 0                                   # the channels that reach link i, active
+        for c in range(m):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c, CH_JOINT]):
+                idx[na] = c
+                na += 1
+        for ja in range(na):
+            a = int(idx[ja])
             acc = z[a]
             for k in range(13):
-                acc += filt[ca, i, WR + k] * R[i, k]
+                acc += filt[a, i, WR + k] * R[i, k]
             z[a] = acc
-            for b in range(a + 1):
-                if i < start[b]:
-                    continue
-                cb = active[b]
-                acc = A[a, b]
+            jb = 0
+            while jb + 4 <= ja + 1:              # four entries at once: four sums in flight
+                b0, b1, b2, b3 = int(idx[jb]), int(idx[jb + 1]), int(idx[jb + 2]), \
+                    int(idx[jb + 3])
+                acc0, acc1, acc2, acc3 = A[a, b0], A[a, b1], A[a, b2], A[a, b3]
                 for k in range(13):
-                    acc += filt[ca, i, WR + k] * filt[cb, i, UR + k]
-                A[a, b] = acc
-    for a in range(na):
+                    w = filt[a, i, WR + k]
+                    acc0 += w * filt[b0, i, UR + k]
+                    acc1 += w * filt[b1, i, UR + k]
+                    acc2 += w * filt[b2, i, UR + k]
+                    acc3 += w * filt[b3, i, UR + k]
+                A[a, b0], A[a, b1], A[a, b2], A[a, b3] = acc0, acc1, acc2, acc3
+                jb += 4
+            for j in range(jb, ja + 1):
+                b0 = int(idx[j])
+                acc0 = A[a, b0]
+                for k in range(13):
+                    acc0 += filt[a, i, WR + k] * filt[b0, i, UR + k]
+                A[a, b0] = acc0
+    for a in range(m):
         for b in range(a + 1):
             A[a, b] *= hg
         A[a, a] += 1.0
     cholesky_solve(A, z)
     for i in range(n):
-        for a in range(na):
-            if i < start[a]:
+        for a in range(m):
+            if chan[a, CH_ACTIVE] == 0.0 or i < channel_start(chan[a, CH_JOINT]):
                 continue
             za = hg * z[a]
-            ca = active[a]
             for k in range(13):
-                state[i, TH + k] -= za * filt[ca, i, UR + k]
+                state[i, TH + k] -= za * filt[a, i, UR + k]
 
 
 @njit(cache=True, inline="always")
@@ -247,7 +308,7 @@ def update_least_squares(chan, filt, const, state, scal, f, Sf):
     for i in range(state.shape[0]):
         S = state[i, SQ:SQ + 169]
         for c in range(chan.shape[0]):
-            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan, c):
+            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c, CH_JOINT]):
                 potter_update(S, filt[c, i, WR:WR + 13], h, f, Sf)
         bounded_gain_forgetting(S, h, scal[I_FORGET], const[i, PMAX])
 
@@ -258,6 +319,143 @@ def project(const, state):
     for i in range(state.shape[0]):
         for k in range(13):
             state[i, TH + k] = min(max(state[i, TH + k], const[i, TLO + k]), const[i, THI + k])
+
+
+@njit(cache=True, inline="always")
+def is_paper_law(chan, scal):
+    """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
+    update, no dead zone, no projection, adapting. :func:`paper_step` then runs it."""
+    return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
+            and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0)
+
+
+@njit(cache=True)
+def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+    """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+
+    The same equations, in the same floating-point order, as the general kernel with
+    ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
+    are computed in place, with no per-link helper taking arrays (each such argument
+    costs an atomic reference count in the loop). One allocation besides ``tau``.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    work = np.empty(n * 41 + 6, q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
+    tau = np.empty(n, q.dtype)
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    kd_diag = scal[I_KD_DIAG] != 0.0
+    p_diag = scal[I_P_DIAG] != 0.0
+    y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
+    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    E = 0.0
+    for i in range(n):
+        row = data[i]                                  # link i: constants, then state
+        qdi = qd[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
+        if i == 0:
+            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            A, Ad = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qdi, A, Ad, 0.0, 0.0)
+        svx, svy, svz, swx, swy, swz = vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz
+        state[i, S0], state[i, S0 + 1], state[i, S0 + 2] = svx, svy, svz
+        state[i, S0 + 3], state[i, S0 + 4], state[i, S0 + 5] = swx, swy, swz
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(row, CONST_COLS + TH, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        gr = regressor_terms(svx, svy, svz, swx, swy, swz, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(13):
+            G[i, k] = gr[k]
+        phi, psi = axis_terms(A, Ad, V, g)                           # eq 22
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[0, i, PHF + k] = ph
+                filt[0, i, PSF + k] = 0.0
+            else:
+                php = filt[0, i, PHP + k]
+                psp = filt[0, i, PSP + k]
+                filt[0, i, PHF + k] = fe * filt[0, i, PHF + k] + fb0 * php + fb1 * (ph - php)
+                filt[0, i, PSF + k] = fe * filt[0, i, PSF + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHP + k] = ph
+            filt[0, i, PSP + k] = ps
+            w = lam * (ph - filt[0, i, PHF + k]) + filt[0, i, PSF + k]     # eq 23
+            filt[0, i, WR + k] = w
+            E += w * state[i, TH + k]
+    E -= y
+    chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
+    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        if i < n - 1:
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
+                F[0], F[1], F[2], F[3], F[4], F[5])
+        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
+        for r in range(6):
+            acc = Fs[i, r]
+            if kd_diag:
+                acc -= const[i, KD0 + 7 * r] * state[i, S0 + r]
+            else:
+                for k in range(6):
+                    acc -= const[i, KD0 + 6 * r + k] * state[i, S0 + k]
+            F[r] += acc
+        tau[i] = F[5]                                                        # eq 20
+        # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
+        for k in range(13):
+            G[i, k] -= gamma * filt[0, i, WR + k] * y
+        if p_diag:
+            for a in range(13):
+                R[i, a] = state[i, TH + a] - h * const[i, PG0 + 14 * a] * G[i, a]
+                filt[0, i, UR + a] = const[i, PG0 + 14 * a] * filt[0, i, WR + a]
+        else:
+            for a in range(13):
+                acc_r = 0.0
+                acc_u = 0.0
+                for c in range(13):
+                    acc_r += const[i, PG0 + 13 * a + c] * G[i, c]
+                    acc_u += const[i, PG0 + 13 * a + c] * filt[0, i, WR + c]
+                R[i, a] = state[i, TH + a] - h * acc_r
+                filt[0, i, UR + a] = acc_u
+    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
+    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
+    WR_ = 0.0
+    WU = 0.0
+    for i in range(n):
+        for k in range(13):
+            WR_ += filt[0, i, WR + k] * R[i, k]
+            WU += filt[0, i, WR + k] * filt[0, i, UR + k]
+    kc = h * gamma * WR_ / (1.0 + h * gamma * WU)
+    for i in range(n):
+        for k in range(13):
+            state[i, TH + k] = R[i, k] - kc * filt[0, i, UR + k]
+        state[i, TAU] = tau[i]
+        state[i, QPREV] = q[i]
+    scal[I_K] += 1.0
+    return tau
 
 
 @njit(RCAC_SIGNATURE, cache=True)
@@ -274,7 +472,10 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    work = np.empty(n * 41 + 84, q.dtype)
+    if is_paper_law(chan, scal):
+        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
+    m = chan.shape[0]
+    work = np.empty(n * 41 + 84 + m * (m + 2), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -282,6 +483,9 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
         work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    A = work[41 * n + 84:41 * n + 84 + m * m].reshape((m, m))   # the implicit solve's
+    z = work[41 * n + 84 + m * m:41 * n + 84 + m * (m + 1)]     # m x m system
+    idx = work[41 * n + 84 + m * (m + 1):41 * n + 84 + m * (m + 2)]
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -329,7 +533,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve(chan, filt, state, R, scal)
+        implicit_solve(chan, filt, state, R, A, z, idx, scal)
     else:
         for i in range(n):
             for k in range(13):

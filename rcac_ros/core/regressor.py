@@ -275,9 +275,9 @@ def reference_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wr
 
 
 @njit(cache=True)
-def regressor_row(out, svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
-                  vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz):
-    """``s^T Y(Vdot_r, V_r, w, g)`` (1 x 13, eq 24's ``Y_ri^T s_i``) without forming Y.
+def regressor_terms(svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
+                    vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz):
+    """``s^T Y(Vdot_r, V_r, w, g)`` (13-tuple, eq 24's ``Y_ri^T s_i``) without forming Y.
 
     The gradient in theta of ``s^T`` (the wrench of :func:`reference_wrench`).
     """
@@ -289,18 +289,25 @@ def regressor_row(out, svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, al
     cz = wx * wry - wy * wrx
     ww = wx * wrx + wy * wry + wz * wrz
     sw_r = svx * wrx + svy * wry + svz * wrz
-    out[0] = svx * ax + svy * ay + svz * az
     # h . (s_v x alpha_r - (w . w_r) s_v + (s_v . w_r) w + a x s_w)
-    out[1] = (svy * alz - svz * aly) - ww * svx + sw_r * wx + (ay * swz - az * swy)
-    out[2] = (svz * alx - svx * alz) - ww * svy + sw_r * wy + (az * swx - ax * swz)
-    out[3] = (svx * aly - svy * alx) - ww * svz + sw_r * wz + (ax * swy - ay * swx)
     # s_w . I_o (alpha_r + c) + (s_w x w) . I_o w_r - (t5 + t6 + t7) s_w . c
     a = inertia_row(swx, swy, swz, alx + cx, aly + cy, alz + cz)
     b = inertia_row(swy * wz - swz * wy, swz * wx - swx * wz, swx * wy - swy * wx,
                     wrx, wry, wrz)
     sc = swx * cx + swy * cy + swz * cz
-    for k in range(9):
-        out[4 + k] = a[k] + b[k]
-    out[4] -= sc
-    out[5] -= sc
-    out[6] -= sc
+    return (svx * ax + svy * ay + svz * az,
+            (svy * alz - svz * aly) - ww * svx + sw_r * wx + (ay * swz - az * swy),
+            (svz * alx - svx * alz) - ww * svy + sw_r * wy + (az * swx - ax * swz),
+            (svx * aly - svy * alx) - ww * svz + sw_r * wz + (ax * swy - ay * swx),
+            a[0] + b[0] - sc, a[1] + b[1] - sc, a[2] + b[2] - sc, a[3] + b[3], a[4] + b[4],
+            a[5] + b[5], a[6] + b[6], a[7] + b[7], a[8] + b[8])
+
+
+@njit(cache=True)
+def regressor_row(out, svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
+                  vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz):
+    """:func:`regressor_terms` written into ``out`` (13)."""
+    t = regressor_terms(svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
+                        vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz)
+    for k in range(13):
+        out[k] = t[k]
