@@ -1,12 +1,11 @@
 """The managed controller, driven through its real lifecycle services from another process."""
 
 import os
-import subprocess
-import sys
 
 import numpy as np
 
-from test_nodes_support import DEEP, JOINTS, PAPER_Q0, Probe, ros_context, spin_until
+from test_nodes_support import (DEEP, H_NS, JOINTS, PAPER_Q0, Probe, ros_context, spin_until,
+                                start, stop)
 
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
@@ -15,31 +14,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NODE = "/rcac_controller"
-H_NS = 2_000_000
 #: what robot_state_publisher offers on /robot_description
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def start(module, *params):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
-    for p in params:
-        cmd += ["-p", p]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=20.0):
-    if proc.poll() is None:
-        proc.send_signal(2)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 class Lifecycle:
