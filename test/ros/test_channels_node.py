@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from test_nodes_support import (CONFIG, DEEP, H_NS, node_cmd, PAPER_Q0, Probe, ROOT, ros_context,
-                                ros_domain, spin_until, start, stop)
+                                ros_domain, run_to_end, spin_until, start)
 
 from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -62,13 +62,8 @@ def test_all_channels_publish_n_prediction_errors_equal_to_the_offline_run():
                           timeout=60.0)
         sim = start("simulator_node", f"duration:={DURATION}", "min_subscribers:=1",
                     params_file=os.path.join(CONFIG, "simulator.yaml"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            assert spin_until(ex, lambda: len(every) >= steps + 1 and len(first) >= steps + 1,
-                              timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            ctrl_code, ctrl_out = stop(ctrl)
+        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
+            ex, sim, ctrl, lambda: len(every) >= steps + 1 and len(first) >= steps + 1)
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
     assert "lockstep misses 0" in sim_out, sim_out     # no effort held: the same loop

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from test_nodes_support import (CONFIG, DEEP, JOINTS, node_cmd, NS, PAPER_Q0, Probe, ROOT,
-                                ros_context, ros_domain, spin_until, start, stop)
+                                ros_context, ros_domain, run_to_end, spin_until, start, stop)
 
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -63,13 +63,8 @@ def test_lockstep_matches_the_offline_experiment():
                     # a process stalled 0.5 s on a loaded machine is not a lost
                     # effort: wait long enough that only a real loss is a miss
                     "lockstep_timeout:=5.0", params_file=os.path.join(CONFIG, "simulator.yaml"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            # the controller answers the last state too: wait for its messages to drain
-            assert spin_until(ex, lambda: len(theta) >= steps + 1, timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            ctrl_code, ctrl_out = stop(ctrl)
+        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
+            ex, sim, ctrl, lambda: len(theta) >= steps + 1)
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
     # an effort for every state: no lockstep miss, none late
@@ -113,12 +108,7 @@ def test_positions_only_states_still_track():
         matched(ex, [sub])
         sim = start("simulator_node", "duration:=1.0", "publish_velocity:=false",
                     "min_subscribers:=2", params_file=os.path.join(CONFIG, "simulator.yaml"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            assert spin_until(ex, lambda: len(track) >= steps + 1, timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            stop(ctrl)
+        (sim_code, sim_out), _ = run_to_end(ex, sim, ctrl, lambda: len(track) >= steps + 1)
     assert sim_code == 0, sim_out
     assert all(len(m.velocity) == 0 for m in probe.states)
     worst = np.max(np.abs(np.array(track)))

@@ -121,6 +121,24 @@ def stop(proc, timeout=20.0):
     return proc.returncode, out
 
 
+def run_to_end(executor, sim, ctrl, drained):
+    """Spin until the simulator process ``sim`` has ended and ``drained()`` holds (the
+    controller answers the last state too), then stop both processes (also when a wait fails).
+
+    Returns
+    -------
+    tuple
+        ``((sim exit code, output), (controller exit code, output))``.
+    """
+    try:
+        assert spin_until(executor, lambda: sim.poll() is not None, timeout=90.0)
+        assert spin_until(executor, drained, timeout=10.0)
+    finally:
+        sim_result = stop(sim)
+        ctrl_result = stop(ctrl)
+    return sim_result, ctrl_result
+
+
 def spin_until(executor, cond, timeout=20.0):
     """Spin until ``cond()`` is true; return whether it became true within ``timeout`` s.
 
