@@ -24,3 +24,38 @@ class GainError(RcacError, ValueError):
 
 class InputError(RcacError, ValueError):
     """A run-time input (state, desired motion, torque) has a wrong shape or is not finite."""
+
+
+def read_yaml(path, label=None):
+    """Parse the YAML file at ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    label : str, optional
+        How the message names the file (default: the path).
+
+    Returns
+    -------
+    object
+        The parsed document (None for an empty file).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``label``: the file cannot be read, or is not valid YAML (with the
+        line and column of the error where YAML gives them).
+    """
+    import yaml      # here: importing the exceptions stays light
+    label = path if label is None else label
+    try:
+        with open(path, encoding="utf-8") as f:
+            return yaml.safe_load(f)
+    except OSError as err:
+        raise ConfigError(f"{label}: cannot read ({err.strerror})") from None
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
+        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+        raise ConfigError(f"{label}: not valid YAML{where} ({problem})") from None

@@ -130,6 +130,12 @@ def _effort_limit():
                  "model's)", lo=0.0, hi=math.inf, strict=True, per_joint=True)
 
 
+def _constraint(name, default, text):
+    """``constraints.<name>``: a default tolerance of FollowJointTrajectory goals, >= 0."""
+    return Param(f"constraints.{name}", "double", default, f"FollowJointTrajectory: {text}",
+                 lo=0.0, hi=BIG)
+
+
 def _diagnostics_period():
     return Param("diagnostics_period", "double", 1.0, "diagnostics period, s (steady clock)",
                  lo=0.0, hi=3600.0, strict=True)
@@ -213,18 +219,11 @@ CONTROLLER = _robot("controller") + (
     Param("monitor_decimation", "integer", 1, "publish estimates and errors every k-th step",
           lo=1, hi=1_000_000, read_only=False),
     # the defaults of FollowJointTrajectory goals (JTC's constraints, one value for all joints)
-    Param("constraints.trajectory", "double", 0.0,
-          "FollowJointTrajectory: default path position tolerance, rad (0: not checked)",
-          lo=0.0, hi=BIG),
-    Param("constraints.goal", "double", 0.0,
-          "FollowJointTrajectory: default goal position tolerance, rad (0: not checked)",
-          lo=0.0, hi=BIG),
-    Param("constraints.stopped_velocity_tolerance", "double", 0.01,
-          "FollowJointTrajectory: default goal velocity tolerance, rad/s (0: not checked)",
-          lo=0.0, hi=BIG),
-    Param("constraints.goal_time", "double", 0.0,
-          "FollowJointTrajectory: default goal_time_tolerance, s (0: no time limit)",
-          lo=0.0, hi=BIG),
+    _constraint("trajectory", 0.0, "default path position tolerance, rad (0: not checked)"),
+    _constraint("goal", 0.0, "default goal position tolerance, rad (0: not checked)"),
+    _constraint("stopped_velocity_tolerance", 0.01,
+                "default goal velocity tolerance, rad/s (0: not checked)"),
+    _constraint("goal_time", 0.0, "default goal_time_tolerance, s (0: no time limit)"),
     Param("initial_estimates", "string", "zero",
           "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters) or the "
           "path of a file written by ~/save_estimates"),

@@ -15,9 +15,8 @@ import math
 import os
 
 import numpy as np
-import yaml
 
-from rcac_ros.errors import ConfigError, ModelError
+from rcac_ros.errors import ConfigError, ModelError, read_yaml
 from ._validate import as_array, joint_values
 from .spatial import pack_kinematics
 
@@ -199,14 +198,7 @@ class RobotModel:
         ModelError
             If the values are not physically valid.
         """
-        try:
-            with open(path, encoding="utf-8") as f:
-                doc = yaml.safe_load(f)
-        except OSError as err:
-            raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
-        except yaml.YAMLError as err:
-            raise ConfigError(f"{path}: not valid YAML ({err})") from None
-        return cls.from_dict(doc, source=os.fspath(path))
+        return cls.from_dict(read_yaml(path), source=os.fspath(path))
 
     @classmethod
     def from_dict(cls, doc, source="model"):

@@ -10,9 +10,7 @@
 
 import difflib
 
-import yaml
-
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import ConfigError, read_yaml
 
 #: parameters every rclpy node declares itself
 BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
@@ -32,16 +30,7 @@ def load_params_file(path):
         One line naming the file, and the line and column of a YAML error, or the first
         entry that is not ``NODE: {ros__parameters: {...}}``.
     """
-    try:
-        with open(path, encoding="utf-8") as f:
-            data = yaml.safe_load(f)
-    except OSError as err:
-        raise ConfigError(f"params file {path}: {err.strerror}") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" line {mark.line + 1} column {mark.column + 1}:" if mark else ""
-        problem = getattr(err, "problem", None) or str(err).splitlines()[0]
-        raise ConfigError(f"params file {path}:{where} malformed YAML ({problem})") from None
+    data = read_yaml(path, f"params file {path}")
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -32,11 +32,10 @@ import math
 import time
 
 import numpy as np
-import yaml
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
 from rcac_ros.tools.payload_demo import GAINS as PANDA_GAINS
@@ -277,17 +276,7 @@ def validate(doc, source="campaign"):
 
 def load(path):
     """Read and validate a campaign file (ConfigError naming the key on any problem)."""
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = yaml.safe_load(f)
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read ({err.strerror})") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where} "
-                          f"({getattr(err, 'problem', None) or err})") from None
-    return validate(doc, str(path))
+    return validate(read_yaml(path), str(path))
 
 
 def with_overrides(campaign, samples=None, duration=None):

@@ -172,7 +172,7 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     from rclpy.node import Node
 
     from rcac_ros.tools.launch import init_context
-    from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed
+    from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed, shut_down
 
     h = 1.0 / rate
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
@@ -261,12 +261,7 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
                 flood.wait()
             if relay is not None:
                 relay.close()
-            for c in reversed(children):
-                c.stop()
-            if executor is not None:
-                executor.shutdown()
-            if ctx is not None:
-                ctx.try_shutdown()
+            shut_down(children, executor, ctx)
     src = np.array([e[0] for e in probe.efforts], dtype=np.int64)
     gaps = np.diff(src) * 1e-6 if src.size > 1 else np.array([np.inf])
     track = np.array([e for e in probe.tracking]).reshape(-1, 2)

@@ -185,3 +185,27 @@ def init_context(domain_id=None):
     kwargs = {} if domain_id is None else {"domain_id": int(domain_id)}
     rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO, **kwargs)
     return ctx
+
+
+def shut_down(children, executor=None, ctx=None):
+    """Stop ``children`` (the last started first), then the executor and the context.
+
+    Parameters
+    ----------
+    children : list of Child
+        The node processes.
+    executor : rclpy.executors.Executor, optional
+    ctx : rclpy.context.Context, optional
+        Either may be None (start-up failed before it was made).
+
+    Returns
+    -------
+    dict
+        ``{child name: exit code}``.
+    """
+    codes = {c.name: c.stop() for c in reversed(children)}
+    if executor is not None:
+        executor.shutdown()
+    if ctx is not None:
+        ctx.try_shutdown()
+    return codes

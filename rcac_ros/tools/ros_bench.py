@@ -30,7 +30,7 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
-    StopFlag
+    shut_down, StopFlag
 from rcac_ros.tools.metrics import percentiles
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
@@ -279,12 +279,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
             t_diag = time.monotonic()
             spin_until(lambda: time.monotonic() - t_diag > 1.2, 5.0, "at the end")
         finally:
-            for c in reversed(children):
-                c.stop()
-            if executor is not None:
-                executor.shutdown()
-            if ctx is not None:
-                ctx.try_shutdown()
+            shut_down(children, executor, ctx)
             stop.restore()
     result = analyse(probe, window, rate)
     result["controller_mode"] = "timer" if controller_mode == "timer" else "on_state"

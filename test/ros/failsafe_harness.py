@@ -5,68 +5,26 @@ replies are recorded with their DDS source stamps (the sender's clock, not the p
 """
 
 import contextlib
-import math
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 
 import numpy as np
-import pytest
 
-rclpy = pytest.importorskip("rclpy")
+from test_nodes_support import (DEEP, H_NS, JOINTS, node_cmd, NS, PAPER_Q0, QOS,  # noqa: F401
+                                ROOT, ros_domain, ROSOUT, stamp, start, stop)
 
-from builtin_interfaces.msg import Time as TimeMsg  # noqa: E402
+import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa
 from rclpy.serialization import deserialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-NS = 1_000_000_000
-H_NS = 2_000_000
-PAPER_Q0 = np.array([0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 3,
-                     math.pi / 2, 0.3])
-JOINTS = [f"joint{i}" for i in range(1, 8)]
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                 reliability=ReliabilityPolicy.RELIABLE)
-DEEP = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5000,
-                  reliability=ReliabilityPolicy.RELIABLE)
-ROSOUT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                    reliability=ReliabilityPolicy.RELIABLE,
-                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TRAJECTORY = "/rcac_controller/joint_trajectory"
-
-
-def stamp(ns):
-    """Integer nanoseconds as a builtin_interfaces/Time."""
-    return TimeMsg(sec=ns // NS, nanosec=ns % NS)
-
-
-@contextlib.contextmanager
-def ros_domain():
-    """A unique ROS_DOMAIN_ID and localhost-only discovery for the block (and children)."""
-    dc = pytest.importorskip("domain_coordinator")
-    saved = {k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
-    with dc.domain_id() as did:
-        os.environ["ROS_DOMAIN_ID"] = str(did)
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        try:
-            yield did
-        finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
 
 
 class Probe(Node):
@@ -179,34 +137,6 @@ def wait(cond, timeout=20.0, step=0.005):
             return True
         time.sleep(step)
     return cond()
-
-
-def node_cmd(module, *overrides, params_file=None):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
-    if params_file is not None:
-        cmd += ["--params-file", str(params_file)]
-    for o in overrides:
-        cmd += ["-p", o]
-    return cmd
-
-
-def start(module, *overrides, params_file=None):
-    """Start a node process (output piped)."""
-    return subprocess.Popen(node_cmd(module, *overrides, params_file=params_file),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=10.0):
-    """SIGINT, then wait; return ``(exit code, output)``."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 @contextlib.contextmanager

@@ -3,12 +3,12 @@ diagnostics, against an offline core run of the same closed loop."""
 
 import os
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from test_nodes_support import DEEP, PAPER_Q0, Probe, ros_context, ros_domain, spin_until
+from test_nodes_support import (CONFIG, DEEP, H_NS, node_cmd, PAPER_Q0, Probe, ROOT, ros_context,
+                                ros_domain, run_to_end, spin_until, start)
 
 from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -21,35 +21,8 @@ from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-CONFIG = os.path.join(ROOT, "config")
 H = 0.002
-H_NS = 2_000_000
 DURATION = 1.0
-
-
-def node_cmd(module, *overrides):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args", "--params-file",
-           os.path.join(CONFIG, module.split("_")[0] + ".yaml")]
-    for o in overrides:
-        cmd += ["-p", o]
-    return cmd
-
-
-def start(cmd):
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=10.0):
-    if proc.poll() is None:
-        proc.send_signal(2)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 def offline_E(steps, channels):
@@ -83,17 +56,14 @@ def test_all_channels_publish_n_prediction_errors_equal_to_the_offline_run():
         ex.add_node(probe)
         # a watchdog trip restarts the filters (E then differs from the offline run): under
         # load a state can come later than the default 20 ms, so allow the maximum, 1 s
-        ctrl = start(node_cmd("controller_node", "channels:=[all]", "state_timeout:=1.0"))
+        ctrl = start("controller_node", "channels:=[all]", "state_timeout:=1.0",
+                     params_file=os.path.join(CONFIG, "controller.yaml"))
         assert spin_until(ex, lambda: all(s.get_publisher_count() > 0 for s in subs),
                           timeout=60.0)
-        sim = start(node_cmd("simulator_node", f"duration:={DURATION}", "min_subscribers:=1"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            assert spin_until(ex, lambda: len(every) >= steps + 1 and len(first) >= steps + 1,
-                              timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            ctrl_code, ctrl_out = stop(ctrl)
+        sim = start("simulator_node", f"duration:={DURATION}", "min_subscribers:=1",
+                    params_file=os.path.join(CONFIG, "simulator.yaml"))
+        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
+            ex, sim, ctrl, lambda: len(every) >= steps + 1 and len(first) >= steps + 1)
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
     assert "lockstep misses 0" in sim_out, sim_out     # no effort held: the same loop
@@ -179,7 +149,8 @@ def test_managed_configure_fails_with_the_reason():
 
 def test_bad_channels_at_start_up_give_one_line_and_exit_2():
     with ros_domain():
-        proc = subprocess.run(node_cmd("controller_node", 'channels:=["1","torque"]'),
+        proc = subprocess.run(node_cmd("controller_node", 'channels:=["1","torque"]',
+                                       params_file=os.path.join(CONFIG, "controller.yaml")),
                               capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr + proc.stdout

@@ -1,12 +1,8 @@
 """The operator's estimate services (std_srvs) on the running controller, from another process."""
 
-import os
-import subprocess
-import sys
-
 import numpy as np
 
-from test_nodes_support import DEEP, ros_context, spin_until
+from test_nodes_support import DEEP, JOINTS, ros_context, spin_until, start, stop
 
 from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -14,28 +10,7 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from rcac_ros.nodes.estimates import load  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NODE = "/rcac_controller"
-JOINTS = [f"joint{i}" for i in range(1, 8)]
-
-
-def start(module, *params):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
-    for p in params:
-        cmd += ["-p", p]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=20.0):
-    if proc.poll() is None:
-        proc.send_signal(2)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 class Operator(Node):

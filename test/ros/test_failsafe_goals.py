@@ -6,21 +6,11 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from failsafe_harness import (controller, feed, first_answer, H_NS, JOINTS, NS, PAPER_Q0,
                               session, stamp, wait)
+from test_nodes_support import two_link_urdf
 
 from rcac_ros.core.model import CSS_EFFORT_LIMIT  # noqa: E402
 
-URDF = """<robot name="two_link">
-  <link name="base"/>
-  <link name="upper"><inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
-    <inertia ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="fore"><inertial><origin xyz="0.15 0 0"/><mass value="1.0"/>
-    <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
-    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="50" velocity="0.5"/></joint>
-  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/>
-    <origin xyz="0.4 0 0"/><axis xyz="0 0 1"/>
-    <limit lower="-2" upper="2" effort="30" velocity="0.5"/></joint>
-</robot>"""
+URDF = two_link_urdf(shoulder=(-1, 1), elbow=(-2, 2), velocity=0.5)
 
 
 def trajectory(names, times, positions, velocities=None, start_ns=0):

@@ -1,12 +1,12 @@
 """The managed controller, driven through its real lifecycle services from another process."""
 
+import contextlib
 import os
-import subprocess
-import sys
 
 import numpy as np
 
-from test_nodes_support import DEEP, JOINTS, PAPER_Q0, Probe, ros_context, spin_until
+from test_nodes_support import (DEEP, H_NS, JOINTS, PAPER_Q0, Probe, ros_context, spin_until,
+                                start, stop)
 
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
@@ -15,31 +15,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 NODE = "/rcac_controller"
-H_NS = 2_000_000
 #: what robot_state_publisher offers on /robot_description
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def start(module, *params):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
-    for p in params:
-        cmd += ["-p", p]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=20.0):
-    if proc.poll() is None:
-        proc.send_signal(2)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 class Lifecycle:
@@ -90,105 +69,96 @@ def silent(ex, probe, k0, count=20):
     return len(probe.efforts) - before
 
 
-def test_every_transition_through_the_lifecycle_services():
+@contextlib.contextmanager
+def managed_controller(*params):
+    """A probe and a controller process with its lifecycle client: ``(executor, probe, process,
+    Lifecycle)``; the process is stopped at the end and must end cleanly (exit 0, no traceback)."""
     with ros_context() as (ctx, ex):
         probe = Probe(ctx)
         ex.add_node(probe)
-        ctrl = start("controller_node", "autostart:=false", "state_timeout:=1.0")
+        ctrl = start("controller_node", *params)
         try:
-            lc = Lifecycle(probe, ex)
-            assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
-            # configure: parameters, model, kernels; no effort yet
-            assert lc.transition(Transition.TRANSITION_CONFIGURE)
-            assert lc.state() == State.PRIMARY_STATE_INACTIVE
-            assert spin_until(ex, lambda: probe.subs["efforts"].get_publisher_count() > 0,
-                              timeout=60.0)
-            assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
-                              timeout=60.0)
-            assert silent(ex, probe, 0) == 0                # inactive: silence
-            # activate: efforts answer the states
-            assert lc.transition(Transition.TRANSITION_ACTIVATE)
-            assert lc.state() == State.PRIMARY_STATE_ACTIVE
-            k = feed(ex, probe, 100, 5)
-            assert not np.allclose(probe.efforts[-1][1], 0.0)
-            # deactivate: exactly one zero effort, then silence
-            n = len(probe.efforts)
-            assert lc.transition(Transition.TRANSITION_DEACTIVATE)
-            assert lc.state() == State.PRIMARY_STATE_INACTIVE
-            assert spin_until(ex, lambda: any("stamp=" not in lab
-                                              for lab, _ in probe.efforts[n:]), timeout=10.0)
-            assert silent(ex, probe, k) == 0
-            # (an answer to a state re-sent during discovery may precede it: stamped)
-            after = [d for lab, d in probe.efforts[n:] if "stamp=" not in lab]
-            assert len(after) == 1 and "stamp=" not in probe.efforts[-1][0]
-            np.testing.assert_array_equal(after[0], np.zeros(7))
-            # activate again: control resumes
-            assert lc.transition(Transition.TRANSITION_ACTIVATE)
-            k = feed(ex, probe, k + 100, 3)
-            assert lc.transition(Transition.TRANSITION_DEACTIVATE)
-            # cleanup: back to unconfigured, the effort publisher is gone
-            assert lc.transition(Transition.TRANSITION_CLEANUP)
-            assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
-            assert spin_until(ex, lambda: not [
-                i for i in probe.get_publishers_info_by_topic("/effort_controller/commands")
-                if i.node_name == "rcac_controller"], timeout=30.0)
-            # configure again (a fresh start), then shut down: the process ends cleanly
-            assert lc.transition(Transition.TRANSITION_CONFIGURE)
-            assert lc.state() == State.PRIMARY_STATE_INACTIVE
-            assert lc.transition(Transition.TRANSITION_INACTIVE_SHUTDOWN)
-            ctrl.wait(timeout=30.0)
+            yield ex, probe, ctrl, Lifecycle(probe, ex)
         finally:
             code, out = stop(ctrl)
     assert code == 0, out
     assert "Traceback" not in out
+
+
+def test_every_transition_through_the_lifecycle_services():
+    with managed_controller("autostart:=false", "state_timeout:=1.0") as (ex, probe, ctrl, lc):
+        assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
+        # configure: parameters, model, kernels; no effort yet
+        assert lc.transition(Transition.TRANSITION_CONFIGURE)
+        assert lc.state() == State.PRIMARY_STATE_INACTIVE
+        assert spin_until(ex, lambda: probe.subs["efforts"].get_publisher_count() > 0,
+                          timeout=60.0)
+        assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
+                          timeout=60.0)
+        assert silent(ex, probe, 0) == 0                # inactive: silence
+        # activate: efforts answer the states
+        assert lc.transition(Transition.TRANSITION_ACTIVATE)
+        assert lc.state() == State.PRIMARY_STATE_ACTIVE
+        k = feed(ex, probe, 100, 5)
+        assert not np.allclose(probe.efforts[-1][1], 0.0)
+        # deactivate: exactly one zero effort, then silence
+        n = len(probe.efforts)
+        assert lc.transition(Transition.TRANSITION_DEACTIVATE)
+        assert lc.state() == State.PRIMARY_STATE_INACTIVE
+        assert spin_until(ex, lambda: any("stamp=" not in lab
+                                          for lab, _ in probe.efforts[n:]), timeout=10.0)
+        assert silent(ex, probe, k) == 0
+        # (an answer to a state re-sent during discovery may precede it: stamped)
+        after = [d for lab, d in probe.efforts[n:] if "stamp=" not in lab]
+        assert len(after) == 1 and "stamp=" not in probe.efforts[-1][0]
+        np.testing.assert_array_equal(after[0], np.zeros(7))
+        # activate again: control resumes
+        assert lc.transition(Transition.TRANSITION_ACTIVATE)
+        k = feed(ex, probe, k + 100, 3)
+        assert lc.transition(Transition.TRANSITION_DEACTIVATE)
+        # cleanup: back to unconfigured, the effort publisher is gone
+        assert lc.transition(Transition.TRANSITION_CLEANUP)
+        assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert spin_until(ex, lambda: not [
+            i for i in probe.get_publishers_info_by_topic("/effort_controller/commands")
+            if i.node_name == "rcac_controller"], timeout=30.0)
+        # configure again (a fresh start), then shut down: the process ends cleanly
+        assert lc.transition(Transition.TRANSITION_CONFIGURE)
+        assert lc.state() == State.PRIMARY_STATE_INACTIVE
+        assert lc.transition(Transition.TRANSITION_INACTIVE_SHUTDOWN)
+        ctrl.wait(timeout=30.0)
 
 
 def test_an_error_in_configure_leaves_it_unconfigured_and_says_why():
-    with ros_context() as (ctx, ex):
-        probe = Probe(ctx)
-        ex.add_node(probe)
-        ctrl = start("controller_node", "autostart:=false", "model:=/nonexistent/arm.yaml")
-        try:
-            lc = Lifecycle(probe, ex)
-            assert not lc.transition(Transition.TRANSITION_CONFIGURE)
-            assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
-            assert spin_until(ex, lambda: any(
-                m.level >= Log.ERROR and m.name.endswith("rcac_controller")
-                and "model: no such file" in m.msg for m in probe.logs), timeout=30.0)
-            assert ctrl.poll() is None                       # still there, still managed
-            assert not lc.transition(Transition.TRANSITION_ACTIVATE)     # not from unconfigured
-            assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
-            assert lc.transition(Transition.TRANSITION_UNCONFIGURED_SHUTDOWN)
-            ctrl.wait(timeout=30.0)
-        finally:
-            code, out = stop(ctrl)
-    assert code == 0, out
-    assert "Traceback" not in out
+    with managed_controller("autostart:=false",
+                            "model:=/nonexistent/arm.yaml") as (ex, probe, ctrl, lc):
+        assert not lc.transition(Transition.TRANSITION_CONFIGURE)
+        assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert spin_until(ex, lambda: any(
+            m.level >= Log.ERROR and m.name.endswith("rcac_controller")
+            and "model: no such file" in m.msg for m in probe.logs), timeout=30.0)
+        assert ctrl.poll() is None                       # still there, still managed
+        assert not lc.transition(Transition.TRANSITION_ACTIVATE)     # not from unconfigured
+        assert lc.state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert lc.transition(Transition.TRANSITION_UNCONFIGURED_SHUTDOWN)
+        ctrl.wait(timeout=30.0)
 
 
 def test_autostart_is_active_in_one_step_and_shutdown_from_active():
-    with ros_context() as (ctx, ex):
-        probe = Probe(ctx)
-        ex.add_node(probe)
-        ctrl = start("controller_node", "state_timeout:=1.0")
-        try:
-            lc = Lifecycle(probe, ex)
-            assert spin_until(ex, lambda: lc.state() == State.PRIMARY_STATE_ACTIVE, timeout=30.0)
-            assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
-                              timeout=60.0)
-            feed(ex, probe, 0, 3)
-            # shutdown from active: one zero effort first, then the process ends
-            n = len(probe.efforts)
-            assert lc.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
-            ctrl.wait(timeout=30.0)
-            assert spin_until(ex, lambda: any("stamp=" not in lab
-                                              for lab, _ in probe.efforts[n:]), timeout=10.0)
-            final = [d for lab, d in probe.efforts[n:] if "stamp=" not in lab]
-            assert len(final) == 1
-            np.testing.assert_array_equal(final[0], np.zeros(7))
-        finally:
-            code, out = stop(ctrl)
-    assert code == 0, out
+    with managed_controller("state_timeout:=1.0") as (ex, probe, ctrl, lc):
+        assert spin_until(ex, lambda: lc.state() == State.PRIMARY_STATE_ACTIVE, timeout=30.0)
+        assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
+                          timeout=60.0)
+        feed(ex, probe, 0, 3)
+        # shutdown from active: one zero effort first, then the process ends
+        n = len(probe.efforts)
+        assert lc.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+        ctrl.wait(timeout=30.0)
+        assert spin_until(ex, lambda: any("stamp=" not in lab
+                                          for lab, _ in probe.efforts[n:]), timeout=10.0)
+        final = [d for lab, d in probe.efforts[n:] if "stamp=" not in lab]
+        assert len(final) == 1
+        np.testing.assert_array_equal(final[0], np.zeros(7))
 
 
 with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf"),

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from test_nodes_support import JOINTS, NS, PAPER_Q0, Probe, ros_context, spin_until
+from test_nodes_support import (JOINTS, NS, PAPER_Q0, Probe, ros_context, spin_until,
+                                two_link_urdf)
 
 from rclpy.parameter import Parameter  # noqa: E402  (after the importorskip in support)
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -311,18 +312,7 @@ def test_topic_trajectory_is_followed_like_jtc():
         assert spin_until(ex, lambda: probe.warned("rejected (trajectory"))
 
 
-URDF = """<robot name="two_link">
-  <link name="base"/>
-  <link name="upper"><inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
-    <inertia ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <link name="fore"><inertial><origin xyz="0.15 0 0"/><mass value="1.0"/>
-    <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="50" velocity="2"/></joint>
-  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/>
-    <origin xyz="0.4 0 0"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="30" velocity="2"/></joint>
-</robot>"""
+URDF = two_link_urdf()
 
 
 @pytest.mark.parametrize("as_file", [False, True])

@@ -3,13 +3,12 @@
 import os
 import signal
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from test_nodes_support import (DEEP, JOINTS, NS, PAPER_Q0, Probe, ros_context, ros_domain,
-                                spin_until)
+from test_nodes_support import (CONFIG, DEEP, JOINTS, node_cmd, NS, PAPER_Q0, Probe, ROOT,
+                                ros_context, ros_domain, run_to_end, spin_until, start, stop)
 
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -18,34 +17,8 @@ from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-CONFIG = os.path.join(ROOT, "config")
 DURATION = 3.0
 H = 0.002
-
-
-def node_cmd(module, params_file, *overrides):
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args",
-           "--params-file", params_file]
-    for o in overrides:
-        cmd += ["-p", o]
-    return cmd
-
-
-def start(cmd):
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            cwd=ROOT)
-
-
-def stop(proc, timeout=10.0):
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    return proc.returncode, out
 
 
 def matched(executor, subs):
@@ -84,20 +57,14 @@ def test_lockstep_matches_the_offline_experiment():
                                       "/rcac_controller/parameter_estimates", theta.append,
                                       DEEP)]
         ex.add_node(probe)
-        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml")))
+        ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
         matched(ex, subs)
-        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
-                             f"duration:={DURATION}", "min_subscribers:=2",
-                             # a process stalled 0.5 s on a loaded machine is not a lost
-                             # effort: wait long enough that only a real loss is a miss
-                             "lockstep_timeout:=5.0"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            # the controller answers the last state too: wait for its messages to drain
-            assert spin_until(ex, lambda: len(theta) >= steps + 1, timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            ctrl_code, ctrl_out = stop(ctrl)
+        sim = start("simulator_node", f"duration:={DURATION}", "min_subscribers:=2",
+                    # a process stalled 0.5 s on a loaded machine is not a lost
+                    # effort: wait long enough that only a real loss is a miss
+                    "lockstep_timeout:=5.0", params_file=os.path.join(CONFIG, "simulator.yaml"))
+        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
+            ex, sim, ctrl, lambda: len(theta) >= steps + 1)
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
     # an effort for every state: no lockstep miss, none late
@@ -137,17 +104,11 @@ def test_positions_only_states_still_track():
         sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
                                         lambda m: track.append(np.array(m.data)), DEEP)
         ex.add_node(probe)
-        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml")))
+        ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
         matched(ex, [sub])
-        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
-                             "duration:=1.0", "publish_velocity:=false",
-                             "min_subscribers:=2"))
-        try:
-            assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
-            assert spin_until(ex, lambda: len(track) >= steps + 1, timeout=10.0)
-        finally:
-            sim_code, sim_out = stop(sim)
-            stop(ctrl)
+        sim = start("simulator_node", "duration:=1.0", "publish_velocity:=false",
+                    "min_subscribers:=2", params_file=os.path.join(CONFIG, "simulator.yaml"))
+        (sim_code, sim_out), _ = run_to_end(ex, sim, ctrl, lambda: len(track) >= steps + 1)
     assert sim_code == 0, sim_out
     assert all(len(m.velocity) == 0 for m in probe.states)
     worst = np.max(np.abs(np.array(track)))
@@ -159,8 +120,8 @@ def test_sigint_publishes_one_zero_effort_and_exits_zero():
     with ros_context() as (ctx, ex):
         probe = Probe(ctx)
         ex.add_node(probe)
-        ctrl = start(node_cmd("controller_node", os.path.join(CONFIG, "controller.yaml"),
-                              "state_timeout:=1.0"))
+        ctrl = start("controller_node", "state_timeout:=1.0",
+                     params_file=os.path.join(CONFIG, "controller.yaml"))
         try:
             assert spin_until(ex, lambda: probe.pub_state.get_subscription_count() > 0,
                               timeout=60.0)
@@ -202,7 +163,7 @@ def test_bad_parameter_file_is_refused_cleanly(tmp_path, module, text, name):
     path = tmp_path / "bad.yaml"
     path.write_text(f"{node}:\n  ros__parameters:\n{text}")
     with ros_domain():
-        proc = subprocess.run(node_cmd(module, str(path)), capture_output=True, text=True,
+        proc = subprocess.run(node_cmd(module, params_file=path), capture_output=True, text=True,
                               timeout=120, cwd=ROOT)
     assert proc.returncode != 0
     assert "Traceback" not in proc.stderr + proc.stdout
@@ -220,9 +181,9 @@ def test_simulator_realtime_mode_paces_on_the_steady_clock():
         probe = Probe(ctx)
         probe.create_publisher(Float64MultiArray, "/effort_controller/commands", DEEP)
         ex.add_node(probe)
-        sim = start(node_cmd("simulator_node", os.path.join(CONFIG, "simulator.yaml"),
-                             "mode:=realtime", "wait_for_controller:=true",
-                             "duration:=1.0", "use_sim_time:=true"))
+        sim = start("simulator_node", "mode:=realtime", "wait_for_controller:=true",
+                    "duration:=1.0", "use_sim_time:=true",
+                    params_file=os.path.join(CONFIG, "simulator.yaml"))
         try:
             assert spin_until(ex, lambda: sim.poll() is not None, timeout=90.0)
         finally:

@@ -3,6 +3,9 @@
 import contextlib
 import math
 import os
+import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -22,6 +25,9 @@ PAPER_Q0 = np.array([0.3, math.pi / 2, math.pi / 3, -2 * math.pi / 3, math.pi / 
                      math.pi / 2, 0.3])
 JOINTS = [f"joint{i}" for i in range(1, 8)]
 NS = 1_000_000_000
+H_NS = 2_000_000
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CONFIG = os.path.join(ROOT, "config")
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                  reliability=ReliabilityPolicy.RELIABLE)
 #: the test side keeps more, so that a slow test process loses nothing
@@ -67,6 +73,70 @@ def ros_context():
                 node.destroy_node()
             executor.shutdown()
             rclpy.try_shutdown(context=ctx)
+
+
+def two_link_urdf(shoulder=(-3, 3), elbow=(-3, 3), velocity=2):
+    """A planar two-link arm's URDF (efforts 50 and 30 N m); joint limits as given."""
+    return f"""<robot name="two_link">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
+    <inertia ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="fore"><inertial><origin xyz="0.15 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 0 1"/>
+    <limit lower="{shoulder[0]}" upper="{shoulder[1]}" effort="50" velocity="{velocity}"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/>
+    <origin xyz="0.4 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="{elbow[0]}" upper="{elbow[1]}" effort="30" velocity="{velocity}"/></joint>
+</robot>"""
+
+
+def node_cmd(module, *overrides, params_file=None):
+    """The command line of node ``rcac_ros.nodes.<module>`` with ``-p`` overrides."""
+    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
+    if params_file is not None:
+        cmd += ["--params-file", str(params_file)]
+    for o in overrides:
+        cmd += ["-p", o]
+    return cmd
+
+
+def start(module, *overrides, params_file=None):
+    """Start a node process (output piped)."""
+    return subprocess.Popen(node_cmd(module, *overrides, params_file=params_file),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            cwd=ROOT)
+
+
+def stop(proc, timeout=20.0):
+    """SIGINT, then wait up to ``timeout`` s (then kill); return ``(exit code, output)``."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+    return proc.returncode, out
+
+
+def run_to_end(executor, sim, ctrl, drained):
+    """Spin until the simulator process ``sim`` has ended and ``drained()`` holds (the
+    controller answers the last state too), then stop both processes (also when a wait fails).
+
+    Returns
+    -------
+    tuple
+        ``((sim exit code, output), (controller exit code, output))``.
+    """
+    try:
+        assert spin_until(executor, lambda: sim.poll() is not None, timeout=90.0)
+        assert spin_until(executor, drained, timeout=10.0)
+    finally:
+        sim_result = stop(sim)
+        ctrl_result = stop(ctrl)
+    return sim_result, ctrl_result
 
 
 def spin_until(executor, cond, timeout=20.0):

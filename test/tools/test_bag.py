@@ -1,7 +1,6 @@
 """Bags: ``rcac inspect`` on a synthetic bag, ``rcac record`` during a two-node run, SIGINT."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -9,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+from bagtest_support import ros_env  # noqa: F401 - a fixture
 
 from rcac_ros import topics
 from rcac_ros.core.model import css_arm
@@ -180,18 +180,6 @@ def test_inspect_rejects_missing_bag(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------- live: two nodes + rcac record
-@pytest.fixture
-def ros_env():
-    """A unique ROS_DOMAIN_ID, discovery on localhost only."""
-    domain_coordinator = pytest.importorskip("domain_coordinator")
-    with domain_coordinator.domain_id() as domain:
-        env = os.environ.copy()
-        env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                   PYTHONUNBUFFERED="1")
-        env.pop("ROS_LOCALHOST_ONLY", None)
-        yield env
-
-
 class Procs:
     """Child processes, always stopped (SIGINT, then SIGKILL) at the end of a test."""
 
@@ -232,7 +220,7 @@ def wait_for(cond, timeout, what, procs=()):
 
 
 @pytest.fixture
-def procs(tmp_path, ros_env):
+def procs(tmp_path, ros_env):  # noqa: F811
     p = Procs(tmp_path, ros_env)
     yield p
     p.stop_all()

@@ -83,14 +83,29 @@ def _chunk_offsets(path):
                 for ci in make_reader(f).get_summary().chunk_indexes]
 
 
-def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
+def _damaged_bag(tmp_path, chunk, damage):
+    """An mcap bag whose chunk number ``chunk`` (0-based) ``damage(raw, start, length)`` changes
+    in the file's bytes; return ``(bag, the chunk's start offset)``."""
     bag = tmp_path / "bag"
     write_bag(bag, "mcap")
     path = bag_file(str(bag))
-    start, length = _chunk_offsets(path)[3]
+    start, length = _chunk_offsets(path)[chunk]
     raw = bytearray(open(path, "rb").read())
-    raw[start + length - 40] ^= 0xFF         # inside the 4th chunk's compressed data
+    damage(raw, start, length)
     open(path, "wb").write(bytes(raw))
+    return bag, start
+
+
+def _flip_byte(raw, start, length):
+    raw[start + length - 40] ^= 0xFF         # inside the chunk's compressed data
+
+
+def _garble_length(raw, start, length):
+    raw[start + 1:start + 9] = b"\xff" * 8   # the chunk's record length
+
+
+def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
+    bag, start = _damaged_bag(tmp_path, 3, _flip_byte)        # the 4th chunk
     assert _main(["inspect", str(bag)]) == 2
     line = _err_line(capsys)
     assert "damaged record" in line and "corrupt" in line, line
@@ -243,13 +258,7 @@ def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
 
 def test_garbled_record_length_is_one_line(tmp_path, capsys):
     """A damaged length field (the OverflowError traceback of the issue) is one line too."""
-    bag = tmp_path / "bag"
-    write_bag(bag, "mcap")
-    path = bag_file(str(bag))
-    start, _length = _chunk_offsets(path)[5]
-    raw = bytearray(open(path, "rb").read())
-    raw[start + 1:start + 9] = b"\xff" * 8            # the 6th chunk's record length
-    open(path, "wb").write(bytes(raw))
+    bag, _ = _damaged_bag(tmp_path, 5, _garble_length)        # the 6th chunk
     assert _main(["inspect", str(bag)]) == 2
     line = _err_line(capsys)
     assert "bag_0.mcap" in line and "corrupt" in line, line
