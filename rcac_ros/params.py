@@ -291,6 +291,9 @@ SIMULATOR = _robot("simulator") + (
     Param("lockstep_timeout", "double", 0.5,
           "lockstep: wait this long (wall time) for the effort, then hold the previous one "
           "and count a miss, s", lo=0.0, hi=3600.0, strict=True),
+    Param("lockstep_max_speed", "double", 0.0,
+          "lockstep: at most this many times real time (wall clock), so that a recorder "
+          "keeps up; 0 = as fast as the controller answers", lo=0.0, hi=1e6),
     Param("wait_for_controller", "bool", True,
           "start only once a node subscribes to joint_states and publishes efforts"),
     Param("min_subscribers", "integer", 1,

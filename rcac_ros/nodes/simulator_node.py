@@ -89,6 +89,7 @@ class SimulatorNode(RcacNode):
         self.dt_ns = round(self.dt * NS)
         self.duration = v["duration"]
         self.lockstep_timeout = v["lockstep_timeout"]
+        self.max_speed = v["lockstep_max_speed"]
         self.wait_for_controller = v["wait_for_controller"]
         self.min_subscribers = v["min_subscribers"]
         if v["q0"] is None and self.model.name == "css_arm" and n == len(PAPER_Q0):
@@ -153,6 +154,10 @@ class SimulatorNode(RcacNode):
         self._applied = np.clip(self._tau, -self.sim.effort_limit, self.sim.effort_limit)
         self.sim.step(self._tau)
         self.k += 1
+        if self.mode == "lockstep" and self.max_speed > 0.0:   # no faster than the cap
+            delay = self._wall_start + self.k * self.dt / self.max_speed - time.monotonic()
+            if delay > 0.0:
+                time.sleep(delay)
         if self.duration > 0.0 and self.k * self.dt_ns >= round(self.duration * NS):
             self._publish_state()
             self._finish()

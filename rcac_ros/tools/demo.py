@@ -47,9 +47,10 @@ def demo_overrides(duration, dt):
     # keep-last queue can then lose the real answer (a lockstep miss).
     controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 1.0}
     # min_subscribers 2: the simulator starts once the controller and our recorder both
-    # subscribe to joint_states, so the bag holds the run from state 0
+    # subscribe to joint_states, so the bag holds the run from state 0; at most real time,
+    # so that the recorder (nine topics at 1/dt each) keeps up and the bag holds every step
     simulator = {"mode": "lockstep", "dt": float(dt), "duration": float(duration),
-                 "min_subscribers": 2}
+                 "min_subscribers": 2, "lockstep_max_speed": 1.0}
     return controller, simulator
 
 

@@ -1,6 +1,7 @@
 """The simulator node in-process: the lockstep protocol, bad efforts, timeouts, parameters."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -142,6 +143,21 @@ def test_duration_finishes_and_noise_is_added():
         q = np.array([m.position for m in probe.states])
         dev = q - PAPER_Q0                  # zero effort, g = 0: the arm does not move
         assert 0.003 < np.std(dev) < 0.03
+
+
+def test_lockstep_max_speed_holds_the_next_state_until_its_wall_time():
+    """With lockstep_max_speed s, state k goes out no earlier than k dt / s after the start,
+    however fast the answers come (the demo uses 1.0 so that its recorder keeps up)."""
+    speed, steps = 0.2, 10                 # state k at >= k x 10 ms
+    with ros_context() as (ctx, ex):
+        node, probe, _ = make(ctx, ex, lockstep_max_speed=speed)
+        for k in range(steps):
+            assert spin_until(ex, lambda: len(probe.states) == k + 1)
+            probe.pub_effort.publish(effort(np.zeros(7), tag(k)))
+        assert spin_until(ex, lambda: len(probe.states) == steps + 1)
+        elapsed = time.monotonic() - node._wall_start
+        assert elapsed >= steps * 0.002 / speed
+        assert node.misses == 0 and node.late == 0
 
 
 def test_effort_limit_clips():
