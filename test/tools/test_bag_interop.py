@@ -88,16 +88,17 @@ def test_use_sim_time_stamps_with_clock(tmp_path, ros_env):  # noqa: F811
     data = read_rosbags(str(bag))
     states = data["/joint_states"]
     assert len(states) > 100
-    clock_max = max(m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in data["/clock"])
+    clock_sims = {m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in data["/clock"]}
     lags = []
     for log_ns, msg in states:
         header_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        # stamped with the latest /clock received before the state: the state's own sim
-        # time (its /clock is published just before it). States a reliable publisher
-        # delivers late (those sent while the subscription was matching) are received
-        # later, and take a later time
+        # stamped with the latest /clock received before the state: a simulated time the
+        # bag's /clock carries (not the wall clock, not an interpolation). Normally that is
+        # the state's own time (its /clock is published just before it); a state the DDS
+        # delivers late (a reliable retransmission, or one sent while the subscription was
+        # matching) takes the later time it was received at, as ros2 bag record does
+        assert log_ns in clock_sims, log_ns
         lags.append(header_ns - log_ns)
-        assert 0 <= log_ns <= clock_max               # simulated time, not the wall clock
-    assert sorted(lags)[len(lags) // 2] == 0           # the median state: its own time
-    on_time = [x for x in lags if 0 <= x <= 10 * 2_000_000]
-    assert len(on_time) >= 0.8 * len(lags), sorted(lags)[:10]
+    # the median state: its own time. How many arrive late depends on the machine's load
+    # (in one CI run a burst of 180 states came 366 ms late), so only the median is fixed
+    assert sorted(lags)[len(lags) // 2] == 0, sorted(lags)[:10]
