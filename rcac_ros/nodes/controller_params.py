@@ -13,7 +13,7 @@ from rcac_ros.core.rcac import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import declare
 from rcac_ros.nodes.estimates import initial_estimates, urdf_child_links
-from rcac_ros.nodes.follow_joint_trajectory import Tolerances
+from rcac_ros.nodes.fjt_tolerances import Tolerances
 from rcac_ros.nodes.gains import parse_overrides, per_joint_gains
 
 

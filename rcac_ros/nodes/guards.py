@@ -8,9 +8,11 @@ unit-tested on its own (issue 9):
   restart (stamps start again at 0) is accepted once the watchdog has tripped, or after
   ``restart_count`` consecutive consistent messages.
 * :func:`oversize`: the size cap checked on the serialised bytes, before deserialising.
+* :func:`check_end`: a trajectory that ends in the past is refused, as
+  joint_trajectory_controller does (the one implementation of that rule, for the topic
+  through :func:`check_goal` and for the FollowJointTrajectory server).
 * :func:`check_goal`: a trajectory that ends in the past, or leaves the model's position
-  or velocity limits (URDF ``<limit>``), is refused with a reason, as
-  joint_trajectory_controller does.
+  or velocity limits (URDF ``<limit>``), is refused with a reason.
 * :class:`DesiredLimiter`: the desired state moves by at most a given step per control
   period, so no goal produces a jump in effort.
 """
@@ -121,6 +123,30 @@ def oversize(nbytes, cap, what):
 
 
 # ------------------------------------------------------------------ goals
+def check_end(start_ns, times, now_ns):
+    """Refuse a parsed trajectory whose last point is before now (JTC refuses it too).
+
+    Parameters
+    ----------
+    start_ns : int or None
+        Start time of the trajectory (``None``: now, never in the past).
+    times : ndarray (m,)
+        ``time_from_start`` of each point, s.
+    now_ns : int
+        Now, on the same time base as ``start_ns``.
+
+    Raises
+    ------
+    Rejected
+        ``past``, with how long ago the trajectory ended.
+    """
+    if start_ns is not None:
+        end_ns = start_ns + round(float(times[-1]) * 1e9)
+        if end_ns < now_ns:
+            raise Rejected("past", f"trajectory ends {(now_ns - end_ns) * 1e-9:.3f} s in the "
+                           "past (header.stamp + last time_from_start < now)")
+
+
 def check_goal(start_ns, times, pos, vel, now_ns, lower, upper, vmax):
     """Refuse a parsed trajectory that cannot be followed safely.
 
@@ -132,22 +158,20 @@ def check_goal(start_ns, times, pos, vel, now_ns, lower, upper, vmax):
         ``time_from_start`` of each point, s.
     pos, vel : ndarray (m, n)
         Positions and velocities (``vel`` may be ``None``), model order.
-    now_ns : int
-        The controller's time now.
+    now_ns : int or None
+        The controller's time now; ``None``: the end is not checked here (the
+        FollowJointTrajectory server checks it, :func:`check_end`, for any sink).
     lower, upper, vmax : ndarray (n,)
         The model's position and velocity limits (infinite: no limit).
 
     Raises
     ------
     Rejected
-        ``past``: the last point is before now (joint_trajectory_controller refuses it
-        too); ``position limit`` or ``velocity limit``: a point leaves the model's limits.
+        ``past`` (:func:`check_end`); ``position limit`` or ``velocity limit``: a point
+        leaves the model's limits.
     """
-    if start_ns is not None:
-        end_ns = start_ns + round(float(times[-1]) * 1e9)
-        if end_ns < now_ns:
-            raise Rejected("past", f"trajectory ends {(now_ns - end_ns) * 1e-9:.3f} s in the "
-                           "past (header.stamp + last time_from_start < now)")
+    if now_ns is not None:
+        check_end(start_ns, times, now_ns)
     _within("position limit", "positions", pos, lower, upper)
     if vel is not None:
         _within("velocity limit", "velocities", vel, -vmax, vmax)

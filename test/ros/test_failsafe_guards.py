@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes.guards import check_goal, DesiredLimiter, oversize, Rejected, StampGate
+from rcac_ros.nodes.guards import (check_end, check_goal, DesiredLimiter, oversize, Rejected,
+                                   StampGate)
 from rcac_ros.nodes.paramcheck import (check_params_files, foreign_sections, load_params_file,
                                        unknown_parameters)
 
@@ -90,6 +91,7 @@ def test_goal_checks():
     with pytest.raises(Rejected) as err:
         goal(start_ns=7 * S)                # ended at 9 s
     assert err.value.kind == "past"
+    goal(start_ns=7 * S, now_ns=None)       # the end left to the caller (the FJT server)
     with pytest.raises(Rejected) as err:
         goal(pos=np.array([[0.0, 0.0], [0.0, 1.5]]))
     assert err.value.kind == "position limit" and "points[1].positions[1]" in str(err.value)
@@ -98,6 +100,16 @@ def test_goal_checks():
     assert err.value.kind == "velocity limit"
     # unbounded models accept anything finite
     goal(pos=np.full((2, 2), 1e6), lower=np.full(2, -np.inf), upper=np.full(2, np.inf))
+
+
+def test_end_check():
+    """JTC's rule, the one check of the topic and the FollowJointTrajectory server."""
+    times = np.array([1.0, 2.0])
+    check_end(None, times, 10 * S)          # no stamp: starts now, never in the past
+    check_end(8 * S, times, 10 * S)         # ends exactly now: accepted (before now is refused)
+    with pytest.raises(Rejected) as err:
+        check_end(7 * S, times, 10 * S)     # ended at 9 s
+    assert err.value.kind == "past" and "ends 1.000 s in the past" in str(err.value)
 
 
 def test_desired_limiter_bounds_each_step_and_converges():
