@@ -14,7 +14,7 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            css_arm)
-from rcac_ros.tools.args import non_negative_float, positive_float, positive_int
+from rcac_ros.tools.args import add_gain_arguments, positive_float, positive_int
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 
@@ -70,15 +70,13 @@ def add_arguments(parser):
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (doc/design.md §5)")
-    for name, text in (("K_D", "link gain K_Di = K_D I6"),
-                       ("Lambda", "Lambda = value * I"),
-                       ("P", "adaptation gain P_i = P I13"),
-                       ("gamma", "prediction-error weight of the composite law"),
-                       ("lam", "filter bandwidth lambda, rad/s"),
-                       ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
-                            else positive_float, default=PAPER_GAINS[name],
-                            help=f"{text} (default {PAPER_GAINS[name]:g})")
+    add_gain_arguments(parser, PAPER_GAINS, (
+        ("K_D", "link gain K_Di = K_D I6"),
+        ("Lambda", "Lambda = value * I"),
+        ("P", "adaptation gain P_i = P I13"),
+        ("gamma", "prediction-error weight of the composite law"),
+        ("lam", "filter bandwidth lambda, rad/s"),
+        ("h", "control period, s")))
     parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--channels", type=channel_list, default=(1,),

@@ -31,7 +31,8 @@ import numpy as np
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import finite_float, non_negative_float, positive_float
+from rcac_ros.tools.args import (add_gain_arguments, finite_float, non_negative_float,
+                                 positive_float)
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.robots import example_robot_urdf
 
@@ -228,15 +229,13 @@ def add_arguments(parser):
     parser.add_argument("--out", default="results/payload_demo", help="output directory")
     parser.add_argument("--urdf", default=None,
                         help="panda.urdf (default: example-robot-data's)")
-    for name, text in (("kappa", "link gain K_Di = kappa * M_i (rad/s)"),
-                       ("Lambda", "Lambda = value * I"),
-                       ("rho", "adaptation gain P_7 = rho * diag(parameter scale)^2"),
-                       ("gamma", "prediction-error weight of the composite law"),
-                       ("lam", "filter bandwidth lambda, rad/s"),
-                       ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
-                            else positive_float, default=GAINS[name],
-                            help=f"{text} (default {GAINS[name]:g})")
+    add_gain_arguments(parser, GAINS, (
+        ("kappa", "link gain K_Di = kappa * M_i (rad/s)"),
+        ("Lambda", "Lambda = value * I"),
+        ("rho", "adaptation gain P_7 = rho * diag(parameter scale)^2"),
+        ("gamma", "prediction-error weight of the composite law"),
+        ("lam", "filter bandwidth lambda, rad/s"),
+        ("h", "control period, s")))
     parser.add_argument("--adapt-all", action="store_true",
                         help="adapt links 1-6 too (default: only link 7)")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
