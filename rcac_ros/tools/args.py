@@ -60,3 +60,21 @@ def non_negative_int(text):
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
     return value
+
+
+def add_gain_arguments(parser, gains, texts):
+    """One ``--NAME`` option per controller gain, its default and its check.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+    gains : dict
+        Default value of each gain, by name.
+    texts : sequence of (str, str)
+        ``(name, help)`` in the order of ``--help``; ``gamma`` (the prediction-error
+        weight, 0 for the direct law) may be 0, every other gain must be > 0.
+    """
+    for name, text in texts:
+        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
+                            else positive_float, default=gains[name],
+                            help=f"{text} (default {gains[name]:g})")

@@ -30,20 +30,29 @@ VARIANTS = {
 }
 
 
+def _timed(fn, reps):
+    """Seconds for ``reps`` calls of ``fn()``."""
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        fn()
+    return time.perf_counter() - t0
+
+
+def _reps(budget_s, blocks, *fns):
+    """Calls per block so that ``blocks`` blocks of every ``fn`` take about ``budget_s``.
+
+    Each ``fn`` is called once first (compilation, caches), then timed once.
+    """
+    for fn in fns:
+        fn()
+    once = max(sum(_timed(fn, 1) for fn in fns), 1e-7)
+    return max(1, int(budget_s / blocks / once))
+
+
 def median_us(fn, budget_s=0.3, blocks=7):
     """Median over ``blocks`` of the mean µs per call of ``fn()``, about ``budget_s`` in all."""
-    fn()
-    t0 = time.perf_counter()
-    fn()
-    once = max(time.perf_counter() - t0, 1e-7)
-    reps = max(1, int(budget_s / blocks / once))
-    samples = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            fn()
-        samples.append((time.perf_counter() - t0) / reps * 1e6)
-    return float(np.median(samples))
+    reps = _reps(budget_s, blocks, fn)
+    return float(np.median([_timed(fn, reps) / reps * 1e6 for _ in range(blocks)]))
 
 
 def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
@@ -52,23 +61,8 @@ def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
     On a shared machine the load changes between cells; timed side by side, block by
     block, the ratio is far steadier than the ratio of two medians.
     """
-    fa(), fb()
-    t0 = time.perf_counter()
-    fa()
-    fb()
-    once = max(time.perf_counter() - t0, 1e-7)
-    reps = max(1, int(budget_s / blocks / once))
-    ratios = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            fa()
-        ta = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        for _ in range(reps):
-            fb()
-        ratios.append(ta / (time.perf_counter() - t0))
-    return float(np.median(ratios))
+    reps = _reps(budget_s, blocks, fa, fb)
+    return float(np.median([_timed(fa, reps) / _timed(fb, reps) for _ in range(blocks)]))
 
 
 def goal_ratios(budget_s=1.0):

@@ -13,40 +13,10 @@ import time
 import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           Simulator, css_arm)
-from rcac_ros.tools.args import non_negative_float, positive_float, positive_int
+                           css_arm)
+from rcac_ros.tools.args import add_gain_arguments, positive_float, positive_int
+from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
-from rcac_ros.tools.progress import Progress
-
-
-def simulate(model, controller, trajectory, q0, duration, substeps=1, progress=None):
-    """Close the loop for ``duration`` s; return the time series of one run.
-
-    Returns
-    -------
-    dict
-        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_hat`` (T, n, 13), ``E`` (T, m):
-        the prediction error of each channel.
-    """
-    h = controller.h
-    steps = int(round(duration / h)) + 1
-    n = model.n
-    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
-               tau=np.empty((steps, n)), theta_hat=np.empty((steps, n, 13)),
-               E=np.empty((steps, np.size(controller.E))))
-    sim = Simulator(model, dt=h, q0=q0, substeps=substeps)
-    with Progress(steps, progress or "", enabled=progress is not None) as bar:
-        for k in range(steps):
-            q_d, qd_d, qdd_d = trajectory(k * h)
-            out["theta_hat"][k] = controller.theta_hat
-            tau = controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
-            out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
-            out["E"][k] = controller.E
-            sim.step(tau)
-            controller.set_applied_torque(sim.applied)   # what the arm felt (limits)
-            if k % 200 == 0:
-                bar.update(k)
-    return out
 
 
 def metrics(run, theta_true, last_seconds=LAST_WINDOW):
@@ -70,8 +40,9 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
     for law, gamma in (("direct", 0.0), ("composite", g["gamma"])):
         ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma), channels=channels)
         t0 = time.perf_counter()
-        runs[law] = simulate(model, ctrl, trajectory, q0, duration, substeps,
-                             progress=f"{law:>9s}" if progress else None)
+        runs[law] = closed_loop(ctrl, trajectory, duration, q0=q0, qd0=np.zeros(model.n),
+                                substeps=substeps, strict=True,
+                                progress=f"{law:>9s}" if progress else None)
         report[law] = metrics(runs[law], model.theta())
         report[law]["wall_time_s"] = time.perf_counter() - t0
     return model, runs, report
@@ -99,15 +70,13 @@ def add_arguments(parser):
     parser.add_argument("--out", default="results/experiment", help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (doc/design.md §5)")
-    for name, text in (("K_D", "link gain K_Di = K_D I6"),
-                       ("Lambda", "Lambda = value * I"),
-                       ("P", "adaptation gain P_i = P I13"),
-                       ("gamma", "prediction-error weight of the composite law"),
-                       ("lam", "filter bandwidth lambda, rad/s"),
-                       ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
-                            else positive_float, default=PAPER_GAINS[name],
-                            help=f"{text} (default {PAPER_GAINS[name]:g})")
+    add_gain_arguments(parser, PAPER_GAINS, (
+        ("K_D", "link gain K_Di = K_D I6"),
+        ("Lambda", "Lambda = value * I"),
+        ("P", "adaptation gain P_i = P I13"),
+        ("gamma", "prediction-error weight of the composite law"),
+        ("lam", "filter bandwidth lambda, rad/s"),
+        ("h", "control period, s")))
     parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
     parser.add_argument("--channels", type=channel_list, default=(1,),

@@ -28,12 +28,12 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (ConfigError, RecursiveCompositeController, Simulator,
-                           SinusoidTrajectory)
+from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import finite_float, non_negative_float, positive_float
-from rcac_ros.tools.progress import Progress
+from rcac_ros.tools.args import (add_gain_arguments, finite_float, non_negative_float,
+                                 positive_float)
+from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
@@ -117,43 +117,6 @@ def gains_for(model, kappa, Lambda, rho, gamma, lam, h, adapt_all=False, law="co
                 lam=lam, h=h, theta_hat0=model.theta())
 
 
-def simulate(model, loaded, controller, trajectory, duration, jump, progress=None):
-    """Close the loop; at ``t >= jump`` the plant becomes ``loaded`` (state carried over).
-
-    Returns
-    -------
-    dict
-        ``t`` (T,), ``q``, ``q_d``, ``tau`` (T, n), ``theta_last`` (T, 13) (last link's
-        estimates), ``E`` (T, m).
-    """
-    h = controller.h
-    steps = int(round(duration / h)) + 1
-    n = model.n
-    out = dict(t=np.arange(steps) * h, q=np.empty((steps, n)), q_d=np.empty((steps, n)),
-               tau=np.empty((steps, n)), theta_last=np.empty((steps, 13)),
-               E=np.empty((steps, np.size(controller.E))))
-    q_d0, qd_d0, _ = trajectory(0.0)
-    sim = Simulator(model, dt=h, q0=q_d0, qd0=qd_d0)
-    attached = False
-    with Progress(steps, progress or "", enabled=progress is not None) as bar:
-        for k in range(steps):
-            t = k * h
-            if not attached and t >= jump - 1e-12:
-                plant = Simulator(loaded, dt=h)
-                plant.reset(sim.q, sim.qd, t=sim.t)
-                sim, attached = plant, True
-            q_d, qd_d, qdd_d = trajectory(t)
-            out["theta_last"][k] = controller.theta_hat[-1]
-            tau = controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
-            out["q"][k], out["q_d"][k], out["tau"][k] = sim.q, q_d, tau
-            out["E"][k] = controller.E
-            sim.step(tau)
-            controller.set_applied_torque(sim.applied)
-            if k % 250 == 0:
-                bar.update(k)
-    return out
-
-
 def window_rms(run, start, stop):
     """RMS of ``q - q_d`` over all joints for ``start <= t < stop``."""
     return measure.window_rms(run["t"], run["q"] - run["q_d"], start, stop)
@@ -164,7 +127,7 @@ def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None)
     t_end = run["t"][-1]
     e = np.linalg.norm(run["q"] - run["q_d"], axis=1)
     after = run["t"] >= jump
-    est = run["theta_last"][-1]
+    est = run["theta_hat"][-1, -1]
     first = theta_after[1:4]
     out = {
         "rms_error_before_jump": window_rms(run, max(0.0, jump - window), jump),
@@ -184,7 +147,7 @@ def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None)
         out["max_torque_over_effort_limit"] = float(np.max(np.abs(run["tau"]) / effort_limit))
     out["recovery_ratio"] = (out["rms_error_last_window"]
                              / out["rms_error_first_window_after_jump"])
-    within = np.abs(run["theta_last"][:, 0] - theta_after[0]) <= 0.05 * theta_after[0]
+    within = np.abs(run["theta_hat"][:, -1, 0] - theta_after[0]) <= 0.05 * theta_after[0]
     outside = np.nonzero(after & ~within)[0]
     settled = outside[-1] + 1 if outside.size else np.nonzero(after)[0][0]
     out["link7_mass_settling_time_5pct"] = (float(run["t"][settled] - jump)
@@ -207,8 +170,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
         ctrl = RecursiveCompositeController(model, **gains_for(model, adapt_all=adapt_all,
                                                                law=law, **g))
         t0 = time.perf_counter()
-        runs[law] = simulate(model, loaded, ctrl, trajectory, duration, jump,
-                             progress=f"{law:>9s}" if progress else None)
+        runs[law] = closed_loop(ctrl, trajectory, duration, events=((jump, loaded),), strict=True,
+                                progress=f"{law:>9s}" if progress else None, progress_every=250)
         report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1],
                               effort_limit=model.effort_limit)
         report[law]["wall_time_s"] = time.perf_counter() - t0
@@ -227,7 +190,7 @@ def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
     plot_tracking_errors(t, {law: r["q"] - r["q_d"] for law, r in runs.items()},
                          os.path.join(out_dir, "tracking_errors.png"), list(model.joint_names),
                          title=f"Panda tracking errors, payload attached at t = {jump:g} s")
-    plot_parameter_estimates(t, {law: r["theta_last"] for law, r in runs.items()},
+    plot_parameter_estimates(t, {law: r["theta_hat"][:, -1] for law, r in runs.items()},
                              loaded.theta()[-1], os.path.join(out_dir, "link7_estimates.png"),
                              link=model.n)
     truth = np.where(t[:, None] >= jump, loaded.theta()[-1], model.theta()[-1])
@@ -236,7 +199,7 @@ def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
         axes[0].semilogy(t, np.linalg.norm(r["q"] - r["q_d"], axis=1) + 1e-12, lw=0.8,
                          label=law)
         for k in range(4):
-            axes[k + 1].plot(t, r["theta_last"][:, k], lw=1.0, label=law)
+            axes[k + 1].plot(t, r["theta_hat"][:, -1, k], lw=1.0, label=law)
     for k, label in enumerate(("mass m (kg)", "m px (kg m)", "m py (kg m)", "m pz (kg m)")):
         axes[k + 1].plot(t, truth[:, k], "k--", lw=0.9, label="true")
         axes[k + 1].set_title(f"link 7 {label}")
@@ -266,15 +229,13 @@ def add_arguments(parser):
     parser.add_argument("--out", default="results/payload_demo", help="output directory")
     parser.add_argument("--urdf", default=None,
                         help="panda.urdf (default: example-robot-data's)")
-    for name, text in (("kappa", "link gain K_Di = kappa * M_i (rad/s)"),
-                       ("Lambda", "Lambda = value * I"),
-                       ("rho", "adaptation gain P_7 = rho * diag(parameter scale)^2"),
-                       ("gamma", "prediction-error weight of the composite law"),
-                       ("lam", "filter bandwidth lambda, rad/s"),
-                       ("h", "control period, s")):
-        parser.add_argument(f"--{name}", type=non_negative_float if name == "gamma"
-                            else positive_float, default=GAINS[name],
-                            help=f"{text} (default {GAINS[name]:g})")
+    add_gain_arguments(parser, GAINS, (
+        ("kappa", "link gain K_Di = kappa * M_i (rad/s)"),
+        ("Lambda", "Lambda = value * I"),
+        ("rho", "adaptation gain P_7 = rho * diag(parameter scale)^2"),
+        ("gamma", "prediction-error weight of the composite law"),
+        ("lam", "filter bandwidth lambda, rad/s"),
+        ("h", "control period, s")))
     parser.add_argument("--adapt-all", action="store_true",
                         help="adapt links 1-6 too (default: only link 7)")
     parser.add_argument("--quiet", action="store_true", help="no progress line")

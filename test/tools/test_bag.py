@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 import pytest
-from bagtest_support import ros_env  # noqa: F401 - a fixture
+from bagtest_support import read_rosbags, ros_env  # noqa: F401 - a fixture
 
 from rcac_ros import topics
 from rcac_ros.core.model import css_arm
@@ -247,17 +247,6 @@ def _wait_controller_matched(rec, ctrl):
              "recorder matched the controller", [rec, ctrl])
 
 
-def _read(bag):
-    """(topic -> list of (receive stamp, message)) of a bag, with rosbags only."""
-    from rosbags.rosbag2 import Reader
-    ts = _typestore()
-    out = {}
-    with Reader(bag) as reader:
-        for conn, stamp, raw in reader.messages():
-            out.setdefault(conn.topic, []).append((stamp, ts.deserialize_cdr(raw, conn.msgtype)))
-    return out
-
-
 def _stamp_ns(t):
     return t.sec * 1_000_000_000 + t.nanosec
 
@@ -279,7 +268,7 @@ def test_record_two_node_lockstep_run(tmp_path, procs):
     rec.send_signal(signal.SIGINT)
     assert rec.wait(30) == 0, _output(rec)
 
-    data = _read(str(bag))
+    data = read_rosbags(str(bag))
     states = data["/joint_states"]
     stamps = [_stamp_ns(m.header.stamp) for _, m in states]
     steps = int(round(duration / 0.002))
@@ -333,7 +322,7 @@ def test_sigint_during_recording_leaves_a_readable_bag(tmp_path, procs):
     rec.send_signal(signal.SIGINT)
     assert rec.wait(30) == 0, _output(rec)
     assert "closed" in _output(rec)
-    data = _read(str(bag))          # every message deserialises
+    data = read_rosbags(str(bag))          # every message deserialises
     assert len(data["/joint_states"]) > 10
     assert len(data["/clock"]) > 10
     assert len(data["/effort_controller/commands"]) > 10

@@ -104,14 +104,25 @@ def _garble_length(raw, start, length):
     raw[start + 1:start + 9] = b"\xff" * 8   # the chunk's record length
 
 
-def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
-    bag, start = _damaged_bag(tmp_path, 3, _flip_byte)        # the 4th chunk
+def _inspect_fails_then_recover(tmp_path, capsys, chunk, damage, *words):
+    """One chunk of ten damaged: ``rcac inspect`` fails in one line holding ``words``, and
+    recovery keeps the nine intact chunks (1800 of the 2000 /clock messages).
+
+    Returns the recovery report and the damaged chunk's byte offset.
+    """
+    bag, start = _damaged_bag(tmp_path, chunk, damage)
     assert _main(["inspect", str(bag)]) == 2
     line = _err_line(capsys)
-    assert "damaged record" in line and "corrupt" in line, line
-    # the summary is intact: recovery keeps the nine intact chunks, says what was lost
+    assert all(word in line for word in words), line
     report = recover(str(bag))
     assert report.counts == {"/clock": 1800}
+    return report, start
+
+
+def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
+    report, start = _inspect_fails_then_recover(tmp_path, capsys, 3, _flip_byte,  # 4th chunk
+                                                "damaged record", "corrupt")
+    # the summary is intact: recovery says what was lost
     assert any(f"the chunk at byte {start} of bag_0.mcap" in item for item in report.lost)
     assert any("200 of the 2000" in item for item in report.lost), report.lost
     ks = [round(m.clock.sec * 500 + m.clock.nanosec / 2e6)
@@ -258,9 +269,5 @@ def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
 
 def test_garbled_record_length_is_one_line(tmp_path, capsys):
     """A damaged length field (the OverflowError traceback of the issue) is one line too."""
-    bag, _ = _damaged_bag(tmp_path, 5, _garble_length)        # the 6th chunk
-    assert _main(["inspect", str(bag)]) == 2
-    line = _err_line(capsys)
-    assert "bag_0.mcap" in line and "corrupt" in line, line
-    report = recover(str(bag))
-    assert report.counts == {"/clock": 1800}             # every chunk but that one
+    _inspect_fails_then_recover(tmp_path, capsys, 5, _garble_length,      # the 6th chunk
+                                "bag_0.mcap", "corrupt")

@@ -56,12 +56,12 @@ def test_estimates_find_the_payload(short_run):
     model, loaded, runs = short_run
     truth, nominal = loaded.theta()[-1], model.theta()[-1]
     # P = 1e-12 I: the fixed law keeps its nominal estimates (to round-off)
-    fixed = runs["fixed"]["theta_last"]
+    fixed = runs["fixed"]["theta_hat"][:, -1]
     np.testing.assert_allclose(fixed, np.broadcast_to(nominal, fixed.shape), rtol=0, atol=1e-9)
     for law in ("composite", "direct"):
-        assert runs[law]["theta_last"][-1, 0] == pytest.approx(truth[0], rel=0.05)
+        assert runs[law]["theta_hat"][-1, -1, 0] == pytest.approx(truth[0], rel=0.05)
     # the composite law pins down the first moments much better than the direct one
-    err = {law: np.linalg.norm(runs[law]["theta_last"][-1, 1:4] - truth[1:4])
+    err = {law: np.linalg.norm(runs[law]["theta_hat"][-1, -1, 1:4] - truth[1:4])
            for law in ("composite", "direct")}
     assert err["composite"] < 0.5 * err["direct"], err
 

@@ -1,4 +1,4 @@
-"""rcac sweep without Dask: the closed loop against its predecessors, campaign files,
+"""rcac sweep without Dask: the closed loop against a plain reference loop, campaign files,
 reproducibility, the command line's errors, Ctrl-C and --resume."""
 
 import os
@@ -14,7 +14,7 @@ import yaml
 
 from rcac_ros.tools import cli
 from rcac_ros.core import PAPER_Q0, PaperTrajectory, RecursiveCompositeController, \
-    SinusoidTrajectory, css_arm
+    Simulator, SinusoidTrajectory, css_arm
 from rcac_ros.tools import campaign as cp
 from rcac_ros.tools.closed_loop import attach_payload, closed_loop, run_metrics
 
@@ -49,35 +49,84 @@ class Recorder:
         return self.ctrl.step(q, qd, *desired)
 
 
-def test_closed_loop_is_experiment_simulate():
-    """The paper's experiment loop and closed_loop without noise or delay: the same run."""
+def reference_loop(controller, trajectory, duration, plant, q0, qd0, grasp=None, substeps=1):
+    """The closed loop written out from core calls alone: the reference closed_loop must meet.
+
+    ``grasp = (time, loaded)``: from the first period at ``t >= time`` the plant is ``loaded``.
+    Returns ``q`` (true, before the step), ``q_d``, ``tau``, ``theta_hat`` (before the step)
+    and ``E`` (after it), one row a period.
+    """
+    h = controller.h
+    sim = Simulator(plant, dt=h, q0=q0, qd0=qd0, substeps=substeps)
+    rows = {key: [] for key in ("q", "q_d", "tau", "theta_hat", "E")}
+    for k in range(int(round(duration / h)) + 1):
+        if grasp is not None and k * h >= grasp[0] - 1e-12 and sim.model is plant:
+            q, qd = sim.q, sim.qd
+            sim = Simulator(grasp[1], dt=h, q0=q, qd0=qd, substeps=substeps)
+        q_d, qd_d, qdd_d = trajectory(k * h)
+        rows["q"].append(sim.q.copy())
+        rows["q_d"].append(q_d)
+        rows["theta_hat"].append(controller.theta_hat.copy())
+        rows["tau"].append(controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d))
+        rows["E"].append(np.array(controller.E))
+        sim.step(rows["tau"][-1])
+        controller.set_applied_torque(sim.applied)
+    return {key: np.array(v) for key, v in rows.items()}
+
+
+def test_experiment_runs_the_reference_loop():
+    """rcac experiment's runs (closed_loop from PAPER_Q0 at rest) are the reference loop's."""
     from rcac_ros.core import PAPER_GAINS
-    from rcac_ros.tools.experiment import simulate
+    from rcac_ros.tools.experiment import run_experiment
     model = css_arm()
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0, reading="position")          # a large initial error
-    old = simulate(model, RecursiveCompositeController(model, **PAPER_GAINS), traj, q0, 0.6)
-    new = closed_loop(RecursiveCompositeController(model, **PAPER_GAINS), traj, 0.6, q0=q0,
-                      qd0=np.zeros(7))
-    for key in ("q", "q_d", "tau", "theta_hat", "E"):
-        np.testing.assert_array_equal(new[key], old[key], err_msg=key)
-    assert new["status"] == "ok"
+    _, runs, report = run_experiment(0.6, "position", substeps=2, progress=False,
+                                     channels=("all",))
+    for law, gamma in (("direct", 0.0), ("composite", PAPER_GAINS["gamma"])):
+        ctrl = RecursiveCompositeController(model, **dict(PAPER_GAINS, gamma=gamma),
+                                            channels=("all",))
+        ref = reference_loop(ctrl, traj, 0.6, model, q0, np.zeros(7), substeps=2)
+        assert runs[law]["E"].shape == (301, 7)
+        for key in ref:
+            np.testing.assert_array_equal(runs[law][key], ref[key], err_msg=f"{law} {key}")
+        assert runs[law]["status"] == "ok"
 
 
-def test_closed_loop_is_payload_demo_simulate():
-    """payload-demo's grasp at t = jump is closed_loop's plant event."""
-    from rcac_ros.tools.payload_demo import gains_for, simulate, with_payload
+def test_payload_grasp_is_the_reference_loops():
+    """closed_loop's plant event is the grasp of the reference loop, state carried over."""
+    from rcac_ros.tools.payload_demo import gains_for, with_payload
     model = css_arm(gravity=(0.0, 0.0, -9.81))
     loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
     traj = SinusoidTrajectory(np.array(PAPER_Q0), 0.1, 0.3)
     gains = gains_for(model, kappa=50.0, Lambda=5.0, rho=10.0, gamma=1.0, lam=10.0, h=0.002)
-    old = simulate(model, loaded, RecursiveCompositeController(model, **gains), traj, 0.4, 0.2)
+    q0, qd0, _ = traj(0.0)
+    ref = reference_loop(RecursiveCompositeController(model, **gains), traj, 0.4, model, q0,
+                         qd0, grasp=(0.2, loaded))
     new = closed_loop(RecursiveCompositeController(model, **gains), traj, 0.4,
                       events=((0.2, loaded),))
-    for key in ("q", "q_d", "tau", "E"):
-        np.testing.assert_array_equal(new[key], old[key], err_msg=key)
-    np.testing.assert_array_equal(new["theta_hat"][:, -1], old["theta_last"])
+    for key in ref:
+        np.testing.assert_array_equal(new[key], ref[key], err_msg=key)
     assert new["plant"] is loaded
+    # the grasp matters: without it the runs part after t = 0.2 s
+    free = closed_loop(RecursiveCompositeController(model, **gains), traj, 0.4)
+    np.testing.assert_array_equal(free["tau"][:101], ref["tau"][:101])
+    assert np.abs(free["tau"][101:] - ref["tau"][101:]).max() > 1.0
+
+
+def test_payload_demo_runs_the_reference_loop():
+    """rcac payload-demo's run (closed_loop with the grasp event) is the reference loop's."""
+    from rcac_ros.tools.payload_demo import (AMPLITUDE, FREQUENCY, find_panda_urdf, GAINS,
+                                             gains_for, READY, run_demo)
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data's panda.urdf not installed")
+    model, loaded, runs, _ = run_demo(0.4, 0.2, progress=False, laws=("composite",))
+    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    q0, qd0, _ = traj(0.0)
+    ctrl = RecursiveCompositeController(model, **gains_for(model, law="composite", **GAINS))
+    ref = reference_loop(ctrl, traj, 0.4, model, q0, qd0, grasp=(0.2, loaded))
+    for key in ref:
+        np.testing.assert_array_equal(runs["composite"][key], ref[key], err_msg=key)
 
 
 def test_attach_payload_matches_parallel_axis():
@@ -121,6 +170,25 @@ def test_divergence_stops_the_run():
     m = run_metrics(run)
     assert m["diverged"] and m["status"] in ("error_limit", "nonfinite")
     assert m["t_end"] < 2.0 and len(run["t"]) < 1001
+
+
+def test_strict_raises_what_the_controller_raises(tmp_path, capsys):
+    """NaN/Inf: a campaign's run ends "nonfinite"; strict (rcac experiment) raises, one line."""
+    from rcac_ros.core import InputError
+    model = css_arm()
+    traj = PaperTrajectory(np.array(PAPER_Q0), reading="position")
+    gains = dict(h=0.05, Lambda=100.0)                        # unstable at this period
+
+    run = closed_loop(RecursiveCompositeController(model, **gains), traj, 3.0)
+    assert run["status"] == "nonfinite" and len(run["t"]) < 61
+    with pytest.raises(InputError, match="contains NaN or Inf"):
+        closed_loop(RecursiveCompositeController(model, **gains), traj, 3.0, strict=True)
+    out = tmp_path / "experiment"
+    assert cli.main(["experiment", "--duration", "3", "--h", "0.05", "--Lambda", "100",
+                     "--trajectory", "position", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "contains NaN or Inf" in err, err
+    assert not out.exists()
 
 
 def test_runs_reproducible_from_campaign_and_index():
