@@ -210,6 +210,10 @@ CONTROLLER = _robot("controller") + (
     Param("state_timeout", "double", 0.02,
           "watchdog: safe effort after this long without a valid state (steady clock), s",
           lo=0.0, hi=1.0, strict=True, read_only=False),
+    Param("watchdog.replan_after", "double", 0.5,
+          "after this long of safe effort (the arm not controlled), control resumes with the "
+          "motion restarted from the measured state (a followed trajectory is aborted), s",
+          lo=0.0, hi=BIG),
     Param("safe_effort", "double_array", None,
           "effort sent by the watchdog, N m, in joints order (unset: zero)", per_joint=True),
     _effort_limit(),

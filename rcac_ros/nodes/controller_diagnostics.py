@@ -10,8 +10,10 @@ def diagnostics(node):
     E = node.ctrl.E
     level = DiagnosticStatus.OK
     message = "running" if node.running else "inactive: no effort published"
-    if node.running and node._watchdog:
-        level, message = DiagnosticStatus.WARN, "watchdog: safe effort (no valid state)"
+    tripped = node._watchdog or node.failsafe.stop.active
+    if node.running and tripped:
+        level, message = DiagnosticStatus.WARN, \
+            "watchdog: safe effort (no valid state, or no tick of /clock)"
     values = {
         "mode": node.mode, "steps": node._steps, "steps_in_window": count,
         "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
@@ -22,8 +24,9 @@ def diagnostics(node):
         "compute_overruns": node._deadline_misses,
         "late_ticks": node._late_ticks if node.loop is None else node.loop.late,
         "skipped_ticks": skipped,
-        "watchdog": "tripped" if node._watchdog else "ok",
+        "watchdog": "tripped" if tripped else "ok",
         "watchdog_trips": node._watchdog_trips,
+        "watchdog_replans": node.failsafe.stop.replans,
         "rejected_messages": node._throttle.total,
         "stamp_restarts": node.failsafe.gate.restarts,
         "desired_limited": node.failsafe.limiter.limited,

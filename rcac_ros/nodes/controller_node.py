@@ -15,7 +15,8 @@ latest valid state (real arms), on absolute deadlines of the steady clock
 (:class:`~rcac_ros.nodes.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
 A watchdog publishes ``safe_effort`` while no valid state has arrived for
 ``state_timeout`` s of the steady clock (in timer mode on ``/clock``, also while no tick
-comes: a frozen clock). Fail-safe guards (issue 9,
+comes: a frozen clock); after ``watchdog.replan_after`` s of it, control resumes with the
+motion restarted from the measured state (doc/failsafe.md). Fail-safe guards (issue 9,
 :class:`~rcac_ros.nodes.failsafe.ControllerGuards`): stamps through a
 :class:`~rcac_ros.nodes.guards.StampGate` (a restart is followed, a stamp in the future
 refused), size caps checked before deserialising, trajectories parsed in their own thread
@@ -128,6 +129,7 @@ class ControllerNode(ManagedNode):
         self._restart_filters = False       # the loop restarts them at its next step
         self.failsafe.gate.reset()
         self.failsafe.limiter.reset()
+        self.failsafe.stop.cancel()
         self._q_msg = None
         self._outputs.last_answer = None
 
@@ -242,6 +244,8 @@ class ControllerNode(ManagedNode):
             self._watchdog = False
             if self._steps:
                 self._restart_filters |= not unbroken   # a gap broke the filters of eqs 21-24
+            if unbroken:                    # the lockstep simulator waited: nothing to resume
+                self.failsafe.stop.cancel()
                 self.get_logger().info("watchdog: valid state again, control resumed")
         if self.mode == "lockstep":
             t_ns = stamp if stamp > 0 else self._steps * round(self.h * 1e9)
@@ -256,6 +260,9 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
         q, qd = self._state                 # one snapshot (timer mode: set by another thread)
+        resumed = self.failsafe.stop.resume(time.monotonic_ns())
+        if resumed is not None and self._steps:
+            self._resume(*resumed)
         if self._restart_filters:
             self._restart_filters = False
             self.ctrl.restart_filters()
@@ -302,21 +309,36 @@ class ControllerNode(ManagedNode):
         last = self._last_tick_steady
         return last is None or time.monotonic_ns() - last > self.state_timeout * 1e9
 
-    def _trip(self):
-        if not self._watchdog and self._last_rx is not None:
-            self._watchdog = True
-            self._watchdog_trips += 1
+    def _send_safe(self, no_state):
+        """The watchdog's safe effort: no valid state (``no_state``), or no tick of /clock."""
+        if no_state and self._last_rx is not None:
+            self._watchdog = True           # (the stamp gate then takes a restart at once)
+        if self.failsafe.stop.trip(time.monotonic_ns()) and self._last_rx is not None:
+            self._watchdog_trips += 1       # once per spell (guards.SafeStop)
             self.get_logger().warning(
-                f"watchdog: no valid state for {self.state_timeout * 1e3:g} ms, "
-                "publishing the safe effort")
+                f"watchdog: {'no valid state' if no_state else 'no tick of /clock'} for "
+                f"{self.state_timeout * 1e3:g} ms, publishing the safe effort")
+        self._outputs.effort(self.safe_effort, watchdog=True)
+
+    def _resume(self, held, replan):
+        """The first step after ``held`` s of safe effort; ``replan``: the motion restarts."""
+        self._restart_filters = True        # the filters of eqs 21-24 missed the spell
+        if replan:                          # the arm drifted: go on from where it is
+            self._motion = DesiredMotion(self.paper)
+            self.failsafe.limiter.reset()
+            if self._fjt is not None:
+                self._fjt.abort(f"the controller sent the safe effort for {held:.3f} s")
+        self.get_logger().info(f"watchdog: control resumed after {held:.3f} s of safe effort"
+                               + ("; the motion restarts from the measured state" if replan
+                                  else ""))
 
     def _on_watchdog(self):
         """Steady clock: the safe effort while no valid state (lockstep) or no tick (/clock)."""
         if not self.running:
             return
-        if self._state_is_stale() if self.mode == "lockstep" else self._tick_is_stale():
-            self._trip()
-            self._outputs.effort(self.safe_effort, watchdog=True)
+        stale = self._state_is_stale()
+        if stale if self.mode == "lockstep" else self._tick_is_stale():
+            self._send_safe(no_state=stale)
 
     def _on_tick(self):
         """Timer mode: one control step on the latest valid state."""
@@ -329,9 +351,7 @@ class ControllerNode(ManagedNode):
         self._last_tick = now
         self._last_tick_steady = time.monotonic_ns()
         if self._state_is_stale():
-            self._trip()
-            self._outputs.effort(self.safe_effort, watchdog=True)
-            return
+            return self._send_safe(no_state=True)
         self._control(now)
 
     # ------------------------------------------------------------------ diagnostics

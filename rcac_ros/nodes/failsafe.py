@@ -1,14 +1,15 @@
 """The controller's fail-safe guards and real-time options, built from its parameters (issue 9).
 
 :class:`ControllerGuards` holds the objects the node's hooks call: the stamp gate, the size
-caps, the goal check against the model's limits, the limiter of the desired state (all
+caps, the goal check against the model's limits, the limiter of the desired state, the
+spells of safe effort and how control resumes after them (all
 :mod:`rcac_ros.nodes.guards`) and the real-time options (:mod:`rcac_ros.nodes.realtime`).
 The parameters are rows of :mod:`rcac_ros.params`.
 """
 
 import numpy as np
 
-from rcac_ros.nodes.guards import check_goal, DesiredLimiter, StampGate
+from rcac_ros.nodes.guards import check_goal, DesiredLimiter, SafeStop, StampGate
 from rcac_ros.nodes.realtime import RealtimeOptions
 
 
@@ -34,6 +35,7 @@ class ControllerGuards:
         self.max_state_bytes = values["max_state_bytes"]
         self.max_trajectory_bytes = values["max_trajectory_bytes"]
         self.gate = StampGate(values["stamp.max_jump"], values["stamp.restart_count"])
+        self.stop = SafeStop(values["watchdog.replan_after"])
         self.limiter = DesiredLimiter(values["desired.max_position_step"],
                                       values["desired.max_velocity_step"], h, model.n)
         self.realtime = RealtimeOptions(

@@ -15,6 +15,8 @@ unit-tested on its own (issue 9):
   or velocity limits (URDF ``<limit>``), is refused with a reason.
 * :class:`DesiredLimiter`: the desired state moves by at most a given step per control
   period, so no goal produces a jump in effort.
+* :class:`SafeStop`: the spells of safe effort (the watchdog), counted once each, and how
+  control resumes after one: a long one restarts the motion from the measured state.
 """
 
 from numba import njit
@@ -112,6 +114,65 @@ class StampGate:
         self.restarts += 1
         self._run, self._run_length = None, 0
         return self._accept(stamp, now, self.RESTART)
+
+
+# ------------------------------------------------------------------ safe stops
+class SafeStop:
+    """The spells of safe effort, and how control resumes after each.
+
+    A spell starts at the first safe effort the watchdog sends (no valid state, or no tick
+    of a frozen ``/clock``) and ends at the next control step. While the safe effort is
+    applied the arm is not controlled: it coasts (or falls). After a short spell the
+    desired motion goes on; after one of ``replan_after`` s or more it cannot be
+    followed on time any more (a time-indexed motion would ask for the whole distance
+    lost at once, far outside the range the gains were tuned for), so the motion restarts
+    from the measured state.
+
+    Parameters
+    ----------
+    replan_after : float
+        Seconds of safe effort from which the motion restarts from the measured state.
+    """
+
+    def __init__(self, replan_after=0.5):
+        self.replan_after_ns = round(replan_after * 1e9)
+        self.spells = 0             # spells started
+        self.replans = 0            # spells ended with the motion restarted
+        self.since = None           # steady ns of the first safe effort of this spell
+
+    @property
+    def active(self):
+        """Whether the safe effort is being sent (a spell has not ended)."""
+        return self.since is not None
+
+    def trip(self, now):
+        """A safe effort goes out at steady time ``now`` (ns); ``True`` if a spell starts."""
+        if self.since is not None:
+            return False
+        self.since = now
+        self.spells += 1
+        return True
+
+    def cancel(self):
+        """Forget the spell: the safe effort never acted (a lockstep simulator ignores it)."""
+        self.since = None
+
+    def resume(self, now):
+        """A control step at steady time ``now`` (ns).
+
+        Returns
+        -------
+        tuple or None
+            ``None`` when no spell was on; else ``(seconds of safe effort, replan)``,
+            ``replan`` telling that the motion must restart from the measured state.
+        """
+        if self.since is None:
+            return None
+        held = now - self.since
+        self.since = None
+        replan = held >= self.replan_after_ns
+        self.replans += replan
+        return held * 1e-9, replan
 
 
 # ------------------------------------------------------------------ sizes

@@ -20,10 +20,13 @@ flood         a third process publishes 8 MB JointStates and 5.6 MB trajectories
 
 Per case it reports the tracking RMS (the controller's ``~/tracking_error``, norm over
 the joints) against nominal, the longest gap between efforts (sender's stamps), whether
-the estimates stayed finite and bounded, and whether control recovered (the last fifth
-of the run tracks within 3x nominal; after the restart, the time to the first
-non-watchdog effort). ``--soak MINUTES`` runs the nominal case that long and reports the
-controller's memory growth (RSS) and late ticks.
+the estimates stayed finite and bounded, and whether control recovered: the last fifth
+of the run tracks within 3x nominal; after the restart, also the first non-watchdog
+effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
+non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
+3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
+``--soak MINUTES`` runs the nominal case that long and reports the controller's memory
+growth (RSS) and late ticks.
 """
 
 import json
@@ -41,7 +44,7 @@ from rcac_ros.errors import ConfigError
 
 CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood")
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
-         "memory_growth": 0.05}
+         "memory_growth": 0.05, "settle_s": 5.0}
 FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "flood.py")
 BOUND = 1e6                 # |theta_hat| above this: not bounded
 
@@ -242,6 +245,7 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
                                              stdout=subprocess.DEVNULL,
                                              stderr=subprocess.DEVNULL)
                 spin_for(third)
+                t_resume = time.monotonic_ns()
                 relay.freeze_clock = False
                 spin_for(duration - 2 * third)
             else:
@@ -282,6 +286,10 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
                    and e[1] > first]
         out["restart_recovery_s"] = (resumed[0] - first) * 1e-9 if resumed else None
         out["restart_at_s"] = (t_restart - t0) * 1e-9
+    if case == "frozen_clock":
+        resumed = [e[1] for e in probe.efforts if not e[2] and e[1] > t_resume]
+        out["control_back_s"] = (resumed[0] - t_resume) * 1e-9 if resumed else None
+        out["resume_at_s"] = (t_resume - t0) * 1e-9
     diag = probe.diagnostics.get("rcac_controller: control loop", {})
     for key in ("late_ticks", "skipped_ticks", "watchdog_trips", "rejected_messages",
                 "stamp_restarts"):
@@ -306,7 +314,24 @@ def judge(results):
         if r["case"] == "restart":
             rec = r.get("restart_recovery_s")
             r["recovered"] &= rec is not None and rec <= GOALS["restart_recovery_s"]
+        if r["case"] == "frozen_clock" and ref:
+            r["settle_s"] = settle_time(r["tracking_t_s"], r["tracking"], r["resume_at_s"],
+                                        GOALS["tracking_ratio"] * ref)
+            back = r.get("control_back_s")
+            r["recovered"] = back is not None and back <= GOALS["restart_recovery_s"] \
+                and r["settle_s"] is not None and r["settle_s"] <= GOALS["settle_s"]
     return results
+
+
+def settle_time(t_s, error, after_s, bound):
+    """Seconds from ``after_s`` until ``error`` stays within ``bound`` (``None``: never)."""
+    t, e = np.asarray(t_s), np.asarray(error)
+    keep = t >= after_s
+    t, e = t[keep], e[keep]
+    if not t.size or e[-1] > bound:
+        return None
+    above = np.flatnonzero(e > bound)
+    return 0.0 if not above.size else float(t[above[-1] + 1] - after_s)
 
 
 def format_table(results, h):
@@ -320,6 +345,11 @@ def format_table(results, h):
         if r["case"] == "restart":
             rec = r.get("restart_recovery_s")
             notes.append("control back after " + ("never" if rec is None else f"{rec:.3f} s"))
+        if r["case"] == "frozen_clock":
+            back, settle = r.get("control_back_s"), r.get("settle_s")
+            notes.append("control back after " + ("never" if back is None else f"{back:.3f} s")
+                         + "; within 3x nominal after "
+                         + ("- (not in the run)" if settle is None else f"{settle:.2f} s"))
         if r.get("dropped"):
             notes.append(f"{r['dropped']} states dropped")
         if r.get("watchdog_efforts"):
@@ -333,7 +363,9 @@ def format_table(results, h):
                      f"{r['gaps_over_2h']:>7} {'yes' if r['theta_bounded'] else 'NO':>8} "
                      f"{'yes' if r['recovered'] else 'NO':>9}  {'; '.join(notes)}")
     lines.append(f"goals: tracking <= {GOALS['tracking_ratio']:g}x nominal (drops, jitter, "
-                 f"noise); control back within {GOALS['restart_recovery_s']:g} s of a restart; "
+                 f"noise); control back within {GOALS['restart_recovery_s']:g} s of a restart "
+                 f"or of /clock resuming, tracking within 3x nominal {GOALS['settle_s']:g} s "
+                 "after it; "
                  f"no gap > {GOALS['gap_periods'] * h * 1e3:g} ms")
     return "\n".join(lines)
 

@@ -5,6 +5,7 @@ import pytest
 
 from rcac_ros.errors import ConfigError
 from rcac_ros.nodes.guards import (check_end, check_goal, DesiredLimiter, oversize, Rejected,
+                                   SafeStop,
                                    StampGate)
 from rcac_ros.nodes.paramcheck import (check_params_files, foreign_sections, load_params_file,
                                        unknown_parameters)
@@ -134,6 +135,22 @@ def test_desired_limiter_bounds_each_step_and_converges():
         out = lim(q, z, z)
         np.testing.assert_array_equal(out[0], q)
     assert lim.limited == 0
+
+
+def test_safe_stop_counts_spells_once_and_replans_after_a_long_one():
+    ms = 1_000_000
+    stop = SafeStop(replan_after=0.5)
+    assert stop.resume(0) is None               # no spell: nothing to resume
+    assert stop.trip(10 * ms) and stop.active
+    assert not any(stop.trip(t * ms) for t in range(20, 400, 10))   # the same spell
+    assert stop.resume(400 * ms) == (0.39, False)   # short: the motion goes on
+    assert not stop.active and stop.resume(401 * ms) is None
+    assert stop.trip(1000 * ms)
+    assert stop.resume(1500 * ms) == (0.5, True)    # from replan_after on: replan
+    assert stop.trip(2000 * ms)
+    stop.cancel()                               # (a lockstep simulator that waited)
+    assert stop.resume(9000 * ms) is None
+    assert (stop.spells, stop.replans) == (3, 1)
 
 
 def test_params_file_errors_are_one_line(tmp_path):

@@ -1,6 +1,11 @@
 """Issue 9.1-9.2: stamps and the watchdog, against a controller process over DDS."""
 
-from failsafe_harness import (controller, feed, first_answer, H_NS, NS, session,
+import threading
+import time
+
+import numpy as np
+
+from failsafe_harness import (controller, feed, first_answer, H_NS, NS, PAPER_Q0, session,
                               set_parameter, start, wait)
 
 
@@ -65,6 +70,68 @@ def test_timer_mode_with_frozen_sim_clock_still_commands_safely():
         # /clock and states stop: safe efforts keep coming, on the steady clock
         n = len(probe.watchdog_efforts())
         assert wait(lambda: len(probe.watchdog_efforts()) > n + 5, timeout=2.0)
+
+
+class SimClock:
+    """Publish /clock and a state every 2 ms of the steady clock, from a thread.
+
+    Like a simulator behind a clock relay: the sim time runs on; ``frozen`` stops /clock
+    (not the states); ``q`` is the position sent (the arm is not simulated).
+    """
+
+    def __init__(self, probe):
+        self.probe, self.q, self.frozen, self.t_ns = probe, PAPER_Q0.copy(), False, NS
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        nxt = time.monotonic()
+        while not self._stop.is_set():
+            self.t_ns += H_NS
+            if not self.frozen:
+                self.probe.clock(self.t_ns)
+            self.probe.state(self.t_ns, self.q)
+            nxt += H_NS / NS
+            time.sleep(max(0.0, nxt - time.monotonic()))
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(5.0)
+
+
+def test_control_resumes_from_the_measured_state_after_a_frozen_clock():
+    """/clock frozen for 1.5 s (safe effort; the unactuated arm drifts 0.5 rad), then resumed:
+    efforts come back and the motion goes on from where the arm is, not from where the time
+    -indexed motion would have been (which would ask the gains for the whole drift at once)."""
+    with session() as probe, controller(probe, "use_sim_time:=true", "mode:=timer",
+                                        "K_D:=1000.0"), SimClock(probe) as sim:
+        def efforts_since(k, watchdog):
+            with probe.lock:
+                return [e for e in probe.efforts[k:] if e[2].endswith("watchdog") == watchdog]
+
+        def desired_after(t_ns):
+            with probe.lock:
+                return [p for s, p in probe.desired if s > t_ns]
+        t_ns = sim.t_ns
+        assert wait(lambda: desired_after(t_ns), timeout=30.0)         # tracking, on /clock
+        sim.frozen = True
+        k = len(probe.efforts)
+        assert wait(lambda: len(efforts_since(k, True)) > 10)          # the safe effort
+        sim.q = PAPER_Q0 + 0.5                  # the arm, unactuated, drifted
+        wait(lambda: False, timeout=1.5)
+        k, clock_ns = len(probe.efforts), sim.t_ns
+        sim.frozen = False
+        assert wait(lambda: efforts_since(k, False), timeout=20.0)     # control back
+        assert wait(lambda: desired_after(clock_ns), timeout=20.0)
+        # the motion restarted from the measured state (the paper's: at rest, then slow)
+        np.testing.assert_allclose(desired_after(clock_ns)[0], sim.q, atol=0.02)
+        assert wait(lambda: probe.logged("the motion restarts from the measured state"))
+        assert wait(lambda: int(probe.diagnostics.get("rcac_controller: control loop", {})
+                                .get("watchdog_replans", 0)) >= 1, timeout=10.0)
 
 
 def test_use_sim_time_cannot_be_switched_at_run_time():
