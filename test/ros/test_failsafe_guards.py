@@ -5,8 +5,7 @@ import pytest
 
 from rcac_ros.errors import ConfigError
 from rcac_ros.nodes.guards import (check_end, check_goal, DesiredLimiter, oversize, Rejected,
-                                   SafeStop,
-                                   StampGate)
+                                   SafeStop, StampGate)
 from rcac_ros.nodes.paramcheck import (check_params_files, foreign_sections, load_params_file,
                                        unknown_parameters)
 
