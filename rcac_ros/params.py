@@ -235,7 +235,7 @@ CONTROLLER = _robot("controller") + (
           "~/save_estimates writes the estimates here (YAML), and the physically consistent "
           "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
-    # fail-safe (issue 9): rcac_ros.nodes.guards, rcac_ros.nodes.realtime
+    # fail-safe (issue 9): rcac_ros.nodes.guards, .state_guards, .realtime
     Param("max_state_bytes", "integer", 65_536,
           "JointStates larger than this (serialised) are refused before deserialising, "
           "bytes; 0: no cap", lo=0, hi=2 ** 31 - 1),

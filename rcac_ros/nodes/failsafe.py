@@ -2,15 +2,16 @@
 
 :class:`ControllerGuards` holds the objects the node's hooks call: the stamp gate, the size
 caps, the goal check against the model's limits, the limiter of the desired state, the
-spells of safe effort and how control resumes after them (all
-:mod:`rcac_ros.nodes.guards`) and the real-time options (:mod:`rcac_ros.nodes.realtime`).
+spells of safe effort and how control resumes after them (:mod:`rcac_ros.nodes.guards`,
+:mod:`rcac_ros.nodes.state_guards`) and the real-time options (:mod:`rcac_ros.nodes.realtime`).
 The parameters are rows of :mod:`rcac_ros.params`.
 """
 
 import numpy as np
 
-from rcac_ros.nodes.guards import check_goal, DesiredLimiter, SafeStop, StampGate
+from rcac_ros.nodes.guards import check_goal, DesiredLimiter
 from rcac_ros.nodes.realtime import RealtimeOptions
+from rcac_ros.nodes.state_guards import SafeStop, StampGate
 
 
 class ControllerGuards:

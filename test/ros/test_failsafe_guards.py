@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes.guards import (check_end, check_goal, DesiredLimiter, oversize, Rejected,
-                                   SafeStop, StampGate)
+from rcac_ros.nodes.guards import check_end, check_goal, DesiredLimiter, oversize, Rejected
 from rcac_ros.nodes.paramcheck import (check_params_files, foreign_sections, load_params_file,
                                        unknown_parameters)
+from rcac_ros.nodes.state_guards import SafeStop, StampGate
 
 MS = 1_000_000
 S = 1_000_000_000
