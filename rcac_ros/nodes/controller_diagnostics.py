@@ -10,7 +10,7 @@ def diagnostics(node):
     E = node.ctrl.E
     level = DiagnosticStatus.OK
     message = "running" if node.running else "inactive: no effort published"
-    tripped = node._watchdog or node.failsafe.stop.active
+    tripped = node.watchdog.tripped or node.failsafe.stop.active
     if node.running and tripped:
         level, message = DiagnosticStatus.WARN, \
             "watchdog: safe effort (no valid state, or no tick of /clock)"
@@ -25,7 +25,7 @@ def diagnostics(node):
         "late_ticks": node._late_ticks if node.loop is None else node.loop.late,
         "skipped_ticks": skipped,
         "watchdog": "tripped" if tripped else "ok",
-        "watchdog_trips": node._watchdog_trips,
+        "watchdog_trips": node.watchdog.trips,
         "watchdog_replans": node.failsafe.stop.replans,
         "rejected_messages": node._throttle.total,
         "stamp_restarts": node.failsafe.gate.restarts,

@@ -90,7 +90,7 @@ class ActionSink:
     def refusal(self):
         if not self.node.running:
             return "the controller is not active"
-        return None if self.node._q is not None else "no joint state received yet"
+        return None if self.node.states.q is not None else "no joint state received yet"
 
     def now_ns(self):
         return self.node._time_now_ns()

@@ -446,7 +446,7 @@ def _closed_loop(via, steps, **tolerances):
         assert node._motion.active is not None
         for k in range(5, steps):
             loop.step(k)
-        assert node._watchdog_trips == 0, "the watchdog tripped: the loop is not deterministic"
+        assert node.watchdog.trips == 0, "the watchdog tripped: the loop is not deterministic"
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)

@@ -157,8 +157,8 @@ def test_lockstep_watchdog_trip_restarts_the_filters_only_after_a_lost_state():
             answers[k] = probe.efforts[-1][1]
 
     def stall():
-        trips = node._watchdog_trips
-        assert spin_until(ex, lambda: node._watchdog_trips > trips)
+        trips = node.watchdog.trips
+        assert spin_until(ex, lambda: node.watchdog.trips > trips)
 
     with ros_context() as (ctx, ex):
         node, probe = make(ctx, ex, state_timeout=0.05)
@@ -194,7 +194,7 @@ def test_watchdog_default_is_zero_in_timer_mode():
         probe.state(0, PAPER_Q0, np.zeros(7))
         # timer mode: efforts (untagged) follow the state at the rate
         assert spin_until(ex, lambda: any(lab == "joint" for lab, _ in probe.efforts))
-        assert spin_until(ex, lambda: node._watchdog and node._watchdog_trips == 1)
+        assert spin_until(ex, lambda: node.watchdog.tripped and node.watchdog.trips == 1)
         assert spin_until(ex, lambda: probe.efforts[-1][0].endswith("watchdog"))
         n_before = len(probe.efforts)
         assert spin_until(ex, lambda: len(probe.efforts) > n_before + 3)
@@ -243,7 +243,7 @@ def test_velocity_estimate_without_velocities():
             probe.state(k * H_NS, PAPER_Q0 + 0.1 * np.sin(2.0 * t))
             assert spin_until(ex, lambda: answered(probe, k * H_NS))
             if t > 0.2:
-                worst = max(worst, np.max(np.abs(node._qd - 0.2 * np.cos(2.0 * t))))
+                worst = max(worst, np.max(np.abs(node.states.qd - 0.2 * np.cos(2.0 * t))))
         # first-order lag at 50 Hz and the half-step delay of the difference: ~1e-3 rad/s
         assert worst < 5e-3
 

@@ -125,6 +125,24 @@ def test_tools_that_must_stay_apart():
         assert "rcac_ros.tools.demo" not in graph()[mod]
 
 
+#: the most lines a node module may have (issue 11: each node file < 300 lines)
+NODE_FILE_LINES = 300
+
+
+def test_node_files_are_short():
+    """Every module of rcac_ros/nodes stays under NODE_FILE_LINES lines: split it along a
+    concern (controller_input, controller_watchdog, ...) when it grows."""
+    folder = os.path.join(PACKAGE, "nodes")
+    sizes = {}
+    for name in sorted(os.listdir(folder)):
+        if name.endswith(".py"):
+            with open(os.path.join(folder, name), encoding="utf-8") as f:
+                sizes[name] = sum(1 for _ in f)
+    assert "controller_node.py" in sizes and len(sizes) > 10     # the folder was found
+    long = {name: n for name, n in sizes.items() if n >= NODE_FILE_LINES}
+    assert not long, f"node modules of {NODE_FILE_LINES} lines or more: {long}"
+
+
 def test_core_never_imports_rclpy():
     mods = modules()
     bad = [f"{m} imports {t}" for m in mods if part(m) == "core"
