@@ -359,9 +359,11 @@ def is_paper_law(chan, scal):
             and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0)
 
 
-@njit(cache=True)
+@njit(RCAC_SIGNATURE, cache=True)
 def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+
+    The controller calls it directly for that law: one compiled call, as the kernel's.
 
     The same equations, in the same floating-point order, as the general kernel with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
@@ -372,6 +374,10 @@ def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
     work = np.empty(n * 41 + 6, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
@@ -497,12 +503,12 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    if is_paper_law(chan, scal):
+        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    if is_paper_law(chan, scal):
-        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
     m = chan.shape[0]
     work = np.empty(n * 41 + 84 + m * (m + 29), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
@@ -655,7 +661,14 @@ class RecursiveCompositeController:
         self._chan = np.zeros((m, CHAN_COLS))
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
+        self._choose_kernel()
         self.reset(theta_hat0)
+
+    def _choose_kernel(self):
+        """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
+        through :func:`rcac_step_kernel`), else the general kernel."""
+        self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
+            rcac_step_kernel
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                    theta_bounds):
@@ -754,11 +767,11 @@ class RecursiveCompositeController:
             If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         try:
-            tau = rcac_step_kernel(self._data, self._filt, self._chan, q, qd, q_d, qd_d, qdd_d)
+            tau = self._kernel(self._data, self._filt, self._chan, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = rcac_step_kernel(self._data, self._filt, self._chan, *args)
+            tau = self._kernel(self._data, self._filt, self._chan, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
@@ -772,6 +785,7 @@ class RecursiveCompositeController:
         """
         self._scal[I_FROZEN] = 0.0 if enabled else 1.0
         self.adapting = bool(enabled)
+        self._choose_kernel()
 
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.
