@@ -52,8 +52,7 @@ from .least_squares import (apply_factored, bounded_gain_forgetting, initial_fac
 from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
-RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
-                  f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
 UPDATES = ("implicit", "explicit")
 AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
 AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -360,7 +359,7 @@ def is_paper_law(chan, scal):
 
 
 @njit(RCAC_SIGNATURE, cache=True)
-def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
 
     The controller calls it directly for that law: one compiled call, as the kernel's.
@@ -374,6 +373,7 @@ def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    chan = filt[:, n]
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
@@ -494,7 +494,7 @@ def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
 
 
 @njit(RCAC_SIGNATURE, cache=True)
-def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
 
     ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`.
@@ -503,8 +503,9 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    chan = filt[:, n]
     if is_paper_law(chan, scal):
-        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
+        return paper_step(data, filt, q, qd, q_d, qd_d, qdd_d)
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
@@ -657,8 +658,9 @@ class RecursiveCompositeController:
         self._configure(update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                         theta_bounds)
         m = len(self.channels)
-        self._filt = np.zeros((m, n, FILT_COLS))
-        self._chan = np.zeros((m, CHAN_COLS))
+        self._buf = np.zeros((m, n + 1, FILT_COLS))    # the kernel's second argument:
+        self._filt = self._buf[:, :n]                  # filt[c, :n], and chan as row n
+        self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
         self._choose_kernel()
@@ -767,11 +769,11 @@ class RecursiveCompositeController:
             If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         try:
-            tau = self._kernel(self._data, self._filt, self._chan, q, qd, q_d, qd_d, qdd_d)
+            tau = self._kernel(self._data, self._buf, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = self._kernel(self._data, self._filt, self._chan, *args)
+            tau = self._kernel(self._data, self._buf, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
