@@ -392,7 +392,19 @@ def test_channels_reach_the_controller_when_given(tmp_path, capsys):
     if "channels" in inspect.signature(RecursiveCompositeController).parameters:
         assert code == 0
         assert cp.setup(c, 1)[1].channels == tuple(range(1, 8))
-        assert rows(tmp_path / "o" / "results.parquet")["channels"].tolist() == ['[1]', '"all"']
+        df = rows(tmp_path / "o" / "results.parquet")
+        assert df["channels"].tolist() == ['[1]', '"all"']
+        # the report takes each channel set as a law of its own (one run each: the median is
+        # that run's value)
+        capsys.readouterr()
+        assert cli.main(["sweep", "report", str(tmp_path / "o")]) == 0
+        text = capsys.readouterr().out
+        for ch, rms in zip(df["channels"], df["rms_tracking_error"]):
+            label = f"composite {ch}"
+            assert f"  {label} " in text.split("metric distributions")[0]   # failure rate
+            line = next(x for x in text.splitlines()
+                        if x.split()[:1] == ["rms_tracking_error"] and f" {label} " in x)
+            assert float(line.split(label)[1].split()[0]) == pytest.approx(rms, rel=1e-3)
     else:                                   # a controller without channels: one clear line
         assert code == 2
         assert capsys.readouterr().err.startswith("rcac sweep: error: channels: this "
