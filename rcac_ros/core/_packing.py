@@ -1,7 +1,8 @@
 """The named layout of the arrays the step kernels read, and the packing of the gains into it.
 
-A step kernel takes few arguments (each costs a dispatch check), so the controllers pack
-their constants, state and scalars into three float64 arrays:
+A step kernel takes few arguments (each costs a dispatch check and a reference count), so
+the controllers pack their constants, state and scalars into two float64 arrays: ``data``,
+and ``filt`` with ``chan`` as its row n, ``(m, n + 1, FILT_COLS)``:
 
 ``data`` (n + 1, LINK_COLS)
     row ``i < n``: link i's constants (``CONST``), then its state (``STATE``);
@@ -9,7 +10,7 @@ their constants, state and scalars into three float64 arrays:
 ``filt`` (m, n, FILT_COLS)
     channel c, link j: the filters of eqs 21-23 (``phi^f``, ``psi^f``, the previous ``phi``,
     ``psi``), the filtered regressor row ``W_cj`` and ``U_cj = P_j W_cj^T`` (eq 24).
-``chan`` (m, CHAN_COLS)
+``chan`` (m, CHAN_COLS): ``filt[:, n, :CHAN_COLS]``
     channel c: its joint (0-based, :data:`POWER` for the energy channel), ``y_c``, ``E_c``,
     whether it adapts this step (dead zone), and its axis ``a_j``, ``adot_j`` while the
     forward pass runs (doc/design.md §4).

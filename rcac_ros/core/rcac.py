@@ -52,8 +52,7 @@ from .least_squares import (apply_factored, bounded_gain_forgetting, initial_fac
 from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
-RCAC_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
-                  f"{VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
 UPDATES = ("implicit", "explicit")
 AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
 AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -76,7 +75,7 @@ def start_channels(chan, state, scal, q, first):
 
 
 @njit(cache=True, inline="always")
-def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
+def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
     """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i`` (eqs 22-23).
 
     A joint channel k carries its axis in ``chan[c]``: ``a_k = z6``, ``adot_k = 0``, then
@@ -84,6 +83,8 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
     filters use a first-order hold on the samples and start at ``phi(0)`` and 0, so that E
     is exact from the first step. The channel loop calls no helper taking an array (each
     would cost atomic reference counts per channel and link): it updates them in place.
+    ``phi_ci``, ``psi_ci`` go through the scratch ``pp`` (26): the filter loop then reads an
+    array, not a 13-tuple at a varying index (a switch per read).
     """
     fe, fb0, fb1, lam = coef
     px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
@@ -106,10 +107,14 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first):
                 chan[c, CH_A + r] = A[r]
                 chan[c, CH_AD + r] = Ad[r]
             phi, psi = axis_terms(A, Ad, V, g)
+        (pp[0], pp[1], pp[2], pp[3], pp[4], pp[5], pp[6], pp[7], pp[8], pp[9], pp[10],
+         pp[11], pp[12]) = phi
+        (pp[13], pp[14], pp[15], pp[16], pp[17], pp[18], pp[19], pp[20], pp[21], pp[22],
+         pp[23], pp[24], pp[25]) = psi
         E = chan[c, CH_E]
         for k in range(13):
-            ph = phi[k]
-            ps = psi[k]
+            ph = pp[k]
+            ps = pp[13 + k]
             if first:
                 filt[c, i, PHF + k] = ph
                 filt[c, i, PSF + k] = 0.0
@@ -216,11 +221,34 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
 
 
 @njit(cache=True, inline="always")
-def implicit_solve(chan, filt, state, R, A, z, idx, scal):
+def sorted_active(chan, order, start):
+    """The active channels in ``order[:na]``, sorted by their first link (``start[:na]``).
+
+    Insertion sort, stable: O(m) for channels already in order (``"all"``). At link i the
+    channels that reach it are then a prefix of ``order``. Returns ``na``.
+    """
+    na = 0
+    for c in range(chan.shape[0]):
+        if chan[c, CH_ACTIVE] == 0.0:
+            continue
+        s = channel_start(chan[c, CH_JOINT])
+        j = na
+        while j > 0 and start[j - 1] > s:
+            order[j] = order[j - 1]
+            start[j] = start[j - 1]
+            j -= 1
+        order[j] = c
+        start[j] = s
+        na += 1
+    return na
+
+
+@njit(cache=True, inline="always")
+def implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal):
     """Eq 24, step 2: ``(I + h gamma U W) theta+ = R`` by Woodbury over the active channels.
 
     ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R``; for one channel Sherman-Morrison.
-    ``A`` (m, m), ``z`` and ``idx`` (m) are scratch.
+    ``A`` (m * m), ``z``, ``order``, ``start`` (m) and ``Wt``, ``Ut`` (13, m) are scratch.
     """
     n, m = R.shape[0], chan.shape[0]
     hg = scal[I_H] * scal[I_GAMMA]
@@ -248,56 +276,56 @@ def implicit_solve(chan, filt, state, R, A, z, idx, scal):
             state[i, TH + k] = R[i, k]
     if na == 0:
         return
-    # A = sum_i W_i U_i^T link by link (the m rows of W_i and U_i are at hand), lower
-    # triangle only: A is symmetric and the Cholesky factorisation reads no more. An
-    # inactive channel keeps a zero row and column, and a unit diagonal: z_c = 0.
-    for a in range(m):
+    na = sorted_active(chan, order, start)
+    # A = sum_i W_i U_i^T and z = sum_i W_i R_i, link by link, in the sorted order of the
+    # channels: the L channels that reach link i are the first L. Their rows W_i, U_i are
+    # gathered as columns of Wt, Ut (13 x L), so that the rank-13 update of A's lower
+    # triangle (A is symmetric; the Cholesky factorisation reads no more) runs its
+    # innermost loop over contiguous channels (SIMD).
+    Aa = A[:na * na].reshape((na, na))
+    for a in range(na):
         z[a] = 0.0
-        for b in range(m):
-            A[a, b] = 0.0
-    for i in range(n):
-        na = 0                                   # the channels that reach link i, active
-        for c in range(m):
-            if chan[c, CH_ACTIVE] != 0.0 and i >= channel_start(chan[c, CH_JOINT]):
-                idx[na] = c
-                na += 1
-        for ja in range(na):
-            a = int(idx[ja])
-            acc = z[a]
-            for k in range(13):
-                acc += filt[a, i, WR + k] * R[i, k]
-            z[a] = acc
-            jb = 0
-            while jb + 4 <= ja + 1:              # four entries at once: four sums in flight
-                b0, b1, b2, b3 = int(idx[jb]), int(idx[jb + 1]), int(idx[jb + 2]), \
-                    int(idx[jb + 3])
-                acc0, acc1, acc2, acc3 = A[a, b0], A[a, b1], A[a, b2], A[a, b3]
-                for k in range(13):
-                    w = filt[a, i, WR + k]
-                    acc0 += w * filt[b0, i, UR + k]
-                    acc1 += w * filt[b1, i, UR + k]
-                    acc2 += w * filt[b2, i, UR + k]
-                    acc3 += w * filt[b3, i, UR + k]
-                A[a, b0], A[a, b1], A[a, b2], A[a, b3] = acc0, acc1, acc2, acc3
-                jb += 4
-            for j in range(jb, ja + 1):
-                b0 = int(idx[j])
-                acc0 = A[a, b0]
-                for k in range(13):
-                    acc0 += filt[a, i, WR + k] * filt[b0, i, UR + k]
-                A[a, b0] = acc0
-    for a in range(m):
         for b in range(a + 1):
-            A[a, b] *= hg
-        A[a, a] += 1.0
-    cholesky_solve(A, z)
+            Aa[a, b] = 0.0
+    L = 0
     for i in range(n):
-        for a in range(m):
-            if chan[a, CH_ACTIVE] == 0.0 or i < channel_start(chan[a, CH_JOINT]):
-                continue
-            za = hg * z[a]
+        while L < na and start[L] <= i:
+            L += 1
+        for j in range(L):
+            c = int(order[j])
             for k in range(13):
-                state[i, TH + k] -= za * filt[a, i, UR + k]
+                Wt[k, j] = filt[c, i, WR + k]
+                Ut[k, j] = filt[c, i, UR + k]
+        for k in range(13):
+            r = R[i, k]
+            for j in range(L):
+                z[j] += Wt[k, j] * r
+        for a in range(L):
+            w0, w1, w2, w3, w4, w5, w6 = Wt[0, a], Wt[1, a], Wt[2, a], Wt[3, a], Wt[4, a], \
+                Wt[5, a], Wt[6, a]
+            w7, w8, w9, w10, w11, w12 = Wt[7, a], Wt[8, a], Wt[9, a], Wt[10, a], Wt[11, a], \
+                Wt[12, a]
+            for b in range(a + 1):
+                Aa[a, b] += (w0 * Ut[0, b] + w1 * Ut[1, b] + w2 * Ut[2, b] + w3 * Ut[3, b]
+                             + w4 * Ut[4, b] + w5 * Ut[5, b] + w6 * Ut[6, b] + w7 * Ut[7, b]
+                             + w8 * Ut[8, b] + w9 * Ut[9, b] + w10 * Ut[10, b]
+                             + w11 * Ut[11, b] + w12 * Ut[12, b])
+    for a in range(na):
+        for b in range(a + 1):
+            Aa[a, b] *= hg
+        Aa[a, a] += 1.0
+    zz = z[:na]
+    cholesky_solve(Aa, zz)
+    # theta+_i = R_i - h gamma sum_c z_c U_ci
+    L = 0
+    for i in range(n):
+        while L < na and start[L] <= i:
+            L += 1
+        for j in range(L):
+            c = int(order[j])
+            zc = hg * z[j]
+            for k in range(13):
+                state[i, TH + k] -= zc * filt[c, i, UR + k]
 
 
 @njit(cache=True, inline="always")
@@ -330,9 +358,11 @@ def is_paper_law(chan, scal):
             and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0)
 
 
-@njit(cache=True)
-def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+@njit(RCAC_SIGNATURE, cache=True)
+def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+
+    The controller calls it directly for that law: one compiled call, as the kernel's.
 
     The same equations, in the same floating-point order, as the general kernel with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
@@ -343,6 +373,11 @@ def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    chan = filt[:, n]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
     work = np.empty(n * 41 + 6, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
@@ -459,7 +494,7 @@ def paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
 
 
 @njit(RCAC_SIGNATURE, cache=True)
-def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
+def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
 
     ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`.
@@ -468,14 +503,15 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     const = data[:n, :CONST_COLS]
     state = data[:n, CONST_COLS:]
     scal = data[n]
+    chan = filt[:, n]
+    if is_paper_law(chan, scal):
+        return paper_step(data, filt, q, qd, q_d, qd_d, qdd_d)
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    if is_paper_law(chan, scal):
-        return paper_step(data, filt, chan, q, qd, q_d, qd_d, qdd_d)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 84 + m * (m + 2), q.dtype)
+    work = np.empty(n * 41 + 84 + m * (m + 29), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -483,9 +519,14 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
         work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
-    A = work[41 * n + 84:41 * n + 84 + m * m].reshape((m, m))   # the implicit solve's
-    z = work[41 * n + 84 + m * m:41 * n + 84 + m * (m + 1)]     # m x m system
-    idx = work[41 * n + 84 + m * (m + 1):41 * n + 84 + m * (m + 2)]
+    pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
+    o = 41 * n + 84                               # the implicit solve's scratch:
+    A = work[o:o + m * m]                         # the m x m system (flat),
+    z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
+    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels by first link,
+    start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
+    Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at link i
+    Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # as columns
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -512,7 +553,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
         regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
                       dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                       wx, wy, wz, gx, gy, gz)
-        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first)
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
     close_channels(chan, scal)
     frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
     tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
@@ -533,7 +574,7 @@ def rcac_step_kernel(data, filt, chan, q, qd, q_d, qd_d, qdd_d):
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve(chan, filt, state, R, A, z, idx, scal)
+        implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
     else:
         for i in range(n):
             for k in range(13):
@@ -617,11 +658,19 @@ class RecursiveCompositeController:
         self._configure(update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                         theta_bounds)
         m = len(self.channels)
-        self._filt = np.zeros((m, n, FILT_COLS))
-        self._chan = np.zeros((m, CHAN_COLS))
+        self._buf = np.zeros((m, n + 1, FILT_COLS))    # the kernel's second argument:
+        self._filt = self._buf[:, :n]                  # filt[c, :n], and chan as row n
+        self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
+        self._choose_kernel()
         self.reset(theta_hat0)
+
+    def _choose_kernel(self):
+        """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
+        through :func:`rcac_step_kernel`), else the general kernel."""
+        self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
+            rcac_step_kernel
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                    theta_bounds):
@@ -720,11 +769,11 @@ class RecursiveCompositeController:
             If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
         """
         try:
-            tau = rcac_step_kernel(self._data, self._filt, self._chan, q, qd, q_d, qd_d, qdd_d)
+            tau = self._kernel(self._data, self._buf, q, qd, q_d, qd_d, qdd_d)
         except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = rcac_step_kernel(self._data, self._filt, self._chan, *args)
+            tau = self._kernel(self._data, self._buf, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         return tau
@@ -738,6 +787,7 @@ class RecursiveCompositeController:
         """
         self._scal[I_FROZEN] = 0.0 if enabled else 1.0
         self.adapting = bool(enabled)
+        self._choose_kernel()
 
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.

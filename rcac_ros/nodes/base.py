@@ -28,7 +28,7 @@ from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes import paramcheck
+from rcac_ros.nodes import gcwatch, paramcheck
 from rcac_ros.nodes.description import wait_for_description
 from rcac_ros.nodes.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.pacing import spin_node_once
@@ -272,6 +272,8 @@ def run(node_factory, prog, args=None):
     code = 0
     try:
         node = node_factory()
+        gcwatch.freeze_startup()            # after the JIT warm-up: see nodes/gcwatch.py
+        gcwatch.WATCH.install()
         rt = _realtime(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
@@ -289,6 +291,7 @@ def run(node_factory, prog, args=None):
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        gcwatch.WATCH.close()
         if rt is not None:
             rt.release()
         if node is not None:

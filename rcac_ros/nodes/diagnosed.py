@@ -9,7 +9,7 @@ from rcl_interfaces.msg import SetParametersResult
 
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes import paramcheck
+from rcac_ros.nodes import gcwatch, paramcheck
 
 
 class RcacNodeMixin:
@@ -56,7 +56,10 @@ class RcacNodeMixin:
         self._pub_diag.publish(msg)
 
     def status(self, level, name, message, values):
-        """A DiagnosticStatus of this node from a ``{key: value}`` dict."""
+        """A DiagnosticStatus of this node from a ``{key: value}`` dict (plus the garbage
+        collector's pauses when :func:`rcac_ros.nodes.base.run` runs the node)."""
+        if gcwatch.WATCH.active:
+            values = dict(values, **gcwatch.WATCH.values())
         return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
                                 hardware_id=self.model.name,
                                 values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

@@ -80,6 +80,30 @@ class DeadlineLoop:
             return None
         return self.next_ns - self.clock()
 
+    def lock_phase(self, event_ns, offset_ns, gain=0.25):
+        """Move the next deadline toward ``event_ns + offset_ns``, modulo the period.
+
+        A first-order phase-locked loop: with ``e`` the phase error of the next deadline
+        against the target, wrapped into ``[-period/2, period/2)``, the deadline moves by
+        ``-gain e``, at most an eighth of a period per call, so the error decays as
+        ``(1 - gain)^k`` over ``k`` calls and no period shrinks or grows by more than 12.5 %.
+        Timer mode calls it at each tick with the steady time of the newest state: the
+        ticks then come ``offset_ns`` after the states arrive, whatever the phase the two
+        loops started with, and follow a driver whose clock drifts.
+
+        Returns
+        -------
+        int
+            The phase error before the move, ns (0 if stopped).
+        """
+        if self.next_ns is None:
+            return 0
+        half = self.period_ns // 2
+        err = (self.next_ns - event_ns - offset_ns + half) % self.period_ns - half
+        move = max(-self.period_ns // 8, min(self.period_ns // 8, round(gain * err)))
+        self.next_ns -= move
+        return err
+
     def spin_once(self, executor, idle=0.05):
         """Tick if due, else serve the executor until the next deadline (``idle`` s if stopped).
 

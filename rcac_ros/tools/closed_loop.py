@@ -15,11 +15,16 @@ effort limit), with what a Monte Carlo campaign varies:
 
 It returns the time series and :func:`run_metrics` summarises them. A run that
 produces NaN/Inf, or whose tracking error exceeds ``error_limit``, stops there and
-is marked diverged (with ``strict``, NaN/Inf raises instead). ``rcac experiment``,
-``rcac payload-demo``, ``rcac compare`` and ``rcac sweep`` all run this loop.
+is marked diverged (with ``strict``, NaN/Inf raises instead); ``check_estimates``
+also stops it at the first period whose estimates or prediction errors are not
+finite. An ``observer`` sees the controller after every period (what a caller
+records beyond the time series), and the time spent in ``controller.step`` alone is
+returned. ``rcac experiment``, ``rcac payload-demo``, ``rcac compare`` and
+``rcac sweep`` all run this loop.
 """
 
 import math
+import time
 from collections import deque
 
 import numpy as np
@@ -88,8 +93,8 @@ def perturbed_estimates(base, scale, relative_error, rng):
 
 def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                 noise_q=0.0, noise_qd=0.0, delay=0, rng=None, theta_hat0=None, events=(),
-                substeps=1, error_limit=math.inf, strict=False, progress=None,
-                progress_every=200):
+                substeps=1, error_limit=math.inf, strict=False, check_estimates=False,
+                observer=None, progress=None, progress_every=200):
     """Close the loop for ``duration`` s at the controller's period ``h``.
 
     Per period ``k``: the desired motion at ``t = k h``, the (noisy, delayed) measured
@@ -125,6 +130,15 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     strict : bool
         If True, NaN/Inf does not end the run: the error the controller or the plant raises
         when it meets them propagates (the command-line tools report it in one line).
+    check_estimates : bool
+        If True, every period ends with a check that ``controller.theta_hat`` and
+        ``controller.E`` are finite; the first period where they are not ends the run
+        (status ``"nonfinite"``; with ``strict``, an :class:`RcacError` is raised). Without
+        it, estimates that blow up end the run only when they reach the torque.
+    observer : callable, optional
+        ``observer(k, controller, sim)``, called after every period ``k`` that completed
+        (controller and plant stepped, ``set_applied_torque`` done, estimates checked if
+        asked), with the :class:`~rcac_ros.core.Simulator` of the true arm then in use.
     progress : str, optional
         Label of a progress line (none if None).
     progress_every : int
@@ -137,7 +151,9 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
         ``theta_hat`` (T, n, 13) (before each step's update), ``E`` (T,) (or (T, m) for a
         controller with m prediction channels), ``status``
         (``"ok"``, ``"nonfinite"`` or ``"error_limit"``), ``plant`` (the final true model),
-        ``effort_limit`` (n,). ``T`` is shorter than planned when the run diverged.
+        ``effort_limit`` (n,), ``step_time`` (s of wall time spent in ``controller.step``
+        over the run, the rest of the loop excluded). ``T`` is shorter than planned when
+        the run diverged.
     """
     from rcac_ros.tools.progress import Progress
 
@@ -162,7 +178,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                tau=np.empty((steps, n)), applied=np.empty((steps, n)),
                theta_hat=np.empty((steps, n, 13)),
                E=np.empty((steps,) + np.shape(controller.E)))   # (T,) or (T, channels)
-    status, done = "ok", steps
+    status, done, spent = "ok", steps, 0.0
     with np.errstate(all="ignore"), Progress(steps, progress or "",
                                              enabled=progress is not None) as bar:
         for k in range(steps):
@@ -180,7 +196,9 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
             out["theta_hat"][k] = controller.theta_hat
             out["q"][k], out["qd"][k], out["q_d"][k] = sim.q, sim.qd, q_d
             try:
+                clock = time.perf_counter()
                 tau = controller.step(q_m, qd_m, q_d, qd_d, qdd_d)
+                spent += time.perf_counter() - clock
                 out["tau"][k] = tau
                 out["E"][k] = controller.E
                 sim.step(tau)
@@ -193,6 +211,14 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                 for key in ("tau", "applied", "E"):
                     out[key][k] = np.nan
                 break
+            if check_estimates and not (np.all(np.isfinite(controller.theta_hat))
+                                        and np.all(np.isfinite(controller.E))):
+                if strict:
+                    raise RcacError(f"theta_hat or E is not finite after t = {t:.6g} s")
+                status, done = "nonfinite", k + 1
+                break
+            if observer is not None:
+                observer(k, controller, sim)
             if k % CHECK_EVERY == CHECK_EVERY - 1 or k == steps - 1:
                 start = max(0, k + 1 - CHECK_EVERY)
                 worst = np.max(np.abs(out["q"][start:k + 1] - out["q_d"][start:k + 1]))
@@ -206,7 +232,8 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                 bar.update(k)
     if done < steps:
         out = {key: v[:done] for key, v in out.items()}
-    out.update(status=status, plant=sim.model, effort_limit=sim.effort_limit)
+    out.update(status=status, plant=sim.model, effort_limit=sim.effort_limit,
+               step_time=spent)
     return out
 
 

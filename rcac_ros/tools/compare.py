@@ -21,18 +21,17 @@ final estimates, :mod:`rcac_ros.core.identifiability`).
 import argparse
 import json
 import os
-import time
 
 import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           Simulator, SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.errors import RcacError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_float
-from rcac_ros.tools.progress import Progress
+from rcac_ros.tools.closed_loop import closed_loop
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -103,50 +102,41 @@ def make_controller(scenario, law, laws=None):
 
 
 def run_law(scenario, controller, duration, progress=None):
-    """Close the loop; returns the time series, the step time and the excitation."""
-    model, h = scenario.model, controller.h
-    steps = int(round(duration / h)) + 1
-    n = model.n
-    out = dict(t=np.arange(steps) * h, e=np.full((steps, n), np.nan),
-               theta_error=np.full(steps, np.nan), mass_last=np.full(steps, np.nan),
-               E=np.full(steps, np.nan), diverged_at=None)
-    exc = Excitation(n, h) if hasattr(controller, "channels") else None
-    sim = Simulator(model, dt=h, q0=scenario.q0, qd0=scenario.qd0)
-    truth = model.theta()
-    attached = scenario.loaded is None
-    spent = 0.0
-    with Progress(steps, progress or "", enabled=progress is not None) as bar:
-        for k in range(steps):
-            t = k * h
-            if not attached and t >= scenario.jump - 1e-12:
-                plant = Simulator(scenario.loaded, dt=h)
-                plant.reset(sim.q, sim.qd, t=sim.t)
-                sim, attached, truth = plant, True, scenario.loaded.theta()
-            q_d, qd_d, qdd_d = scenario.trajectory(t)
-            out["e"][k] = sim.q - q_d
-            try:
-                t0 = time.perf_counter()
-                tau = controller.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
-                spent += time.perf_counter() - t0
-                sim.step(tau)
-                controller.set_applied_torque(sim.applied)
-                theta, E = controller.theta_hat, controller.E
-                if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(E))):
-                    raise FloatingPointError
-                if exc is not None:
-                    exc.add(controller.W)
-            except (RcacError, FloatingPointError):   # NaN/Inf state or torque: diverged
-                out["diverged_at"] = t
-                break
-            out["theta_error"][k] = np.linalg.norm(theta - truth)
-            out["mass_last"][k] = theta[-1, 0]
-            out["E"][k] = np.max(np.abs(E))
-            if k % 250 == 0:
-                bar.update(k)
-    out["us_per_step"] = spent / max(1, k + 1) * 1e6
-    out["excitation"] = exc
-    out["theta_end"] = controller.theta_hat
-    return out
+    """Close the loop (:func:`~rcac_ros.tools.closed_loop.closed_loop`) on the scenario.
+
+    The run stops at the first period whose estimates or prediction errors are not finite
+    (``check_estimates``). Returns the time series of the table and the figure, one row
+    a period and each taken after that period's update: ``t``, ``e`` (``q - q_d``),
+    ``theta_error`` (``||theta_hat - theta||``, the true ``theta`` of the plant then in
+    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``); a
+    diverged run's last row has no estimates (NaN) and ``diverged_at`` is its time.
+    With them ``us_per_step`` (the controller's step alone), ``excitation`` (the
+    accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
+    """
+    exc = Excitation(scenario.model.n, controller.h) if hasattr(controller, "channels") else None
+    events = () if scenario.loaded is None else ((scenario.jump, scenario.loaded),)
+    run = closed_loop(controller, scenario.trajectory, duration, q0=scenario.q0,
+                      qd0=scenario.qd0, events=events, check_estimates=True,
+                      observer=None if exc is None else lambda k, ctrl, sim: exc.add(ctrl.W),
+                      progress=progress, progress_every=250)
+    t = run["t"]
+    theta_end = controller.theta_hat
+    # the estimates after period k are those before period k + 1, or the final ones
+    theta = np.concatenate([run["theta_hat"][1:], theta_end[None]])
+    E = np.max(np.abs(run["E"].reshape(len(t), -1)), axis=1)
+    diverged = run["status"] != "ok"
+    if diverged:                          # the last period's estimates are not finite
+        theta[-1], E[-1] = np.nan, np.nan
+    truth = np.broadcast_to(scenario.model.theta(), theta.shape).copy()
+    if scenario.loaded is not None:                  # closed_loop's event rule
+        truth[t >= scenario.jump - 1e-12] = scenario.theta_end
+    with np.errstate(all="ignore"):                  # a diverged law's huge estimates
+        theta_error = np.array([np.linalg.norm(d) for d in theta - truth])
+    return dict(t=t, e=run["q"] - run["q_d"], theta_error=theta_error,
+                mass_last=theta[:, -1, 0], E=E,
+                diverged_at=float(t[-1]) if diverged else None,
+                us_per_step=run["step_time"] / len(t) * 1e6, excitation=exc,
+                theta_end=theta_end)
 
 
 def metrics(run, scenario, last_seconds=5.0):

@@ -98,6 +98,7 @@ def _count_in_process(kind, n_links):
     # the controllers call their kernel by its module name: count through the public step
     if KINDS[kind] is not None:
         rcac.rcac_step_kernel = _counting(rcac.rcac_step_kernel)
+        rcac.paper_step = _counting(rcac.paper_step)
         c = rcac.RecursiveCompositeController(model, theta_hat0=theta_hat0, **KINDS[kind])
     else:
         slotine_li.slotine_li_step_kernel = _counting(slotine_li.slotine_li_step_kernel)

@@ -119,7 +119,8 @@ def analyse(probe, window_s, rate):
     for node, name, keys in (
             ("controller", f"{topics.CONTROLLER_NODE}: control loop",
              ("deadline_misses", "late_ticks", "skipped_ticks", "compute_overruns",
-              "compute_time_p50_us", "compute_time_p99_us", "watchdog_trips")),
+              "compute_time_p50_us", "compute_time_p99_us", "watchdog_trips",
+              "gc_pause_max_ms", "gc_full_collections")),
             ("simulator", f"{topics.SIMULATOR_NODE}: simulation",
              ("late_ticks", "skipped_ticks"))):
         status = probe.diagnostics.get(name, {})
@@ -173,6 +174,10 @@ def format_table(r):
         rows.append(("controller compute p50 / p99 (us)",
                      f"{r['controller_compute_time_p50_us']:.0f} / "
                      f"{r['controller_compute_time_p99_us']:.0f}", ""))
+    if "controller_gc_pause_max_ms" in r:
+        rows.append(("controller garbage collections: full / longest pause (ms)",
+                     f"{r['controller_gc_full_collections']:.0f} / "
+                     f"{r['controller_gc_pause_max_ms']:.3f}", ""))
     w = max(len(a) for a, _, _ in rows)
     mode = r.get("controller_mode", "timer")
     mode = f"timer, {r['nominal_rate_hz']:g} Hz" if mode == "timer" else "on each state"

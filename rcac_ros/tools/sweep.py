@@ -419,11 +419,15 @@ def report(path, worst=10, plot=None):
     div = df["diverged"].astype(bool)
     print(f"campaign {meta['campaign']['name']!r}: {n} of {expected} runs, "
           f"{int(div.sum())} diverged ({100.0 * div.mean():.1f} %)")
+    if "channels" in varied:      # a law is a law and its channel set
+        channels = df["channels"].fillna("").astype(str)
+        df["law"] = np.where(channels != "", df["law"] + " " + channels, df["law"])
     laws = sorted(df["law"].unique())
+    w = max(11, *(len(law) for law in laws))
     print("\nfailure rate per law:")
     for law in laws:
         sel = df["law"] == law
-        print(f"  {law:11s} {int(div[sel].sum()):5d} / {int(sel.sum()):5d}  "
+        print(f"  {law:{w}s} {int(div[sel].sum()):5d} / {int(sel.sum()):5d}  "
               f"({100.0 * div[sel].mean():.1f} %)")
     print("\nmetric distributions per law (median [5 %, 95 %] max; runs that did not "
           "diverge):")
@@ -432,7 +436,7 @@ def report(path, worst=10, plot=None):
             v = df.loc[(df["law"] == law) & ~div, m]
             if len(v):
                 q = v.quantile([0.5, 0.05, 0.95])
-                print(f"  {m:27s} {law:11s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
+                print(f"  {m:27s} {law:{w}s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
                       f"{q.iloc[2]:10.4g}] {v.max():10.4g}")
     cols = ["run", "law", "status", "t_end", "rms_tracking_error", "max_tracking_error"] + [
         c for c in varied if c != "law"]
@@ -455,9 +459,10 @@ def report(path, worst=10, plot=None):
         sens["diverged"] = sensitivity(df.assign(_div=div.astype(float)), varied, "_div")
     names = sorted({c for s in sens.values() for c in s}, key=lambda c: -abs(
         sens["all"].get(c, 0.0)))
-    print(f"  {'input':22s}" + "".join(f"{k:>12s}" for k in sens))
+    cw = max(12, *(len(k) + 2 for k in sens))
+    print(f"  {'input':22s}" + "".join(f"{k:>{cw}s}" for k in sens))
     for c in names:
-        print(f"  {c:22s}" + "".join(f"{s[c]:12.3f}" if c in s else f"{'-':>12s}"
+        print(f"  {c:22s}" + "".join(f"{s[c]:{cw}.3f}" if c in s else f"{'-':>{cw}s}"
                                      for s in sens.values()))
     for c in [c for c in varied if df[c].dtype.kind not in "fiu" and c != "law"]:
         medians = ok.groupby(c)["rms_tracking_error"].median()
@@ -479,7 +484,9 @@ def plot_report(df, div, laws, sens, path):
     axes[0].boxplot(data, tick_labels=laws)
     axes[0].set_yscale("log")
     axes[0].set_title("tracking RMS error per law (rad)")
-    axes[1].bar(laws, [100.0 * div[df["law"] == law].mean() for law in laws], color="C3")
+    rates = [100.0 * div[df["law"] == law].mean() for law in laws]
+    axes[1].bar(laws, rates, color="C3")
+    axes[1].set_ylim(0.0, max(1.0, 1.1 * max(rates)))     # 0 %: an empty panel, not a gap
     axes[1].set_title("diverged runs per law (%)")
     names = sorted(sens, key=lambda c: abs(sens[c]))
     axes[2].barh(names, [sens[c] for c in names], color="C0")

@@ -82,6 +82,52 @@ def test_far_behind_the_loop_resynchronises_and_counts_the_skipped_ticks():
     assert len(ticks) + loop.skipped == (clock.t - start) // H_NS
 
 
+def test_phase_lock_brings_the_ticks_to_the_states_plus_the_offset():
+    """Events (states) every period at a fixed phase: the ticks converge to event + offset
+    at the rate (1 - gain)^k, no period changes by more than an eighth, the average rate
+    stays the period's."""
+    clock = FakeClock()
+    ticks = []
+    loop = DeadlineLoop(H, lambda: ticks.append(clock.t), clock=clock)
+    loop.start()
+    phase, offset, gain = 1_300_000, 300_000, 0.25          # ns
+    t0 = clock.t
+    errors = []
+    for k in range(60):
+        clock.t = loop.next_ns              # each tick exactly on time
+        loop.due()
+        event = t0 + phase + (ticks[-1] - t0) // H_NS * H_NS - H_NS   # the newest state
+        errors.append(loop.lock_phase(event, offset, gain))
+    # the first error: the deadline 1 period after the start against the state + offset
+    want = (H_NS - phase - offset + H_NS // 2) % H_NS - H_NS // 2
+    assert errors[0] == want
+    for k in range(1, 60):                  # the closed form, within the clamp and rounding
+        bound = max(abs(errors[k - 1]) - H_NS // 8, (1 - gain) * abs(errors[k - 1])) + 1
+        assert abs(errors[k]) <= bound
+    assert abs(errors[-1]) <= 2              # rounding: a move of gain * 2 ns rounds to 0
+    assert (ticks[-1] - t0 - phase - offset + 2) % H_NS <= 4
+    periods = np.diff(ticks)
+    assert periods.min() >= H_NS - H_NS // 8 and periods.max() <= H_NS + H_NS // 8
+
+
+def test_phase_lock_follows_a_drifting_driver():
+    """States from a clock 100 ppm fast: the ticks follow them (bounded phase error)."""
+    clock = FakeClock()
+    ticks = []
+    loop = DeadlineLoop(H, lambda: ticks.append(clock.t), clock=clock)
+    loop.start()
+    t0 = clock.t
+    period = H_NS * (1 - 1e-4)              # the driver's period on our clock
+    errors = []
+    for k in range(5000):
+        clock.t = loop.next_ns
+        loop.due()
+        event = t0 + int(np.floor((clock.t - t0) / period) * period)
+        errors.append(loop.lock_phase(event, 200_000))
+    assert max(abs(e) for e in errors[100:]) < 2_000    # ns: locked, 0.1 % of a period
+    # without the lock the phase would have slipped by 5000 * 200 ns = one half period
+
+
 def test_stopped_loop_only_serves_the_executor():
     clock = FakeClock()
     loop = DeadlineLoop(H, lambda: pytest.fail("ticked while stopped"), clock=clock)

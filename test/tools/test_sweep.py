@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from rcac_ros.tools import cli
-from rcac_ros.core import PAPER_Q0, PaperTrajectory, RecursiveCompositeController, \
+from rcac_ros.core import PAPER_Q0, PaperTrajectory, RcacError, RecursiveCompositeController, \
     Simulator, SinusoidTrajectory, css_arm
 from rcac_ros.tools import campaign as cp
 from rcac_ros.tools.closed_loop import attach_payload, closed_loop, run_metrics
@@ -191,6 +191,42 @@ def test_strict_raises_what_the_controller_raises(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_check_estimates_stops_where_the_reference_loops_estimates_blow_up():
+    """check_estimates (rcac compare): the run ends at the reference loop's first period whose
+    updated theta_hat or E is not finite; the observer sees every period before it."""
+    model = css_arm()
+    traj = PaperTrajectory(np.array(PAPER_Q0), reading="position")
+    gains = dict(h=0.02, Lambda=100.0)                        # unstable at this period
+    ctrl = RecursiveCompositeController(model, **gains)
+    q0, qd0, _ = traj(0.0)
+    with np.errstate(all="ignore"):
+        ref = reference_loop(ctrl, traj, 0.22, model, q0, qd0)      # periods 0..11
+    # the estimates after period k: those before period k + 1, the last ones at the end
+    after = np.concatenate([ref["theta_hat"][1:], ctrl.theta_hat[None]])
+    finite = np.all(np.isfinite(after), axis=(1, 2)) & np.all(np.isfinite(ref["E"]), axis=1)
+    assert finite[:-1].all() and not finite[-1]      # they blow up in the last period
+
+    seen = []
+    t0 = time.perf_counter()
+    run = closed_loop(RecursiveCompositeController(model, **gains), traj, 3.0,
+                      check_estimates=True,
+                      observer=lambda k, c, sim: seen.append((k, c.theta_hat, sim.model)))
+    elapsed = time.perf_counter() - t0
+    assert run["status"] == "nonfinite" and len(run["t"]) == len(finite)
+    for key in ref:
+        np.testing.assert_array_equal(run[key], ref[key], err_msg=key)
+    assert [k for k, _, _ in seen] == list(range(len(finite) - 1))
+    np.testing.assert_array_equal([th for _, th, _ in seen], after[:-1])
+    assert all(plant is model for _, _, plant in seen)
+    assert 0.0 < run["step_time"] < elapsed
+    # without the check the run goes on until the non-finite estimates reach the torque
+    plain = closed_loop(RecursiveCompositeController(model, **gains), traj, 3.0)
+    assert plain["status"] == "nonfinite" and len(plain["t"]) > len(finite)
+    with pytest.raises(RcacError, match="theta_hat or E is not finite"):
+        closed_loop(RecursiveCompositeController(model, **gains), traj, 3.0,
+                    check_estimates=True, strict=True)
+
+
 def test_runs_reproducible_from_campaign_and_index():
     """Run i's inputs and row do not depend on what ran before it."""
     c = cp.validate(SMALL)
@@ -356,7 +392,19 @@ def test_channels_reach_the_controller_when_given(tmp_path, capsys):
     if "channels" in inspect.signature(RecursiveCompositeController).parameters:
         assert code == 0
         assert cp.setup(c, 1)[1].channels == tuple(range(1, 8))
-        assert rows(tmp_path / "o" / "results.parquet")["channels"].tolist() == ['[1]', '"all"']
+        df = rows(tmp_path / "o" / "results.parquet")
+        assert df["channels"].tolist() == ['[1]', '"all"']
+        # the report takes each channel set as a law of its own (one run each: the median is
+        # that run's value)
+        capsys.readouterr()
+        assert cli.main(["sweep", "report", str(tmp_path / "o")]) == 0
+        text = capsys.readouterr().out
+        for ch, rms in zip(df["channels"], df["rms_tracking_error"]):
+            label = f"composite {ch}"
+            assert f"  {label} " in text.split("metric distributions")[0]   # failure rate
+            line = next(x for x in text.splitlines()
+                        if x.split()[:1] == ["rms_tracking_error"] and f" {label} " in x)
+            assert float(line.split(label)[1].split()[0]) == pytest.approx(rms, rel=1e-3)
     else:                                   # a controller without channels: one clear line
         assert code == 2
         assert capsys.readouterr().err.startswith("rcac sweep: error: channels: this "
