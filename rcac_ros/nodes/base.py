@@ -1,15 +1,13 @@
 """What the controller and simulator nodes share (they never import each other).
 
 Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
-left behind), the QoS profiles, diagnostics, on-set parameter checks, throttled warnings,
-compute-time statistics, and :func:`run`: the ``main`` of a node (clean start-up refusal
-with one line and exit 2, clean shutdown on SIGINT/SIGTERM).
+left behind), the QoS profiles, diagnostics, on-set parameter checks, and :func:`run`: the
+``main`` of a node (clean start-up refusal with one line and exit 2, clean shutdown on
+SIGINT/SIGTERM). Throttled warnings and compute-time statistics: :mod:`rcac_ros.nodes.stats`.
 """
 
-import math
 import signal
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -33,6 +31,7 @@ from rcac_ros.nodes.description import wait_for_description
 from rcac_ros.nodes.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.pacing import spin_node_once
 from rcac_ros.nodes.realtime import Realtime
+from rcac_ros.nodes.stats import Throttle
 
 #: reliable, keep-last 10: the control topics (what ros2_control uses)
 QOS = topics.qos()
@@ -172,57 +171,6 @@ class RcacNode(RcacNodeMixin, Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
         self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-
-class Throttle:
-    """One warning per kind per ``period`` seconds (steady clock), with counts per kind."""
-
-    def __init__(self, logger, period=1.0):
-        self.logger = logger
-        self.period = period
-        self.counts = {}
-        self._last = {}
-
-    def warn(self, kind, text):
-        """Count a rejection of ``kind`` and log ``text`` unless one was logged recently."""
-        self.counts[kind] = self.counts.get(kind, 0) + 1
-        now = time.monotonic()
-        if now - self._last.get(kind, -math.inf) >= self.period:
-            self._last[kind] = now
-            suppressed = self.counts[kind]
-            self.logger.warning(f"rejected ({kind}): {text} [{suppressed} so far]")
-
-    @property
-    def total(self):
-        """Total number of rejections."""
-        return sum(self.counts.values())
-
-
-class Percentiles:
-    """Compute-time statistics over a window (p50, p99, max) in microseconds."""
-
-    def __init__(self):
-        self._samples = []
-        self.max_all = 0.0
-        self._last = (math.nan, math.nan, math.nan)
-
-    def add(self, seconds):
-        """Record one sample, in seconds."""
-        self._samples.append(seconds)
-        self.max_all = max(self.max_all, seconds)
-
-    def pop(self):
-        """Return ``(count, p50, p99, max)`` in µs over the window, and start a new window.
-
-        An empty window (the node is idle) repeats the figures of the last non-empty one.
-        """
-        if not self._samples:
-            return (0,) + self._last
-        arr = np.asarray(self._samples) * 1e6
-        self._samples = []
-        self._last = (float(np.percentile(arr, 50)), float(np.percentile(arr, 99)),
-                      float(arr.max()))
-        return (arr.size,) + self._last
 
 
 # ------------------------------------------------------------------ main

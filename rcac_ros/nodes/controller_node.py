@@ -33,7 +33,7 @@ import numpy as np
 
 from rcac_ros import params, topics
 from rcac_ros.errors import RcacError
-from rcac_ros.nodes.base import Percentiles, run
+from rcac_ros.nodes.base import run
 from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_input import StateInput
 from rcac_ros.nodes.controller_outputs import ControllerOutputs
@@ -46,6 +46,7 @@ from rcac_ros.nodes.follow_joint_trajectory import create_server, FollowJointTra
 from rcac_ros.nodes.lookahead import StatePredictor
 from rcac_ros.nodes.managed import ManagedNode
 from rcac_ros.nodes.pacing import DeadlineLoop
+from rcac_ros.nodes.stats import Percentiles
 from rcac_ros.nodes.trajectory_msg import DesiredMotion
 
 

@@ -27,9 +27,10 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes import gcwatch
-from rcac_ros.nodes.base import declare, declare_parameters, QOS, Throttle
+from rcac_ros.nodes.base import declare, declare_parameters, QOS
 from rcac_ros.nodes.description import subscribe_description
 from rcac_ros.nodes.diagnosed import RcacNodeMixin
+from rcac_ros.nodes.stats import Throttle
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
