@@ -35,7 +35,8 @@ TLO = 218           #: lower bounds of theta_i (13): projection
 THI = 231           #: upper bounds of theta_i (13)
 PMAX = 244          #: k_0 of link i: the bound on trace(P_i) (least squares)
 TH0 = 245           #: theta_0i (13), the nominal estimates the leakage pulls toward
-CONST_COLS = 258
+LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
+CONST_COLS = 259
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
 TH = 0              #: theta_hat_i (13)
@@ -69,8 +70,7 @@ I_E = 20            #: E of the first channel (the paper's scalar E)
 I_Y = 21            #: y of the first channel
 I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
 I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
-I_LEAK_M0 = 24      #: M_0 of the switching leakage (0: fixed sigma-modification)
-SCAL_LEN = 25
+SCAL_LEN = 24
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 

@@ -57,10 +57,10 @@ from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_A, CH_ACTIVE, CH_AD,
                        CH_E, CH_JOINT, CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E,
                        I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA,
-                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_LEAK_M0, I_P_DIAG,
-                       I_PROJECT, I_TRACKING, I_Y, KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP,
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_P_DIAG, I_PROJECT,
+                       I_TRACKING, I_Y, KD0, LAM, LEAK_M0, PG0, PHF, PHP, PMAX, POWER, PSF, PSP,
                        QPREV, S0, SQ, TAU, TH, TH0, THI, TLO, UR, WR, Gains, block, new_data)
-from ._validate import as_array, scalar
+from ._validate import as_array, joint_values, scalar
 from .channels import (axis_terms, channel_codes, filtered_output, parse_channels,
                        power_terms)
 from rcac_ros.errors import GainError
@@ -188,10 +188,10 @@ def leakage_gradient(row, st, scal, grad):
     """Add the leakage to ``grad``: ``+ sigma_i (theta_hat_i - theta_0i)`` (module docstring).
 
     ``sigma_i = sigma_0`` (fixed), or the switching ``sigma_i`` of Ioannou & Sun §8.5 when
-    ``M_0 = scal[I_LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <= M_0``.
+    link i's ``M_0 = row[LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <= M_0``.
     """
     sigma = scal[I_LEAK]
-    m0 = scal[I_LEAK_M0]
+    m0 = row[LEAK_M0]
     if m0 > 0.0:
         d2 = 0.0
         for k in range(13):
@@ -669,7 +669,9 @@ class RecursiveCompositeController:
 
     def _leakage(self, leakage, leakage_bound, theta_0):
         self.leakage = scalar(leakage, "leakage", GainError, minimum=0.0)
-        self.leakage_bound = scalar(leakage_bound, "leakage_bound", GainError, minimum=0.0)
+        self.leakage_bound = joint_values(leakage_bound, self.n, "leakage_bound", GainError)
+        if np.any(self.leakage_bound < 0.0):
+            raise GainError("leakage_bound: must be >= 0")
         self.theta_0 = np.zeros((self.n, 13)) if theta_0 is None else \
             as_array(theta_0, (self.n, 13), "theta_0", GainError)
         if self.adaptation == "least_squares":
@@ -681,7 +683,7 @@ class RecursiveCompositeController:
                             f"{self.h * self.leakage * top:.3g}, must be < 1 (explicit Euler)")
         self._const[:, block("theta_0")] = self.theta_0
         self._scal[I_LEAK] = self.leakage
-        self._scal[I_LEAK_M0] = self.leakage_bound
+        self._const[:, LEAK_M0] = self.leakage_bound
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                    theta_bounds):

@@ -75,26 +75,27 @@ def switching_reference(d0, steps, sigma, p, m0):
 
 
 def test_switching_leakage_follows_its_three_regions():
-    """From 3 M_0 out: full sigma beyond 2 M_0, the linear ramp between, and the estimates
-    never enter the ball (the leakage vanishes on its boundary); each step matches the
-    scalar recursion of the switching law (the direction of theta_tilde is kept, P = p I)."""
+    """From 3 M_0 out (M_0 per link): full sigma beyond 2 M_0, the linear ramp between, and
+    the estimates never enter the ball (the leakage vanishes on its boundary); each step
+    matches the scalar recursion of the switching law (theta_tilde keeps its direction,
+    P = p I)."""
     rng = np.random.default_rng(4)
     model = css_arm()
-    m0, sigma, p = 2.0, 1.0, 100.0
+    m0, sigma, p = np.linspace(1.0, 4.0, 7), 1.0, 100.0
     direction = rng.normal(size=(7, 13))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     theta_0 = rng.normal(size=(7, 13))
     ctrl = RecursiveCompositeController(model, P=p, gamma=0.0, theta_0=theta_0,
-                                        theta_hat0=theta_0 + 3.0 * m0 * direction,
+                                        theta_hat0=theta_0 + 3.0 * m0[:, None] * direction,
                                         leakage=sigma, leakage_bound=m0)
     steps = 3000
     dist = np.linalg.norm(at_rest(ctrl, steps) - theta_0, axis=2)     # (steps, 7)
-    want = switching_reference(3.0 * m0, steps, sigma, p, m0)
     for i in range(7):
+        want = switching_reference(3.0 * m0[i], steps, sigma, p, m0[i])
         assert np.allclose(dist[:, i], want, rtol=1e-10)
-    assert np.all(np.diff(dist, axis=0) <= 0.0) and dist.min() >= m0 * (1.0 - 1e-12)
-    assert dist[-1].max() < 1.05 * m0           # it has reached the ball's boundary
-    first = dist[0, 0] / (3.0 * m0)                 # beyond 2 M_0: the full rate
+    assert np.all(np.diff(dist, axis=0) <= 0.0) and np.all(dist >= m0 * (1.0 - 1e-12))
+    assert np.all(dist[-1] < 1.05 * m0)         # each link has reached its ball's boundary
+    first = dist[0, 0] / (3.0 * m0[0])              # beyond 2 M_0: the full rate
     assert first == pytest.approx(1.0 - H * sigma * p, rel=1e-12)
 
 
@@ -134,7 +135,8 @@ def test_leakage_pulls_a_closed_loop_toward_theta_0():
 
 @pytest.mark.parametrize("kwargs,match", [
     (dict(leakage=-1.0), "leakage"),
-    (dict(leakage_bound=-1.0), "leakage_bound"),
+    (dict(leakage_bound=-1.0), "leakage_bound: must be >= 0"),
+    (dict(leakage_bound=[1.0, 2.0]), "leakage_bound: expected a scalar or 7 values"),
     (dict(leakage=5.0, P=100.0), r"leakage: h \* leakage \* lambda_max\(P\) = 1, must be < 1"),
     (dict(leakage=1.0, theta_0=np.zeros((6, 13))), "theta_0: expected shape"),
     (dict(leakage=1.0, theta_0=np.full((7, 13), np.nan)), "theta_0: contains NaN"),
