@@ -110,14 +110,22 @@ def options(model, channels, variant, steps):
 
 def growth(series):
     """Whether a per-second series still grows: ``slope x T/2`` over its last half (least
-    squares), relative to its mean there, and the ratio of the halves' maxima."""
+    squares), relative to its mean there, the ratio of the halves' maxima, and the exponent
+    a of ``x ~ t^a`` fitted over the last half (1: a steady drift, 0.5: a random walk, 0:
+    settled); not assessed under 4 samples."""
     x = np.asarray(series, dtype=float)
+    if len(x) < 4:
+        return {"last_half_rise": float("nan"), "max_ratio": float("nan"),
+                "still_growing": None}
     half = x[len(x) // 2:]
     t = np.arange(len(half), dtype=float)
     slope = np.polyfit(t, half, 1)[0]
     rel = float(slope * len(half) / max(np.mean(np.abs(half)), 1e-300))
+    t_half = np.arange(len(x) // 2, len(x), dtype=float) + 1.0
+    exponent = float(np.polyfit(np.log(t_half), np.log(np.maximum(half, 1e-300)), 1)[0]) \
+        if np.all(half > 0.0) else float("nan")
     return {"last_half_rise": rel, "max_ratio": float(half.max() / x[:len(x) // 2].max()),
-            "still_growing": bool(rel > GROWTH_TOL)}
+            "exponent": exponent, "still_growing": bool(rel > GROWTH_TOL)}
 
 
 def run_law(model, channels, duration, variant, clean=None, seed=2, progress=None):
