@@ -33,6 +33,7 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            Simulator, css_arm)
+from rcac_ros.core.identifiability import Excitation
 from rcac_ros.tools.progress import Progress
 
 SIGMA_Q, SIGMA_QD = 1e-4, 1e-3
@@ -128,8 +129,32 @@ def growth(series):
             "exponent": exponent, "still_growing": bool(rel > GROWTH_TOL)}
 
 
+#: relative eigenvalue thresholds of the excitation: below 1e-8 a direction is not
+#: identified at all (identifiability.RANK_TOL), below 1e-4 poorly
+WEAK = (1e-8, 1e-4)
+
+
+def weak_share(sigma, deviation):
+    """Share of ``sum_i ||d_i||^2`` in each link's directions of excitation ``Sigma_i``
+    below each threshold of :data:`WEAK` (relative to its largest eigenvalue)."""
+    total = float(np.sum(deviation ** 2))
+    out = {}
+    for tol in WEAK:
+        part = 0.0
+        for S, d in zip(sigma, deviation):
+            w, V = np.linalg.eigh(S)
+            weak = V[:, w < tol * max(w[-1], 1e-300)]
+            part += float(np.sum((weak.T @ d) ** 2))
+        out[f"{tol:g}"] = part / total if total > 0.0 else float("nan")
+    return out
+
+
 def run_law(model, channels, duration, variant, clean=None, seed=2, progress=None):
-    """One closed loop; ``clean``: the clean run's theta_hat per second (deviation)."""
+    """One closed loop; ``clean``: the clean run's theta_hat per second (deviation).
+
+    The clean run also accumulates the excitation of its motion, ``Sigma_i = sum h W_i^T
+    W_i`` with every joint channel (Slotine-Li's information, from a frozen shadow
+    controller fed the same states), returned with the estimates."""
     rng = np.random.default_rng(seed)
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0)
@@ -141,12 +166,22 @@ def run_law(model, channels, duration, variant, clean=None, seed=2, progress=Non
     every = int(round(1.0 / h))
     theta = model.theta()
     hats, err, adapting = [], np.empty(steps), 0
+    shadow = excitation = None
+    if variant == "clean":
+        shadow = RecursiveCompositeController(model, channels="all", **PAPER_GAINS)
+        shadow.set_adaptation(False)
+        excitation = Excitation(model.n, h)
     with Progress(steps, progress or "", enabled=progress is not None) as bar:
         for k in range(steps):
             q_d, qd_d, qdd_d = traj(k * h)
             err[k] = np.sqrt(np.mean((sim.q - q_d) ** 2))
             q, qd = (sim.q, sim.qd) if variant == "clean" else noisy(rng, sim.q, sim.qd)
-            sim.step(ctrl.step(q, qd, q_d, qd_d, qdd_d))
+            tau = ctrl.step(q, qd, q_d, qd_d, qdd_d)
+            if shadow is not None:
+                shadow.step(q, qd, q_d, qd_d, qdd_d)
+                shadow.set_applied_torque(tau)
+                excitation.add(shadow.W)
+            sim.step(tau)
             tracking, channels_on = ctrl.adapted
             adapting += tracking or channels_on.any()
             if (k + 1) % every == 0:
@@ -160,11 +195,13 @@ def run_law(model, channels, duration, variant, clean=None, seed=2, progress=Non
            "adapting_share": adapting / steps,
            "options": {k: v for k, v in extra.items()}}
     if clean is not None:
-        out["deviation"] = np.linalg.norm(hats - clean, axis=(1, 2)).tolist()
+        clean_hats, sigma = clean
+        out["deviation"] = np.linalg.norm(hats - clean_hats, axis=(1, 2)).tolist()
+        out["deviation_weak_share"] = weak_share(sigma, hats[-1] - clean_hats[-1])
     for key in ("theta_norm", "theta_error", "deviation"):
         if key in out:
             out[key + "_growth"] = growth(out[key])
-    return out, hats
+    return out, (hats, None if excitation is None else excitation.sigma)
 
 
 def run_noise_bench(duration=600.0, out_dir="results/noise", progress=True, laws=None,
@@ -182,12 +219,14 @@ def run_noise_bench(duration=600.0, out_dir="results/noise", progress=True, laws
             if variant == "clean":
                 clean = hats
             report[name] = r
-            dev = r.get("deviation_growth", {}).get("last_half_rise", float("nan"))
-            print(f"{name:>20s}: ||theta_hat - theta|| end {r['theta_error'][-1]:8.1f}"
-                  f" (last half {100 * r['theta_error_growth']['last_half_rise']:+6.1f} %)"
-                  f"  ||theta_hat|| end {r['theta_norm'][-1]:8.1f}"
-                  f"  from clean end {r.get('deviation', [float('nan')])[-1]:8.1f}"
-                  f" (last half {100 * dev:+6.1f} %)  RMS {r['rms']:.3g}, last minute"
+            dev = r.get("deviation_growth", {}).get("exponent", float("nan"))
+            weak = r.get("deviation_weak_share", {}).get(f"{WEAK[1]:g}", float("nan"))
+            g = r["theta_norm_growth"]
+            print(f"{name:>20s}: ||theta_hat|| end {r['theta_norm'][-1]:7.1f} (last half"
+                  f" {100 * g['last_half_rise']:+5.1f} %, ~t^{g['exponent']:.2f})"
+                  f"  ||theta_hat - theta|| end {r['theta_error'][-1]:7.1f}"
+                  f"  from clean {r.get('deviation', [float('nan')])[-1]:7.1f} (~t^{dev:.2f},"
+                  f" {100 * weak:.0f} % poorly excited)  RMS {r['rms']:.3g}, last minute"
                   f" {r['rms_last_minute']:.3g} rad  adapting"
                   f" {100 * r['adapting_share']:.0f} %", flush=True)
     os.makedirs(out_dir, exist_ok=True)

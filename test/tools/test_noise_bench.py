@@ -64,3 +64,17 @@ def test_an_unknown_law_or_variant_stops_at_the_parser(capsys, monkeypatch, opti
     lines = capsys.readouterr().err.splitlines()
     assert stop.value.code == 2 and len(lines) == 1
     assert lines[0].startswith(f"rcac bench: error: argument {option}: unknown")
+
+
+def test_weak_share_splits_a_deviation_by_excitation():
+    """A deviation along a direction the motion never excited counts as weak, one along an
+    excited direction does not, and a mix splits by squared norm."""
+    rng = np.random.default_rng(1)
+    V, _ = np.linalg.qr(rng.normal(size=(13, 13)))
+    w = np.r_[np.zeros(3), 1e-2 * np.ones(2), np.logspace(0, 3, 8)]   # 3 null, 2 poor
+    sigma = np.array([V @ np.diag(w) @ V.T] * 2)
+    null, poor, strong = V[:, 0], V[:, 3], V[:, -1]
+    share = noise_bench.weak_share(sigma, np.array([null, null]))
+    assert share == pytest.approx({"1e-08": 1.0, "0.0001": 1.0})
+    share = noise_bench.weak_share(sigma, np.array([poor, 2.0 * strong]))
+    assert share == pytest.approx({"1e-08": 0.0, "0.0001": 0.2}, abs=1e-12)
