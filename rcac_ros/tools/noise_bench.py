@@ -236,9 +236,30 @@ def run_noise_bench(duration=600.0, out_dir="results/noise", progress=True, laws
                     theta_norm_true=float(np.linalg.norm(model.theta())))
     with open(os.path.join(out_dir, "noise.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=settings), f, indent=1)
+    with open(os.path.join(out_dir, "noise.md"), "w", encoding="utf-8") as f:
+        f.write(table(report))
     plot(report, laws, os.path.join(out_dir, "noise.png"))
-    print(f"wrote {out_dir}/noise.json, noise.png")
+    print(f"wrote {out_dir}/noise.json, noise.md, noise.png")
     return report
+
+
+def table(report):
+    """The markdown table of a report: boundedness of ``||theta_hat||`` and tracking cost."""
+    rows = ["| law / variant | ‖θ̂‖ end | last half | ~t^a | still growing | ‖θ̂ − θ‖ end "
+            "| from clean | of which poorly excited | RMS (rad) | RMS last min | adapting |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, r in report.items():
+        if name == "settings":
+            continue
+        g = r["theta_norm_growth"]
+        dev = f"{r['deviation'][-1]:.0f}" if "deviation" in r else "-"
+        weak = f"{100 * r['deviation_weak_share'][f'{WEAK[1]:g}']:.0f} %" \
+            if "deviation" in r else "-"
+        rows.append(f"| {name} | {r['theta_norm'][-1]:.0f} | {100 * g['last_half_rise']:+.1f} % "
+                    f"| {g['exponent']:.2f} | {'yes' if g['still_growing'] else 'no'} "
+                    f"| {r['theta_error'][-1]:.0f} | {dev} | {weak} | {r['rms']:.3g} "
+                    f"| {r['rms_last_minute']:.3g} | {100 * r['adapting_share']:.0f} % |")
+    return "\n".join(rows) + "\n"
 
 
 def plot(report, laws, path):
