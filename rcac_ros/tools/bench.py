@@ -263,10 +263,13 @@ def add_arguments(parser):
                              "dead zones + projection (are the estimates bounded?)")
     parser.add_argument("--noise-duration", type=positive_float, default=600.0,
                         help="seconds of each --noise run (default 600)")
+    parser.add_argument("--noise-sources", action="store_true",
+                        help="--noise: instead, where the paper law's drift comes from (noise "
+                             "on q only, qd only, another seed, half, gamma = 0)")
     parser.add_argument("--noise-laws", type=noise_laws, default=None,
                         help="--noise: laws, ';'-separated, among paper; 4,6; all (default: "
                              "all three)")
-    parser.add_argument("--noise-variants", type=noise_variants, default=noise_bench.VARIANTS,
+    parser.add_argument("--noise-variants", type=noise_variants, default=None,
                         help="--noise: variants, comma-separated, among plain, dead zone, "
                              "sigma, switching (default: all; the clean run always)")
     parser.add_argument("--out", default="results/noise", help="--noise: output directory")
@@ -298,9 +301,12 @@ RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
 
 def run(args):
     if args.noise:
-        from rcac_ros.tools.noise_bench import run_noise_bench
+        from rcac_ros.tools.noise_bench import run_noise_bench, run_noise_sources
+        if args.noise_sources:
+            run_noise_sources(args.noise_duration, args.out)
+            return 0
         run_noise_bench(args.noise_duration, args.out, laws=args.noise_laws,
-                        variants=args.noise_variants)
+                        variants=args.noise_variants or noise_bench.VARIANTS)
         return 0
     over = dict(RT_OPTIONS) if args.rt else {}
     if args.K_D is not None:

@@ -235,12 +235,23 @@ def run_noise_bench(duration=600.0, out_dir="results/noise", progress=True, laws
                     M0_factor=M0_FACTOR, growth_tol=GROWTH_TOL,
                     theta_norm_true=float(np.linalg.norm(model.theta())))
     with open(os.path.join(out_dir, "noise.json"), "w", encoding="utf-8") as f:
-        json.dump(dict(report, settings=settings), f, indent=1)
+        json.dump(dict(compact(report), settings=settings), f, separators=(",", ":"))
     with open(os.path.join(out_dir, "noise.md"), "w", encoding="utf-8") as f:
         f.write(table(report))
     plot(report, laws, os.path.join(out_dir, "noise.png"))
     print(f"wrote {out_dir}/noise.json, noise.md, noise.png")
     return report
+
+
+#: the per-second series of a report, stored to 0.1 (norms of tens to thousands)
+SERIES = ("theta_norm", "theta_error", "deviation")
+
+
+def compact(report):
+    """``report`` with its per-second series rounded to 0.1."""
+    return {name: {k: ([round(x, 1) for x in v] if k in SERIES else v)
+                   for k, v in r.items()} if name != "settings" else r
+            for name, r in report.items()}
 
 
 def table(report):
@@ -290,5 +301,76 @@ def plot(report, laws, path):
     fig.suptitle(f"Estimates under measurement noise (q: {SIGMA_Q:g} rad, qd: "
                  f"{SIGMA_QD:g} rad/s); tracking RMS in rad")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
+
+
+#: ``--noise-sources``: label -> (sigma_q scale, sigma_qd scale, gamma, seed), paper law
+SOURCES = {"both": (1.0, 1.0, None, 2), "both, seed 3": (1.0, 1.0, None, 3),
+           "both, half": (0.5, 0.5, None, 2), "q only": (1.0, 0.0, None, 2),
+           "qd only": (0.0, 1.0, None, 2), "both, gamma = 0": (1.0, 1.0, 0.0, 2)}
+
+
+def _estimates(model, sq, sqd, gamma, duration, seed, label):
+    """The paper law's theta_hat per second (plain), noise ``sq``, ``sqd``, gain gamma."""
+    rng = np.random.default_rng(seed)
+    q0 = np.array(PAPER_Q0)
+    traj = PaperTrajectory(q0)
+    ctrl = RecursiveCompositeController(model, **dict(PAPER_GAINS, gamma=gamma))
+    sim = Simulator(model, dt=ctrl.h, q0=q0)
+    steps, every = int(round(duration / ctrl.h)), int(round(1.0 / ctrl.h))
+    hats = []
+    with Progress(steps, f"{label:>20s}") as bar:
+        for k in range(steps):
+            q = sim.q + sq * rng.standard_normal(model.n)
+            qd = sim.qd + sqd * rng.standard_normal(model.n)
+            sim.step(ctrl.step(q, qd, *traj(k * ctrl.h)))
+            if (k + 1) % every == 0:
+                hats.append(ctrl.theta_hat)
+                bar.update(k)
+    return np.array(hats)
+
+
+def run_noise_sources(duration=600.0, out_dir="results/noise"):
+    """Where does the paper law's drift come from? Its deviation from the clean run with
+    the noise on q only, on qd only, another seed, half the noise, and gamma = 0 (the
+    tracking term alone, against its own clean run). Writes ``sources.json``, ``.png``."""
+    model = css_arm()
+    gamma0 = PAPER_GAINS["gamma"]
+    clean = {g: _estimates(model, 0.0, 0.0, g, duration, 0, f"clean, gamma = {g:g}")
+             for g in (gamma0, 0.0)}
+    report, final = {}, {}
+    for label, (fq, fqd, gamma, seed) in SOURCES.items():
+        g = gamma0 if gamma is None else gamma
+        hats = _estimates(model, fq * SIGMA_Q, fqd * SIGMA_QD, g, duration, seed, label)
+        dev = np.linalg.norm(hats - clean[g], axis=(1, 2))
+        final[label] = (hats[-1] - clean[g][-1]).ravel()
+        report[label] = {"sigma_q": fq * SIGMA_Q, "sigma_qd": fqd * SIGMA_QD, "gamma": g,
+                         "seed": seed, "deviation": [round(x, 1) for x in dev.tolist()],
+                         "deviation_end": float(dev[-1]),
+                         "theta_norm_end": float(np.linalg.norm(hats[-1]))}
+    ref = final["both"]
+    for label, d in final.items():
+        report[label]["cosine_with_both"] = float(d @ ref / max(
+            np.linalg.norm(d) * np.linalg.norm(ref), 1e-300))
+        r = report[label]
+        print(f"{label:>20s}: deviation from clean {r['deviation_end']:8.1f}  cosine with "
+              f"'both' {r['cosine_with_both']:+.4f}", flush=True)
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "sources.json"), "w", encoding="utf-8") as f:
+        json.dump(dict(report, settings=dict(duration=duration)), f, separators=(",", ":"))
+    from rcac_ros.tools.plots import plt
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for label, r in report.items():
+        ax.plot(np.arange(1, len(r["deviation"]) + 1) / 60.0, r["deviation"], lw=1.0,
+                label=f"{label} ({r['deviation_end']:.0f})")
+    ax.set_xlabel("time (min)")
+    ax.set_ylabel("||theta_hat - theta_hat(clean)||")
+    ax.set_title("Paper law: which noise and which term drive the drift")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(out_dir, "sources.png"), dpi=80)
+    plt.close(fig)
+    print(f"wrote {out_dir}/sources.json, sources.png")
+    return report

@@ -78,3 +78,14 @@ def test_weak_share_splits_a_deviation_by_excitation():
     assert share == pytest.approx({"1e-08": 1.0, "0.0001": 1.0})
     share = noise_bench.weak_share(sigma, np.array([poor, 2.0 * strong]))
     assert share == pytest.approx({"1e-08": 0.0, "0.0001": 0.2}, abs=1e-12)
+
+
+def test_noise_sources_writes_its_report(tmp_path):
+    """Four seconds of ``--noise-sources``: each case against the clean run of its own
+    gamma, the cosine of the reference case with itself 1, the JSON and the plot."""
+    report = noise_bench.run_noise_sources(4.0, str(tmp_path))
+    assert set(report) == set(noise_bench.SOURCES)
+    assert report["both"]["cosine_with_both"] == pytest.approx(1.0, rel=1e-12)
+    assert report["both, gamma = 0"]["gamma"] == 0.0
+    assert all(len(r["deviation"]) == 4 for r in report.values())
+    assert (tmp_path / "sources.json").exists() and (tmp_path / "sources.png").exists()
