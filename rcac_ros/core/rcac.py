@@ -33,7 +33,7 @@ projection of ``theta_hat`` onto bounds (mass >= 0, an optional box), and leakag
 nominal estimates ``theta_0`` (:func:`leakage_gradient`). With the defaults the law is the
 paper's, to the last bit. ``gamma = 0`` is the direct adaptive controller.
 
-Leakage (Ioannou & Kokotovic 1983; Ioannou & Sun, "Robust Adaptive Control", 1996, §8.5):
+Leakage (Ioannou & Kokotovic 1983; Ioannou & Sun, "Robust Adaptive Control", 1996, ch. 8):
 with ``sigma_i = sigma_0`` (``leakage_bound = 0``) it is the fixed sigma-modification,
 which bounds ``theta_hat`` for any bounded disturbance but biases the ideal law; the
 switching sigma-modification (``leakage_bound = M_0 > 0``) leaks only outside the ball
@@ -187,7 +187,7 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
 def leakage_gradient(row, st, scal, grad):
     """Add the leakage to ``grad``: ``+ sigma_i (theta_hat_i - theta_0i)`` (module docstring).
 
-    ``sigma_i = sigma_0`` (fixed), or the switching ``sigma_i`` of Ioannou & Sun §8.5 when
+    ``sigma_i = sigma_0`` (fixed), or the switching ``sigma_i`` of Ioannou & Sun ch. 8 when
     link i's ``M_0 = row[LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <= M_0``.
     """
     sigma = scal[I_LEAK]

@@ -67,7 +67,7 @@ def dead_zone_factor(n, steps):
     """``k`` such that noise alone exceeds ``k`` standard deviations in ``max_j |.|`` (n
     independent Gaussians) about once in ``steps`` steps: ``Phi^-1(1 - 1 / (2 n steps))``.
 
-    A dead zone stops drift only above the disturbance's bound (Ioannou & Sun §8.5.4);
+    A dead zone stops drift only above the disturbance's bound (Ioannou & Sun, ch. 8);
     Gaussian noise has none, so this is the bound it crosses once per run."""
     return NormalDist().inv_cdf(1.0 - 1.0 / (2.0 * n * steps))
 

@@ -65,7 +65,7 @@ def test_theta_0_defaults_to_theta_hat0_and_survives_reset():
 
 
 def switching_reference(d0, steps, sigma, p, m0):
-    """Norm of theta_hat - theta_0 under the switching sigma of Ioannou & Sun §8.5, P = p I."""
+    """Norm of theta_hat - theta_0 under the switching sigma of Ioannou & Sun ch. 8, P = p I."""
     out, d = [], d0
     for _ in range(steps):
         s = 0.0 if d <= m0 else sigma * min(d / m0 - 1.0, 1.0)
