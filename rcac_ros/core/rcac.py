@@ -706,9 +706,9 @@ class RecursiveCompositeController:
         self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
-        self._choose_kernel()
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
+        self._choose_kernel()               # after every scalar the choice reads
 
     def _leakage(self, leakage, leakage_bound, theta_0):
         self.leakage = scalar(leakage, "leakage", GainError, minimum=0.0)
