@@ -195,6 +195,13 @@ CONTROLLER = _robot("controller") + (
     Param("theta_bounds", "string", "none",
           "projection of theta_hat after each step: 'none' or 'mass' (every link mass >= 0)",
           choices=("none", "mass")),
+    Param("leakage", "double", 0.0,
+          "sigma_0 of the leakage -P_i sigma_i (theta_hat_i - theta_0i) toward the initial "
+          "estimates (sigma-modification; bounds the estimates under sensor noise; needs "
+          "h * leakage * lambda_max(P) < 1; 0: none)", lo=0.0, hi=BIG),
+    Param("leakage_bound", "double", 0.0,
+          "M_0 of the switching leakage (every link): none while ||theta_hat_i - theta_0i|| "
+          "<= M_0, full beyond 2 M_0 (0: leak always)", lo=0.0, hi=BIG),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),

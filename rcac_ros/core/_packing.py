@@ -35,7 +35,9 @@ PG0 = 49            #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain
 TLO = 218           #: lower bounds of theta_i (13): projection
 THI = 231           #: upper bounds of theta_i (13)
 PMAX = 244          #: k_0 of link i: the bound on trace(P_i) (least squares)
-CONST_COLS = 245
+TH0 = 245           #: theta_0i (13), the nominal estimates the leakage pulls toward
+LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
+CONST_COLS = 259
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
 TH = 0              #: theta_hat_i (13)
@@ -68,7 +70,8 @@ I_PROJECT = 19      #: 1: clip theta_hat to [TLO, THI] after each step
 I_E = 20            #: E of the first channel (the paper's scalar E)
 I_Y = 21            #: y of the first channel
 I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
-SCAL_LEN = 23
+I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
+SCAL_LEN = 24
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 
@@ -99,6 +102,7 @@ BLOCKS = {
     "W": slice(WR, WR + 13),
     "theta_lo": slice(TLO, TLO + 13),
     "theta_hi": slice(THI, THI + 13),
+    "theta_0": slice(TH0, TH0 + 13),
 }
 
 

@@ -9,6 +9,7 @@ Per control period ``h``, with ``s_i = V_i - V_ri``:
     tau_i = z6^T F_ri                                                               (eq 20)
     W_cj, y_c, E_c = sum_j W_cj theta_hat_j - y_c      for each channel c (eqs 21-23, channels.py)
     theta_hat_dot_i = -P_i (Y_ri^T s_i + gamma sum_c W_ci^T E_c)                     (eq 24)
+                      - P_i sigma_i (theta_hat_i - theta_0i)          (leakage, optional)
 
 The paper predicts one channel, the filtered torque of joint 1 (``channels=[1]``, the
 default). More channels (:mod:`rcac_ros.core.channels`) predict more filtered torques;
@@ -27,9 +28,25 @@ prediction-error term either
 - ``update="explicit"``: forward Euler, O(m n).
 
 Options beyond the paper: a least-squares gain with bounded-gain forgetting
-(:mod:`rcac_ros.core.least_squares`), a dead zone on ``s`` and on each ``E_c``, and the
-projection of ``theta_hat`` onto bounds (mass >= 0, an optional box). With the defaults
-the law is the paper's, to the last bit. ``gamma = 0`` is the direct adaptive controller.
+(:mod:`rcac_ros.core.least_squares`), a dead zone on ``s`` and on each ``E_c``, the
+projection of ``theta_hat`` onto bounds (mass >= 0, an optional box), and leakage toward
+nominal estimates ``theta_0`` (:func:`leakage_gradient`). With the defaults the law is the
+paper's, to the last bit. ``gamma = 0`` is the direct adaptive controller.
+
+Leakage (Ioannou & Kokotovic 1983; Ioannou & Sun, "Robust Adaptive Control", 1996, ch. 8):
+with ``sigma_i = sigma_0`` (``leakage_bound = 0``) it is the fixed sigma-modification,
+which bounds ``theta_hat`` for any bounded disturbance but biases the ideal law; the
+switching sigma-modification (``leakage_bound = M_0 > 0``) leaks only outside the ball
+``||theta_hat_i - theta_0i|| <= M_0``, per link:
+
+    sigma_i = 0                                    if ||theta_hat_i - theta_0i|| <= M_0
+            = sigma_0 (||theta_hat_i - theta_0i|| / M_0 - 1)   if M_0 < ... <= 2 M_0
+            = sigma_0                              beyond 2 M_0
+
+so the law is the ideal one while the estimates stay inside (pick ``M_0 >=
+||theta_i - theta_0i||``, a bound the user declares). The leakage is an explicit Euler term:
+with no other input ``theta_hat_i - theta_0i`` is multiplied by ``I - h sigma_i P_i`` each
+step, which needs ``h sigma_0 lambda_max(P_i) < 1`` (checked).
 """
 
 import numpy as np
@@ -40,10 +57,10 @@ from ._blocks import (INPUT_NAMES, VEC, check_vectors, cholesky_solve, feedback_
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_A, CH_ACTIVE, CH_AD,
                        CH_E, CH_JOINT, CH_Y, CHAN_COLS, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E,
                        I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FORGET, I_FROZEN, I_G, I_GAMMA,
-                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_P_DIAG, I_PROJECT, I_TRACKING,
-                       I_Y, KD0, LAM, PG0, PHF, PHP, PMAX, POWER, PSF, PSP, QPREV, S0, SQ, TAU,
-                       TH, THI, TLO, UR, WR, Gains, block, new_data)
-from ._validate import as_array, scalar
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_P_DIAG, I_PROJECT,
+                       I_TRACKING, I_Y, KD0, LAM, LEAK_M0, PG0, PHF, PHP, PMAX, POWER, PSF, PSP,
+                       QPREV, S0, SQ, TAU, TH, TH0, THI, TLO, UR, WR, Gains, block, new_data)
+from ._validate import as_array, joint_values, scalar
 from .channels import (axis_terms, channel_codes, filtered_output, parse_channels,
                        power_terms)
 from rcac_ros.errors import GainError
@@ -172,15 +189,40 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
 
 
 @njit(cache=True, inline="always")
+def leakage_gradient(row, st, scal, grad):
+    """Add the leakage to ``grad``: ``+ sigma_i (theta_hat_i - theta_0i)`` (module docstring).
+
+    ``sigma_i = sigma_0`` (fixed), or the switching ``sigma_i`` of Ioannou & Sun ch. 8 when
+    link i's ``M_0 = row[LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <= M_0``.
+    """
+    sigma = scal[I_LEAK]
+    m0 = row[LEAK_M0]
+    if m0 > 0.0:
+        d2 = 0.0
+        for k in range(13):
+            d = st[TH + k] - row[TH0 + k]
+            d2 += d * d
+        dist = np.sqrt(d2)
+        if dist <= m0:
+            return
+        sigma *= min(dist / m0 - 1.0, 1.0)
+    for k in range(13):
+        grad[k] += sigma * (st[TH + k] - row[TH0 + k])
+
+
+@njit(cache=True, inline="always")
 def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
-    """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + prediction part)``,
-    and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares)."""
+    """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + leakage + prediction
+    part)``, and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares).
+    With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``."""
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     mode = scal[I_ADAPT]
     p_diag = scal[I_P_DIAG] != 0.0
     for k in range(13):
         grad[k] = G[i, k] if tracking else 0.0
+    if scal[I_LEAK] > 0.0:
+        leakage_gradient(row, st, scal, grad)
     if mode == ADAPT_GRADIENT:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
         gain_step(row, p_diag, st, grad, h, R, i)
@@ -352,10 +394,11 @@ def project(const, state):
 @njit(cache=True, inline="always")
 def is_paper_law(chan, scal):
     """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
-    update, no dead zone, no projection, adapting. :func:`paper_step` then runs it."""
+    update, no dead zone, no projection, no leakage, adapting. :func:`paper_step` then runs
+    it."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
-            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0)
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0)
 
 
 @njit(RCAC_SIGNATURE, cache=True)
@@ -643,7 +686,7 @@ class RecursiveCompositeController:
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
-                 theta_bounds=None):
+                 theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -663,8 +706,27 @@ class RecursiveCompositeController:
         self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
-        self._choose_kernel()
         self.reset(theta_hat0)
+        self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
+        self._choose_kernel()               # after every scalar the choice reads
+
+    def _leakage(self, leakage, leakage_bound, theta_0):
+        self.leakage = scalar(leakage, "leakage", GainError, minimum=0.0)
+        self.leakage_bound = joint_values(leakage_bound, self.n, "leakage_bound", GainError)
+        if np.any(self.leakage_bound < 0.0):
+            raise GainError("leakage_bound: must be >= 0")
+        self.theta_0 = np.zeros((self.n, 13)) if theta_0 is None else \
+            as_array(theta_0, (self.n, 13), "theta_0", GainError)
+        if self.adaptation == "least_squares":
+            top = float(self._const[:, PMAX].max())
+        else:
+            top = float(np.linalg.eigvalsh(self.P).max())
+        if self.h * self.leakage * top >= 1.0:
+            raise GainError(f"leakage: h * leakage * lambda_max(P) = "
+                            f"{self.h * self.leakage * top:.3g}, must be < 1 (explicit Euler)")
+        self._const[:, block("theta_0")] = self.theta_0
+        self._scal[I_LEAK] = self.leakage
+        self._const[:, LEAK_M0] = self.leakage_bound
 
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch

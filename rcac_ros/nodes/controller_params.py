@@ -75,7 +75,8 @@ def adaptation_options(v, channels):
     return dict(channels=channels, update=v["update"], adaptation=v["adaptation"],
                 forgetting=v["forgetting"], P_max=v["P_max"], dead_zone_s=v["dead_zone_s"],
                 dead_zone_E=v["dead_zone_E"],
-                theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"])
+                theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"],
+                leakage=v["leakage"], leakage_bound=v["leakage_bound"])
 
 
 def channel_names(channels):

@@ -10,6 +10,7 @@ channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with 
 least-squares gain (channels ``[1]``), against n.
 """
 
+import argparse
 import json
 import time
 
@@ -18,6 +19,7 @@ import numpy as np
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
 from rcac_ros.tools.args import non_negative_float, positive_float
+from rcac_ros.tools import noise_bench
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -255,7 +257,35 @@ def add_arguments(parser):
                              "dead zones + projection (are the estimates bounded?)")
     parser.add_argument("--noise-duration", type=positive_float, default=600.0,
                         help="seconds of each --noise run (default 600)")
+    parser.add_argument("--noise-sources", action="store_true",
+                        help="--noise: instead, where the paper law's drift comes from (noise "
+                             "on q only, qd only, another seed, half, gamma = 0)")
+    parser.add_argument("--noise-laws", type=noise_laws, default=None,
+                        help="--noise: laws, ';'-separated, among paper; 4,6; all (default: "
+                             "all three)")
+    parser.add_argument("--noise-variants", type=noise_variants, default=None,
+                        help="--noise: variants, comma-separated, among plain, dead zone, "
+                             "sigma, switching (default: all; the clean run always)")
     parser.add_argument("--out", default="results/noise", help="--noise: output directory")
+
+
+def _choices(text, sep, known):
+    items = [v.strip() for v in text.split(sep)]
+    bad = [v for v in items if v not in known]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown {', '.join(bad)} (known: "
+                                         f"{sep.join(known)})")
+    return items
+
+
+def noise_laws(text):
+    """``--noise-laws``: ';'-separated names of :data:`noise_bench.LAWS`."""
+    return _choices(text, ";", tuple(noise_bench.LAWS))
+
+
+def noise_variants(text):
+    """``--noise-variants``: comma-separated names of :data:`noise_bench.VARIANTS`."""
+    return tuple(_choices(text, ",", noise_bench.VARIANTS))
 
 
 #: the controller's real-time options of ``--rt``
@@ -265,8 +295,12 @@ RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
 
 def run(args):
     if args.noise:
-        from rcac_ros.tools.noise_bench import run_noise_bench
-        run_noise_bench(args.noise_duration, args.out)
+        from rcac_ros.tools.noise_bench import run_noise_bench, run_noise_sources
+        if args.noise_sources:
+            run_noise_sources(args.noise_duration, args.out)
+            return 0
+        run_noise_bench(args.noise_duration, args.out, laws=args.noise_laws,
+                        variants=args.noise_variants or noise_bench.VARIANTS)
         return 0
     over = dict(RT_OPTIONS) if args.rt else {}
     if args.K_D is not None:

@@ -126,6 +126,7 @@ def test_mixed_channels_label_the_topic_and_the_diagnostics_report_each():
     ("P_max", 0.0, "must be > 0"),
     ("dead_zone_E", -0.1, "out of range"),
     ("theta_bounds", "box", "'none' or 'mass'"),
+    ("leakage", -1.0, "out of range"),
 ])
 def test_a_bad_option_is_refused_naming_it(name, value, words):
     with ros_context() as (ctx, _):
@@ -161,9 +162,10 @@ def test_bad_channels_at_start_up_give_one_line_and_exit_2():
 
 CORE_OPTIONS = dict(channels=(2, "power"), update="explicit", adaptation="least_squares",
                     forgetting=0.5, P_max=900.0, dead_zone_s=0.02, dead_zone_E=100.0,
-                    theta_bounds="mass")
+                    theta_bounds="mass", leakage=0.05, leakage_bound=2.0)
 CORE_DEFAULTS = dict(channels=(1,), update="implicit", adaptation="gradient", forgetting=0.0,
-                     P_max=None, dead_zone_s=0.0, dead_zone_E=0.0, theta_bounds=None)
+                     P_max=None, dead_zone_s=0.0, dead_zone_E=0.0, theta_bounds=None,
+                     leakage=0.0, leakage_bound=0.0)
 
 
 def core_run(ctrl, steps=200):

@@ -73,7 +73,9 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
               f"{np.percentile(g, 99):.2f} ms, max {g.max():.2f} ms, > 2 periods: "
               f"{np.count_nonzero(g > 2e3 * H)}")
     assert sent >= 10, out
-    assert gaps.size > 0.8 * (t_end - t_start) * 1e-9 / H
+    # efforts kept coming: over half the nominal count (on main, one 2 s gap of the 3 s
+    # left a third; a loaded machine alone costs the free-running loop up to ~20 %)
+    assert gaps.size > 0.5 * (t_end - t_start) * 1e-9 / H
     # main: one gap of ~2 s. The goal (<= 2 periods beyond the machine's own stalls)
     # is not met: rclpy's raw take of an 8 MB message holds the interpreter lock ~30 ms
     # (measured: a thread of the same process stalls 36 ms, one of another process 2 ms)
