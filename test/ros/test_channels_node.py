@@ -61,6 +61,7 @@ def test_all_channels_publish_n_prediction_errors_equal_to_the_offline_run():
         assert spin_until(ex, lambda: all(s.get_publisher_count() > 0 for s in subs),
                           timeout=60.0)
         sim = start("simulator_node", f"duration:={DURATION}", "min_subscribers:=1",
+                    "lockstep_timeout:=5.0",        # a loaded machine stalls for 0.1 s+
                     params_file=os.path.join(CONFIG, "simulator.yaml"))
         (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
             ex, sim, ctrl, lambda: len(every) >= steps + 1 and len(first) >= steps + 1)

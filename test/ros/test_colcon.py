@@ -69,7 +69,8 @@ def test_installed_nodes_run(install):
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
         try:
             sim = subprocess.run([str(lib / "simulator"), "--ros-args", "--params-file",
-                                  str(share / "simulator.yaml"), "-p", "duration:=0.2"],
+                                  str(share / "simulator.yaml"), "-p", "duration:=0.2",
+                                  "-p", "lockstep_timeout:=5.0"],
                                  env=env, capture_output=True, text=True, timeout=600)
         finally:
             ctrl.send_signal(subprocess.signal.SIGINT)

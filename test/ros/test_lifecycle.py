@@ -187,7 +187,8 @@ def test_description_topic_waits_unconfigured_then_both_nodes_use_it():
                               timeout=60.0)
             # the simulator takes the same parameter (the latched message is already there)
             sim = start("simulator_node", "description_topic:=/robot_description",
-                        "duration:=0.2", "gravity:=[0.0, 0.0, 0.0]")
+                        "duration:=0.2", "gravity:=[0.0, 0.0, 0.0]",
+                        "lockstep_timeout:=5.0")     # a loaded machine stalls for 0.1 s+
             assert spin_until(ex, lambda: len(names) > 10, timeout=90.0)
             assert names[-1] == ["shoulder", "elbow", "wrist"]
             assert spin_until(ex, lambda: sim.poll() is not None, timeout=60.0)
