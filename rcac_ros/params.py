@@ -275,6 +275,11 @@ CONTROLLER = _robot("controller") + (
           "timer mode: predict the state this long beyond its age at the tick, from the "
           "model and the effort being applied (RK4), s; unset: no prediction (the effort "
           "answers a state up to a period old)", lo=0.0, hi=1.0),
+    Param("timer.phase_offset", "double", None,
+          "timer mode on the steady clock: lock the ticks to this long after each joint "
+          "state's arrival, s (a phase-locked loop: the state waits for the tick at most "
+          "this long instead of up to a period); unset: the ticks keep their own phase",
+          lo=0.0, hi=1.0),
     _strict_parameters(),
 )
 

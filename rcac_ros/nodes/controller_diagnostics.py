@@ -24,6 +24,7 @@ def diagnostics(node):
         "compute_overruns": node._deadline_misses,
         "late_ticks": node._late_ticks if node.loop is None else node.loop.late,
         "skipped_ticks": skipped,
+        "phase_error_us": f"{node.phase_error_ns * 1e-3:.1f}",   # timer.phase_offset's lock
         "watchdog": "tripped" if tripped else "ok",
         "watchdog_trips": node.watchdog.trips,
         "watchdog_replans": node.failsafe.stop.replans,

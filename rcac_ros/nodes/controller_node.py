@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from rcac_ros import params, topics
-from rcac_ros.errors import RcacError
+from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.base import run
 from rcac_ros.nodes.controller_diagnostics import diagnostics
 from rcac_ros.nodes.controller_input import StateInput
@@ -86,6 +86,12 @@ class ControllerNode(ManagedNode):
                                          self.get_logger().warning)
         self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
+        offset = values["timer.phase_offset"]
+        if offset is not None and offset >= self.h:
+            raise ConfigError(f"timer.phase_offset: must be < one period ({self.h:g} s), got "
+                              f"{offset:g}")
+        self._phase_offset_ns = None if offset is None else round(offset * 1e9)
+        self.phase_error_ns = 0
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, self._out, tagged=self.mode == "lockstep",
@@ -243,6 +249,9 @@ class ControllerNode(ManagedNode):
         if self.watchdog.state_is_stale():
             return self.watchdog.send_safe(no_state=True)
         self._control(now)
+        if self._phase_offset_ns is not None and self.loop is not None:
+            self.phase_error_ns = self.loop.lock_phase(self.states.received,
+                                                       self._phase_offset_ns)
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):

@@ -238,6 +238,10 @@ def add_arguments(parser):
     parser.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
                         help="--ros/--faults: the controller's timer.lookahead (state "
                              "prediction; default: none)")
+    parser.add_argument("--phase-offset", type=non_negative_float, default=None,
+                        metavar="SECONDS",
+                        help="--ros/--faults: the controller's timer.phase_offset (ticks "
+                             "locked to the states' arrival plus this; default: not locked)")
     parser.add_argument("--faults", action="store_true",
                         help="instead: the closed loop over ROS under faults (drops, jitter, "
                              "noise, simulator restart, frozen /clock, flood); --duration "
@@ -307,6 +311,8 @@ def run(args):
         over["K_D"] = float(args.K_D)
     if args.lookahead is not None:
         over["timer.lookahead"] = float(args.lookahead)
+    if args.phase_offset is not None:
+        over["timer.phase_offset"] = float(args.phase_offset)
     if args.delay_margin:
         from rcac_ros.tools.delay_margin import run_delay_margin
         run_delay_margin(plot_path=args.plot)

@@ -120,7 +120,7 @@ def analyse(probe, window_s, rate):
             ("controller", f"{topics.CONTROLLER_NODE}: control loop",
              ("deadline_misses", "late_ticks", "skipped_ticks", "compute_overruns",
               "compute_time_p50_us", "compute_time_p99_us", "watchdog_trips",
-              "gc_pause_max_ms", "gc_full_collections")),
+              "gc_pause_max_ms", "gc_full_collections", "phase_error_us")),
             ("simulator", f"{topics.SIMULATOR_NODE}: simulation",
              ("late_ticks", "skipped_ticks"))):
         status = probe.diagnostics.get(name, {})

@@ -203,6 +203,36 @@ def test_watchdog_default_is_zero_in_timer_mode():
             np.testing.assert_array_equal(d, np.zeros(7))
 
 
+@pytest.mark.parametrize("offset", [None, 0.0005])
+def test_timer_ticks_lock_to_the_state_arrival_plus_the_phase_offset(offset):
+    """timer.phase_offset: the loop's deadlines move to the newest state's arrival (steady
+    clock) plus the offset, modulo the period; unset, they keep their own phase."""
+    extra = {} if offset is None else {"timer.phase_offset": offset}
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, mode="timer", **extra)
+        probe.state(0, PAPER_Q0, np.zeros(7))
+        assert spin_until(ex, lambda: any(lab == "joint" for lab, _ in probe.efforts))
+        arrived = node.states.received      # no state after this one
+        phase = (node.loop.next_ns - arrived) % H_NS
+        ticks = node._steps
+        assert spin_until(ex, lambda: node._steps > ticks + 40)
+        if offset is None:
+            assert node.phase_error_ns == 0 and (node.loop.next_ns - arrived) % H_NS == phase
+        else:
+            err = (node.loop.next_ns - arrived - round(offset * 1e9) + H_NS // 2) % H_NS \
+                - H_NS // 2
+            assert abs(err) <= 0.01 * H_NS, err
+            assert abs(node.phase_error_ns) <= 0.01 * H_NS
+
+
+def test_phase_offset_of_a_period_or_more_is_refused():
+    with ros_context() as (ctx, _):
+        with pytest.raises(ConfigError) as err:
+            ControllerNode(context=ctx, parameter_overrides=[
+                Parameter("mode", value="timer"), Parameter("timer.phase_offset", value=0.002)])
+        assert str(err.value).startswith("timer.phase_offset: must be < one period")
+
+
 @pytest.mark.parametrize("name, value", [
     ("K_D", -1.0), ("P", 0.0), ("Lambda", -0.5), ("gamma", -0.1), ("lambda", 0.0),
     ("rate", 0.0), ("state_timeout", -1.0), ("safe_effort", [0.0, 1.0, 2.0]),

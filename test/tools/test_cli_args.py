@@ -36,6 +36,7 @@ NUMERIC_OPTIONS = [
 NON_NEGATIVE_OPTIONS = [
     ("experiment", [], "--gamma"),
     ("bench", [], "--lookahead"),
+    ("bench", [], "--phase-offset"),
     ("payload-demo", [], "--gamma"),
     ("payload-demo", [], "--jump"),
     ("payload-demo", [], "--payload-mass"),
