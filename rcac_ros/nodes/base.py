@@ -220,8 +220,7 @@ def run(node_factory, prog, args=None):
     code = 0
     try:
         node = node_factory()
-        gcwatch.freeze_startup()            # after the JIT warm-up: see nodes/gcwatch.py
-        gcwatch.WATCH.install()
+        gcwatch.WATCH.install()             # the collector's pauses, in the diagnostics
         rt = _realtime(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)

@@ -1,34 +1,21 @@
-"""The garbage collector around a 500 Hz loop: start-up objects frozen, pauses measured.
+"""The garbage collector around a 500 Hz loop: every collection timed.
 
-CPython's cyclic collector stops the process while it walks a generation. A full
-(generation 2) collection walks every tracked object; a node process holds about 130,000
-of them after start-up (rclpy, numpy, numba's dispatchers, the model), and one full
-collection took 120-150 ms on the loaded 2-core VM (doc/failsafe.md), 60 control periods.
-The collector starts one by itself when enough objects have survived into generation 2.
-The steady 500 Hz loop allocates almost no tracked objects (no collection at all in a
-10 s ``rcac bench --ros``), but bursts of allocation (parameter changes, trajectories,
-services) can.
+CPython's cyclic collector stops the process while it walks a generation; a full
+(generation 2) collection walks every tracked object, about 130,000 in a node process
+after start-up (rclpy, numpy, numba's dispatchers, the model): 120-150 ms on the loaded
+2-core VM. :class:`GcWatch` times every collection through :data:`gc.callbacks`, so the
+nodes' diagnostics report the longest pause and the number of full collections.
 
-:func:`freeze_startup` collects once, then moves every object alive into the permanent
-generation (:func:`gc.freeze`, the technique CPython documents for forked servers): later
-collections walk only what was made after start-up, and a full one took 0.005 ms.
-:class:`GcWatch` times every collection through :data:`gc.callbacks`, so the nodes'
-diagnostics report the longest pause and the number of full collections.
+Measured (doc/failsafe.md): the steady loop allocates almost no tracked objects, and a 20 s
+``rcac bench --ros`` saw no collection at all in the controller. Freezing the start-up
+objects (:func:`gc.freeze`, so a full collection would walk only newer ones) was tried and
+measured worse: in the fault benchmark's nominal case it brought 22-26 gaps of more than two
+periods per 20 s against 0-1 without, and watchdog trips, for a reason not found. The nodes
+do not freeze.
 """
 
 import gc
 import time
-
-
-def freeze_startup():
-    """Collect the start-up garbage, then freeze everything alive (after the JIT warm-up)."""
-    gc.collect()
-    gc.freeze()
-
-
-def unfreeze():
-    """Hand the frozen objects back to the collector (a lifecycle cleanup drops many)."""
-    gc.unfreeze()
 
 
 class GcWatch:
@@ -78,10 +65,10 @@ class GcWatch:
             self.full += 1
 
     def values(self):
-        """Diagnostics entries: ``gc_pause_max_ms``, ``gc_full_collections``, ``gc_frozen``."""
+        """Diagnostics entries: ``gc_pause_max_ms``, ``gc_full_collections``,
+        ``gc_collections``."""
         return {"gc_pause_max_ms": f"{self.pause_max_s * 1e3:.3f}",
-                "gc_full_collections": self.full,
-                "gc_frozen_objects": gc.get_freeze_count()}
+                "gc_full_collections": self.full, "gc_collections": self.collections}
 
 
 #: the process's watch: :func:`rcac_ros.nodes.base.run` installs it

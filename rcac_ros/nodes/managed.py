@@ -26,7 +26,6 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes import gcwatch
 from rcac_ros.nodes.base import declare, declare_parameters, QOS
 from rcac_ros.nodes.description import subscribe_description
 from rcac_ros.nodes.diagnosed import RcacNodeMixin
@@ -136,8 +135,6 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
             self._destroy_entities()
             return FAILURE
         self.config_error = None
-        if not self._at_start:              # (at start-up, run() freezes after the node)
-            gcwatch.freeze_startup()
         self._pub_diag = self.keep(self.destroy_publisher, self.create_publisher(
             DiagnosticArray, topics.DIAGNOSTICS, QOS))
         self.keep(self.destroy_timer, self.create_timer(
@@ -163,7 +160,6 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
     def on_cleanup(self, state):
         """Destroy everything configure made (the parameters stay declared)."""
         self._destroy_entities()
-        gcwatch.unfreeze()                  # what configure made can be collected again
         return super().on_cleanup(state)
 
     def on_shutdown(self, state):
