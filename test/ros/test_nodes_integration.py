@@ -59,7 +59,13 @@ def test_lockstep_matches_the_offline_experiment():
         ex.add_node(probe)
         ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
         matched(ex, subs)
-        sim = start("simulator_node", f"duration:={DURATION}", "min_subscribers:=2",
+        # the simulator starts once its state publisher has matched every subscription the
+        # graph shows (the controller's, this probe's, and any other): with a fixed 2, one
+        # full-suite run started it before this probe matched, which then saw no state
+        assert spin_until(ex, lambda: probe.count_subscribers("/joint_states") >= 2,
+                          timeout=60.0)
+        readers = probe.count_subscribers("/joint_states")
+        sim = start("simulator_node", f"duration:={DURATION}", f"min_subscribers:={readers}",
                     # a process stalled 0.5 s on a loaded machine is not a lost
                     # effort: wait long enough that only a real loss is a miss
                     "lockstep_timeout:=5.0", params_file=os.path.join(CONFIG, "simulator.yaml"))
@@ -79,7 +85,7 @@ def test_lockstep_matches_the_offline_experiment():
         assert list(msg.name) == JOINTS
         np.testing.assert_allclose(msg.position, ref_q[k], rtol=0, atol=1e-9)
         seen += 1
-    assert seen >= steps * 0.9
+    assert seen >= steps * 0.9, (seen, readers, sim_out)
     # the tracking error stays what the offline run gives over the same seconds
     track = np.array(track)
     assert track.shape[1] == 7 and len(track) >= steps
