@@ -112,8 +112,15 @@ def test_positions_only_states_still_track():
         ex.add_node(probe)
         ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
         matched(ex, [sub])
+        # every state reader the graph shows matched before the start, and a stalled
+        # controller waited for: in one loaded full run fewer than 501 answers came (a
+        # lockstep miss lets the simulator run ahead of the controller)
+        assert spin_until(ex, lambda: probe.count_subscribers("/joint_states") >= 2,
+                          timeout=60.0)
+        readers = probe.count_subscribers("/joint_states")
         sim = start("simulator_node", "duration:=1.0", "publish_velocity:=false",
-                    "min_subscribers:=2", params_file=os.path.join(CONFIG, "simulator.yaml"))
+                    f"min_subscribers:={readers}", "lockstep_timeout:=5.0",
+                    params_file=os.path.join(CONFIG, "simulator.yaml"))
         (sim_code, sim_out), _ = run_to_end(ex, sim, ctrl, lambda: len(track) >= steps + 1)
     assert sim_code == 0, sim_out
     assert all(len(m.velocity) == 0 for m in probe.states)
