@@ -209,7 +209,7 @@ class ControllerNode(ManagedNode):
         self.watchdog.resume()              # a spell of safe effort ends here
         if self._starvation is not None:    # timer mode: K_D within the delay margin
             if spell:
-                self._starvation.reset()
+                self._starvation.after_spell()
             self._starvation.step()
         if self.filters_stale:
             self.filters_stale = False

@@ -44,10 +44,16 @@ class Starvation:
         self._resume_adaptation = False
 
     def reset(self):
-        """A fresh start (activation, the end of a spell of safe effort): nominal gains."""
+        """A fresh start (activation): nominal gains."""
         if self.guard.starved:
             self._leave()
         self.guard.reset()
+
+    def after_spell(self):
+        """A spell of safe effort ended: its length is the watchdog's, not a held effort of
+        this loop (a frozen ``/clock`` must not read as a starved loop); the smoothed delay
+        and the degraded mode, if on, are kept (a starved machine also trips the watchdog)."""
+        self.guard.forget_gap()
 
     def step(self):
         """Before a control step: judge the delay, scale ``K_D`` (and say so once)."""

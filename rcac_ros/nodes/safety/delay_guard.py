@@ -73,8 +73,12 @@ class DelayGuard:
         self.worst = 0.0
         self.reset()
 
+    def forget_gap(self):
+        """The next step's gap is not a held effort (a spell of safe effort came between)."""
+        self._last_ns = None
+
     def reset(self):
-        """A fresh start (after a safe stop, or activation): nominal, no delay seen."""
+        """A fresh start (activation): nominal, no delay seen."""
         self.starved = False
         self.scale = 1.0
         self.delay = 0.0
