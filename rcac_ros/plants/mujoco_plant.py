@@ -274,7 +274,9 @@ class MujocoPlant:
             other joint of the file is locked (made fixed, at its zero), as the loader
             merges them; meshes are dropped (no contact). Its gravity and joint terms go
             into the MuJoCo model too; the inertial data are the file's, as MuJoCo reads
-            them.
+            them. MuJoCo's world is the URDF's root link: the chain's ``base_link`` must be
+            the root (or fixed to it without a rotation), as ``model.gravity`` is taken in
+            that frame.
         **kwargs
             As the constructor.
         """
