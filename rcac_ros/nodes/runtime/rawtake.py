@@ -1,4 +1,4 @@
-"""Take serialised messages without holding the interpreter lock (doc/failsafe.md, "flood").
+"""Take serialised messages without holding the interpreter lock (doc/failsafe.md).
 
 rclpy's take (``Subscription.take_message``, also with ``raw=True``) copies the sample out of
 DDS while it holds the interpreter lock: a 24 MB JointState stalled every other thread of the
