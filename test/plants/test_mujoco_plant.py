@@ -97,12 +97,13 @@ def test_mujocos_own_urdf_reading_gives_the_same_arm(which):
 def with_terms(model, **terms):
     """``model`` with per-joint ``damping``/``armature``/``friction`` (the model's own keywords
     where it has them, attributes on a copy where it does not yet)."""
+    terms = {k: np.asarray(terms.get(k, np.zeros(model.n)), float)
+             for k in ("damping", "armature", "friction")}
     try:
         return model.replace(**terms)
     except TypeError:
         out = copy.copy(model)
-        for name in ("damping", "armature", "friction"):
-            setattr(out, name, np.asarray(terms.get(name, np.zeros(model.n)), float))
+        out.__dict__.update(terms)
         return out
 
 
@@ -129,7 +130,8 @@ def reference_rk4(rigid, damping, armature, q, qd, taus, h=0.002):
 
 @needs_robots
 def test_damping_and_armature_follow_their_equation():
-    rigid = model_from_urdf(PANDA, tip_link="panda_link8")
+    # rigid: the URDF's own <dynamics damping> removed (the reference adds the terms itself)
+    rigid = with_terms(model_from_urdf(PANDA, tip_link="panda_link8"))
     damping, armature = np.linspace(0.2, 1.0, 7), np.linspace(0.3, 0.05, 7)
     model = with_terms(rigid, damping=damping, armature=armature)
     q0, qd0, taus = open_loop(rigid, seconds=0.4, seed=3)
