@@ -19,7 +19,7 @@ from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
 
 H = 0.002
 DURATION = 1.0
