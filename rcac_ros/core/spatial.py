@@ -11,7 +11,7 @@ armature, damping, friction, v_c]`` (the joint terms of doc/design.md §7).
 All kernels are scalar code compiled by numba with ``cache=True``. They never
 allocate from another dtype than their inputs, so running them with
 ``NUMBA_DISABLE_JIT=1`` on object arrays counts their arithmetic exactly
-(:mod:`rcac_ros.tools.opcount`).
+(:mod:`rcac_ros.tools.bench.opcount`).
 """
 
 import math
