@@ -172,9 +172,12 @@ class RecursiveCompositeController:
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
         through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
+        :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
         :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
         if self.joint_friction:
-            jdata, jfilt, kernel = self._jdata, self._jfilt, jf.friction_step_kernel
+            kernel = jf.paper_friction_step if is_paper_law(self._chan, self._scal) else \
+                jf.friction_step_kernel
+            jdata, jfilt = self._jdata, self._jfilt
             self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
             return
         self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \

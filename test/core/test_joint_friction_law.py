@@ -145,3 +145,25 @@ def test_least_squares_with_joint_terms_stays_exact(adaptation):
     np.testing.assert_allclose(ls, fixed, rtol=1e-6)
     blind = exact_run(model, model, 0.002, 500, "all", traj, adaptation=adaptation)
     assert np.all(blind > 10.0 * ls)
+
+
+def test_fused_paper_step_with_joint_terms_equals_the_general_kernel():
+    """The paper's law with the joint terms runs a fused body (``paper_friction_step``); a
+    dead zone on s too small to act sends it through ``friction_step_kernel``: the same law,
+    summed in another order (1e-12)."""
+    model = frictional(css_arm((0.0, 0.0, -9.81)))
+    traj = PaperTrajectory(Q0, reading="position", amplitude=0.3, period=4.0)
+    runs = []
+    for kwargs in ({}, dict(dead_zone_s=1e-300)):
+        ctrl = RecursiveCompositeController(model, joint_friction=True,
+                                            friction_hat0=np.zeros((7, 3)), **kwargs)
+        sim = Simulator(model, q0=Q0)
+        taus = []
+        for k in range(500):
+            taus.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+            sim.step(taus[-1])
+        runs.append((np.array(taus), ctrl.theta_hat, ctrl.friction_hat, ctrl.E, ctrl.y))
+    for a, b in zip(runs[0][:3], runs[1][:3]):
+        assert np.max(np.abs(a - b)) <= 1e-12 * max(np.max(np.abs(b)), 1.0), (a, b)
+    assert abs(runs[0][3] - runs[1][3]) <= 1e-12 * abs(runs[1][4]), runs   # E = W theta - y
+    assert np.max(np.abs(runs[0][2])) > 1e-3
