@@ -41,7 +41,8 @@ from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
 from rcac_ros.errors import GainError
-from . import joint_friction as jf
+from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, friction_step_kernel, paper_friction_step)
 from .least_squares import initial_factor
 
 UPDATES = ("implicit", "explicit")
@@ -113,7 +114,7 @@ class RecursiveCompositeController:
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
-                 joint_friction=False, friction_hat0=None, P_friction=jf.P_FRICTION):
+                 joint_friction=False, friction_hat0=None, P_friction=P_FRICTION):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -161,13 +162,13 @@ class RecursiveCompositeController:
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
         n = self.n
-        self.P_friction = jf.friction_gain(P_friction, n)
+        self.P_friction = friction_gain(P_friction, n)
         self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
             as_array(friction_hat0, (n, 3), "friction_hat0")
-        self._jdata = np.zeros((n, jf.JOINT_COLS))
-        self._jdata[:, jf.F_GAIN:jf.F_GAIN + 3] = self.P_friction
-        self._jdata[:, jf.F_VC] = self.model.friction_velocity
-        self._jfilt = np.zeros((m, n, jf.JFILT_COLS))
+        self._jdata = np.zeros((n, JOINT_COLS))
+        self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
+        self._jdata[:, F_VC] = self.model.friction_velocity
+        self._jfilt = np.zeros((m, n, JFILT_COLS))
 
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
@@ -175,8 +176,8 @@ class RecursiveCompositeController:
         :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
         :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
         if self.joint_friction:
-            kernel = jf.paper_friction_step if is_paper_law(self._chan, self._scal) else \
-                jf.friction_step_kernel
+            kernel = paper_friction_step if is_paper_law(self._chan, self._scal) else \
+                friction_step_kernel
             jdata, jfilt = self._jdata, self._jfilt
             self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
             return
@@ -260,7 +261,7 @@ class RecursiveCompositeController:
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
-            self._jdata[:, jf.F_HAT:jf.F_HAT + 3] = fh
+            self._jdata[:, F_HAT:F_HAT + 3] = fh
             self._jfilt[:] = 0.0
         self._state[:] = 0.0
         self._state[:, THETA_HAT:THETA_HAT + 13] = th
@@ -342,15 +343,14 @@ class RecursiveCompositeController:
         ``joint_friction`` (doc/design.md §7)."""
         if not self.joint_friction:
             return None
-        return self._jdata[:, jf.F_HAT:jf.F_HAT + 3].copy()
+        return self._jdata[:, F_HAT:F_HAT + 3].copy()
 
     def set_friction_hat(self, friction_hat):
         """Set the joint estimates (n, 3), e.g. restored from a file; filters keep running."""
         if not self.joint_friction:
             raise GainError("friction_hat: the controller has no joint terms "
                             "(joint_friction=False)")
-        self._jdata[:, jf.F_HAT:jf.F_HAT + 3] = as_array(friction_hat, (self.n, 3),
-                                                         "friction_hat")
+        self._jdata[:, F_HAT:F_HAT + 3] = as_array(friction_hat, (self.n, 3), "friction_hat")
 
     @property
     def E(self):
