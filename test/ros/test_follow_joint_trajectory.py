@@ -7,14 +7,16 @@ test chooses. Each outcome is checked against a closed form: the linear interpol
 the goal's points, the time at which an exponentially decaying error enters the goal
 tolerance, the tick at which an offset appears.
 
-Needs control_msgs (on an apt install ``ros-jazzy-control-msgs``; here a local build put
-on PYTHONPATH and LD_LIBRARY_PATH, see doc/install.md); skipped with the reason otherwise,
-except the test of the fallback, which always runs.
+Needs control_msgs: an installed one (apt: ``ros-jazzy-control-msgs``) or, on the pip-only
+path, the subset built at test set-up from ``test/ros/interfaces`` (``conftest.py``). Only
+where neither imports (no C compiler for the build) do these tests skip, with the reason;
+the test of the fallback always runs.
 """
 
 import math
 import time
 
+import interface_build
 import numpy as np
 import pytest
 
@@ -32,8 +34,9 @@ from rcac_ros.nodes.trajectory_msg import ActiveTrajectory  # noqa: E402
 
 needs_control_msgs = pytest.mark.skipif(
     fjt.FollowJointTrajectory is None,
-    reason=f"{fjt.UNAVAILABLE}: control_msgs is not a PyPI wheel (apt: ros-jazzy-control-msgs;"
-           " or a local colcon build on PYTHONPATH/LD_LIBRARY_PATH, doc/install.md)")
+    reason=f"{fjt.UNAVAILABLE}; {interface_build.BUILD_ERROR}: an apt install has"
+           " ros-jazzy-control-msgs, this one has neither it nor a C compiler for the test"
+           " build (test/ros/interface_build.py)")
 
 JOINTS = ["a", "b", "c"]
 Q0 = np.array([0.1, -0.2, 0.3])
