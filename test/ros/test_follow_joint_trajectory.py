@@ -422,11 +422,26 @@ class Loop:
         return sent.result()
 
 
-def _closed_loop(via, steps, **tolerances):
+def _closed_loop(via, steps, attempts=3, **tolerances):
     """The trajectory, stamped to start at step START_STEP, goes through ``via`` ("topic"
     or "action") at step 5. Returns the simulated positions and the efforts per step, the
     goal's ``(status, result, feedback)`` for the action, and whether the controller holds.
+
+    ``state_timeout`` is at most 1 s, and a loaded machine (the CI run of the whole suite
+    beside other work) can hold the test's process for longer between two states: the
+    watchdog then trips and restarts the filters, and the run is not the deterministic one
+    compared. Such a run is done again, up to ``attempts`` times.
     """
+    for attempt in range(attempts):
+        run = _closed_loop_once(via, steps, **tolerances)
+        if run is not None:
+            return run
+    raise AssertionError(f"the watchdog tripped in each of {attempts} runs: the loop is not "
+                         "deterministic")
+
+
+def _closed_loop_once(via, steps, **tolerances):
+    """One run of :func:`_closed_loop`, or ``None`` if the watchdog tripped."""
     from test_nodes_support import PAPER_Q0
     with ros_context() as (ctx, ex):
         loop = Loop(ctx, ex)
@@ -449,7 +464,8 @@ def _closed_loop(via, steps, **tolerances):
         assert node._motion.active is not None
         for k in range(5, steps):
             loop.step(k)
-        assert node.watchdog.trips == 0, "the watchdog tripped: the loop is not deterministic"
+        if node.watchdog.trips:
+            return None
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)
