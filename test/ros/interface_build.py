@@ -164,6 +164,7 @@ def build(root):
     if (out / "python" / PACKAGE / "__init__.py").exists():
         return out
     root.mkdir(parents=True, exist_ok=True)
+    (root / "COLCON_IGNORE").touch()      # colcon build --base-paths <repo> must not look here
     with tempfile.TemporaryDirectory(dir=root) as tmp:
         tmp = pathlib.Path(tmp)
         generate(tmp / "work")
