@@ -73,7 +73,6 @@ class Probe:
         self.states = []     # (source, receive) ns
         self.efforts = []    # (source, receive, watchdog)
         self.latest_state_recv = None
-        self.state_age = []  # ns, per effort: receive(effort) - receive(newest state)
         self.diagnostics = {}
         self.ping_rtt = []   # ns: receive(pong) - send(ping), through the plain DDS echo
         self._ping_msg = JointState(name=[f"joint{i}" for i in range(1, 8)],
@@ -112,8 +111,6 @@ class Probe:
         watchdog = b"watchdog" in bytes(data[:96])
         recv = info["received_timestamp"]
         self.efforts.append((info["source_timestamp"], recv, watchdog))
-        if not watchdog and self.latest_state_recv is not None:
-            self.state_age.append(recv - self.latest_state_recv)
 
     def _on_diag(self, msg):
         for status in msg.status:
@@ -122,6 +119,21 @@ class Probe:
     def matched(self):
         return all(s.get_publisher_count() > 0 for s in self._subs[:2] + self._subs[3:]) \
             and self._ping.get_subscription_count() > 0
+
+
+def state_age(state_recv, effort_recv):
+    """ns, per effort: its receive stamp minus that of the newest state received before it.
+
+    From the DDS receive stamps after the run, not in the callbacks: a loaded probe runs its
+    callbacks late and not in arrival order (a backlog of states first, then of efforts),
+    while the stamps are those of the samples' arrival. Efforts before the first state are
+    left out.
+    """
+    state_recv = np.sort(np.asarray(state_recv, np.int64))
+    effort_recv = np.asarray(effort_recv, np.int64)
+    i = np.searchsorted(state_recv, effort_recv, side="right") - 1
+    ok = i >= 0
+    return (effort_recv[ok] - state_recv[i[ok]]).astype(float)
 
 
 def analyse(probe, window_s, rate):
@@ -139,7 +151,7 @@ def analyse(probe, window_s, rate):
     out.update(percentiles(period, "period"))
     state_period = 1e-6 * np.diff(st[:, 0]).astype(float) if len(st) > 1 else np.empty(0)
     out.update(percentiles(state_period, "state_period"))
-    out.update(percentiles(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
+    out.update(percentiles(1e-6 * state_age(st[:, 1], eff[:, 1]), "state_to_effort_latency"))
     out.update(percentiles(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
     out.update(percentiles(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
     out.update(percentiles(0.5e-6 * np.asarray(probe.ping_rtt, float), "ping_one_way"))
