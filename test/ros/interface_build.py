@@ -16,8 +16,10 @@ Result, under ``OUT``: ``python/control_msgs`` (to put on ``sys.path``) and ``li
     python test/ros/interface_build.py OUT
 """
 
+import contextlib
 import hashlib
 import importlib.util
+import io
 import os
 import pathlib
 import shutil
@@ -50,7 +52,21 @@ def cache_key():
 
 def generate(work):
     """Run the rosidl generators (the wheels' Python API: no cmake, no ``rosidl`` CLI)."""
-    os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)   # the generators' templates
+    before = os.environ.get("AMENT_PREFIX_PATH")
+    if not before:                  # the generators find their templates in the ament index
+        os.environ["AMENT_PREFIX_PATH"] = sys.prefix
+    log = io.StringIO()             # the generators print a line per file: kept for errors
+    try:
+        with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            _generate(work)
+    except Exception as err:
+        raise RuntimeError(f"rosidl generation failed ({err}):\n{log.getvalue()[-3000:]}")
+    finally:                        # the tests' environment as it was
+        if not before:
+            os.environ.pop("AMENT_PREFIX_PATH", None)
+
+
+def _generate(work):
     from rosidl_generator_c.cli import GenerateC
     from rosidl_generator_py.cli import GeneratePython
     from rosidl_typesupport_c.cli import GenerateCTypesupport
