@@ -1,9 +1,9 @@
 """The README's table of the ROS loop's timing, from a run (``make readme-bench``).
 
-Runs ``rcac bench --ros`` (:func:`ros_bench.run_ros_bench`) once per controller mode, one
-after the other: the free-running timer, the timer locked to the states' arrival
-(``timer.phase_offset`` 0) and ``on_state`` (the controller's ``lockstep`` mode answering
-each state of the real-time simulator). It then replaces the block between the two
+Runs ``rcac bench --ros`` (:func:`rcac_ros.tools.bench.ros.run_ros_bench`) once per
+controller mode, one after the other: the free-running timer, the timer locked to the
+states' arrival (``timer.phase_offset`` 0) and ``on_state`` (the controller's ``lockstep``
+mode answering each state of the real-time simulator). It then replaces the block between the two
 ``<!-- bench-ros ... -->`` markers of README.md with the table of the figures and the
 conditions of the run (date, cores, load average before and after). The rows that matter
 are the ratios (doc/nodes.md, "Timing"): what the controller adds to its input, which the
@@ -73,7 +73,7 @@ def replace_block(text, block):
 
 def measure(duration, rate=500.0):
     """Run the bench once per mode; return ``(results, conditions)``."""
-    from rcac_ros.tools.ros_bench import BENCH_CONTROLLER, run_ros_bench
+    from rcac_ros.tools.bench.ros import BENCH_CONTROLLER, run_ros_bench
     load0 = os.getloadavg()[0]
     results = {}
     for column, (mode, over) in MODES.items():

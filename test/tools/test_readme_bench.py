@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rcac_ros.tools import readme_bench as rb
-from rcac_ros.tools.ros_bench import analyse
+from rcac_ros.tools.bench.ros import analyse
 
 
 class FakeProbe:

@@ -20,7 +20,7 @@ states, the effort commands and ``/diagnostics`` and measures, after a warm-up:
 * what the controller adds, as ratios of two figures of the same run, which the load of the
   machine moves together (doc/nodes.md, "Timing"): the effort period p99 over the state
   period p99 (the simulator's own jitter as received), and the latency p50 over the one-way
-  latency of a plain DDS ping (:mod:`rcac_ros.tools.dds_echo`, a third process that echoes
+  latency of a plain DDS ping (:mod:`rcac_ros.tools.bench.echo`, a third process that echoes
   a 7-joint JointState; half the round trip, every 20 ms).
 """
 
@@ -65,7 +65,7 @@ class Probe:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
-        from rcac_ros.tools.dds_echo import PING, PONG
+        from rcac_ros.tools.bench.echo import PING, PONG
 
         qos = topics.qos(depth)
         self.node = Node("rcac_bench_probe", context=context)
@@ -312,7 +312,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
             children.append(Child("controller", ctrl, env,
                                   os.path.join(log_dir, "controller.log")))
             children.append(Child("simulator", sim, env, os.path.join(log_dir, "simulator.log")))
-            children.append(Child("DDS echo", [sys.executable, "-m", "rcac_ros.tools.dds_echo"],
+            children.append(Child("DDS echo", [sys.executable, "-m", "rcac_ros.tools.bench.echo"],
                                   env, os.path.join(log_dir, "echo.log")))
 
             def spin_until(cond, timeout, what):

@@ -6,7 +6,8 @@ subscription's callback in a ``SingleThreadedExecutor``, as the controller answe
 in ``on_state`` mode. The benchmark's probe sends a 7-joint ping every 20 ms and halves the
 round trip: one hop of the same message over the same DDS, in the same run as the loop it
 measures, with the wake-up of a Python executor at the far end
-(``python -m rcac_ros.tools.dds_echo``, started by :func:`ros_bench.run_ros_bench`).
+(``python -m rcac_ros.tools.bench.echo``, started by
+:func:`rcac_ros.tools.bench.ros.run_ros_bench`).
 """
 
 import sys
