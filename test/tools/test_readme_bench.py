@@ -1,5 +1,7 @@
 """The README's ROS timing table: its ratios, its block, and the bench's ratio figures."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -65,3 +67,15 @@ def test_block_lists_every_mode_and_replaces_only_itself():
         rb.replace_block("no markers", block)
     with pytest.raises(rb.BlockError):
         rb.replace_block(f"{rb.END}\n{rb.BEGIN}\n", block)
+
+
+def test_readme_has_the_block_as_generated():
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(root, "README.md"), encoding="utf-8") as f:
+        text = f.read()
+    block = text[text.index(rb.BEGIN):text.index(rb.END) + len(rb.END)]
+    assert rb.replace_block(text, block) == text
+    lines = block.splitlines()
+    assert lines[1].startswith("Measured by `make readme-bench` on ")
+    assert lines[3] == "| | " + " | ".join(rb.MODES) + " |"
+    assert [x.split(" | ")[0] for x in lines[5:-1]] == [f"| {label}" for label, _ in rb.ROWS]
