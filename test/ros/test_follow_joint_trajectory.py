@@ -432,7 +432,7 @@ def _closed_loop(via, steps, attempts=3, **tolerances):
     watchdog then trips and restarts the filters, and the run is not the deterministic one
     compared. Such a run is done again, up to ``attempts`` times.
     """
-    for attempt in range(attempts):
+    for _ in range(attempts):
         run = _closed_loop_once(via, steps, **tolerances)
         if run is not None:
             return run
