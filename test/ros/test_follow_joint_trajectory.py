@@ -34,7 +34,8 @@ from rcac_ros.nodes.msgs.trajectory import ActiveTrajectory  # noqa: E402
 
 needs_control_msgs = pytest.mark.skipif(
     fjt.FollowJointTrajectory is None,
-    reason=f"{fjt.UNAVAILABLE}; {interface_build.BUILD_ERROR}: an apt install has"
+    reason=f"{fjt.UNAVAILABLE}; {interface_build.BUILD_ERROR or 'the test build did not load'}:"
+           " an apt install has"
            " ros-jazzy-control-msgs, this one has neither it nor a C compiler for the test"
            " build (test/ros/interface_build.py)")
 
