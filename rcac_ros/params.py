@@ -24,6 +24,7 @@ import numpy as np
 
 from rcac_ros.core.model import PAPER_GAINS, PRESETS
 from rcac_ros.errors import ConfigError
+from rcac_ros.plants import ENGINES
 
 #: the ROS parameter types a row may have
 TYPES = ("bool", "integer", "double", "string", "double_array", "string_array",
@@ -301,7 +302,12 @@ SIMULATOR = _robot("simulator") + (
           "(steady-clock timer)", choices=("lockstep", "realtime")),
     Param("dt", "double", PAPER_GAINS["h"], "integration (and control) period, s",
           lo=0.0, hi=10.0, strict=True),
-    Param("substeps", "integer", 1, "RK4 steps per dt", lo=1, hi=1000),
+    Param("engine", "string", ENGINES[0],
+          "the plant: 'builtin' (the package's own dynamics, RK4) or 'mujoco' (the same arm "
+          "in MuJoCo, joint friction as MuJoCo's friction loss; needs the mujoco package); "
+          "doc/plants.md", choices=ENGINES),
+    Param("substeps", "integer", 1, "integrator steps per dt (RK4 on both engines)",
+          lo=1, hi=1000),
     Param("duration", "double", 0.0,
           "stop (exit 0) after this much sim time, s; 0 = run forever", lo=0.0, hi=1e9),
     Param("lockstep_timeout", "double", 0.5,
