@@ -77,7 +77,7 @@ class RecursiveCompositeController:
         The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
         ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
     update : {"implicit", "explicit"}
-        Discretisation of the prediction-error term (module docstring).
+        Discretisation of the prediction-error term (:mod:`rcac_ros.core.adaptation`).
     adaptation : {"gradient", "least_squares", "least_squares_prediction"}
         ``P_i`` fixed (default), least squares with bounded-gain forgetting on both terms,
         or least squares on the prediction term only (the tracking term keeps ``P``).

@@ -236,9 +236,9 @@ def add_arguments(parser):
                         help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
     parser.add_argument("--duration", type=positive_float, default=60.0,
                         help="seconds of the --ros run (default 60)")
-    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
-                        help="--ros: the controller on its 500 Hz timer (default) or answering "
-                             "each joint state")
+    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="on_state",
+                        help="--ros: the controller answering each joint state (default, the "
+                             "node's default mode) or on its 500 Hz timer")
     parser.add_argument("--budget", type=positive_float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
     parser.add_argument("--rt", action="store_true",
