@@ -203,6 +203,11 @@ CONTROLLER = _robot("controller") + (
     Param("leakage_bound", "double", 0.0,
           "M_0 of the switching leakage (every link): none while ||theta_hat_i - theta_0i|| "
           "<= M_0, full beyond 2 M_0 (0: leak always)", lo=0.0, hi=BIG),
+    Param("joint_friction", "bool", False,
+          "also estimate each joint's armature, viscous and Coulomb friction "
+          "(doc/design.md §7), published on ~/friction_estimates"),
+    Param("P_friction", "double_array", (1.0, 10.0, 10.0),
+          "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0"),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),

@@ -14,8 +14,6 @@ import it. MuJoCo is optional: it is imported only when the ``mujoco`` engine is
 and its absence is a one-line :class:`~rcac_ros.errors.DependencyError`.
 """
 
-import copy
-
 import numpy as np
 
 from rcac_ros.errors import ConfigError
@@ -55,25 +53,13 @@ def make_plant(model, engine="builtin", **kwargs):
     if engine == "mujoco":
         from .mujoco_plant import MujocoPlant
         return MujocoPlant(model, **kwargs)
-    if getattr(model, "mujoco_only", False):
-        raise ConfigError("engine builtin: this model has no joint terms (damping, friction, "
-                          "armature) in its dynamics; use engine mujoco")
     from rcac_ros.core.simulator import Simulator
     return Simulator(model, **kwargs)
 
 
 def with_joint_terms(model, damping=0.0, friction=0.0, armature=0.0):
-    """``model`` with the same ``damping``, ``friction`` and ``armature`` on every joint.
-
-    The model's own fields (``RobotModel.replace``). A model class without them (before
-    joint terms were part of the model) gets them as attributes of a copy, which only the
-    MuJoCo plant reads (:func:`rcac_ros.plants.mujoco_plant.joint_terms`).
-    """
-    values = (("damping", damping), ("friction", friction), ("armature", armature))
-    terms = {k: np.full(model.n, float(v)) for k, v in values}
-    try:
-        return model.replace(**terms)
-    except TypeError:
-        out = copy.copy(model)
-        out.__dict__.update(terms, mujoco_only=any(v != 0.0 for _, v in values))
-        return out
+    """``model`` with the same ``damping``, ``friction`` and ``armature`` on every joint
+    (``RobotModel.replace``; doc/design.md §7)."""
+    n = model.n
+    return model.replace(damping=np.full(n, float(damping)), friction=np.full(n, float(friction)),
+                         armature=np.full(n, float(armature)))

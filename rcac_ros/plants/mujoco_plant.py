@@ -43,14 +43,13 @@ def require_mujoco():
 
 
 def joint_terms(model):
-    """``{"damping": (n,), "armature": (n,), "friction": (n,)}`` of ``model`` (zero if absent).
+    """``{"damping": (n,), "armature": (n,), "friction": (n,)}`` of ``model``.
 
     The model's per-joint viscous damping (N m s/rad), reflected rotor inertia (kg m^2) and
-    dry friction (N m); a model without these fields is rigid.
+    dry friction (N m) (doc/design.md §7). MuJoCo has no ``friction_velocity``: its dry
+    friction is a constraint, not the model's ``tanh`` (doc/plants.md).
     """
-    zeros = np.zeros(model.n)
-    return {name: np.asarray(getattr(model, name, zeros), dtype=float)
-            for name, _ in JOINT_TERMS}
+    return {name: np.asarray(getattr(model, name), dtype=float) for name, _ in JOINT_TERMS}
 
 
 def _num(x):

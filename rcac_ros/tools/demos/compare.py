@@ -4,7 +4,8 @@ panda with joint friction and rotor inertia on MuJoCo.
 Laws (:data:`LAWS`): computed torque at the nominal parameters (``fixed``), the direct
 law (``gamma = 0``), the paper's composite law (joint-1 channel), ``channels="all"`` with
 the implicit and the explicit update, the power channel, fixed-m channel sets,
-least-squares variants, and the non-recursive Slotine-Li law. Scenarios
+least-squares variants, the non-recursive Slotine-Li law, and the direct, paper and
+``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7). Scenarios
 (:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
@@ -44,10 +45,14 @@ from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
+from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.demos.payload import FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
+
+#: P_friction of the friction-aware direct and paper laws (doc/tools.md, joint friction).
+P_FRICTION_TRACKING = (30.0, 30.0, 30.0)
 
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
 #: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
@@ -71,14 +76,23 @@ LAWS = {
     "ls_pred_4,6": ("rcac", dict(channels=[4, 6], adaptation="least_squares_prediction",
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
+    # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
+    # direct and paper laws, adapting them mostly from the tracking term (an explicit step),
+    # with P_friction = 30 (100 diverges on the rigid panda, doc/tools.md)
+    "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True,
+                                     P_friction=P_FRICTION_TRACKING)),
+    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=P_FRICTION_TRACKING)),
+    "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
 }
 
-#: The laws the paper and payload scenarios run by default (every law but ``fixed``).
-DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed")
+#: The laws the paper and payload scenarios run by default (every law but ``fixed`` and the
+#: ``*_friction`` ones).
+DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed" and not law.endswith("_friction"))
 
 #: The laws of the joint-friction scenarios (the rows of doc/tools.md's table); a law added
 #: to :data:`LAWS` and to this list joins the table.
-JOINT_LAWS = ["fixed", "direct", "paper", "all"]
+JOINT_LAWS = ["fixed", "direct", "paper", "all", "direct_friction", "paper_friction",
+              "all_friction"]
 
 #: scenario -> (damping N m s/rad, dry friction N m, armature kg m^2), the same on every joint
 #: of the panda on MuJoCo (the friction is MuJoCo's friction loss, doc/plants.md).

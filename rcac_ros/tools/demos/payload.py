@@ -56,12 +56,17 @@ def find_panda_urdf():
     return example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
 
 
-def load_panda(urdf=None):
-    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``."""
+def load_panda(urdf=None, joint_terms=False):
+    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``.
+
+    Rigid unless ``joint_terms``: the URDF's ``<dynamics damping="0.003">`` is dropped, so
+    the payload experiments isolate the payload (joint terms: doc/design.md §7).
+    """
     path = urdf or find_panda_urdf()
     if path is None:
         raise ConfigError("urdf: example-robot-data's panda.urdf not found; pass --urdf")
-    return model_from_urdf(path, tip_link="panda_link8")
+    model = model_from_urdf(path, tip_link="panda_link8")
+    return model if joint_terms else model.replace(damping=0.0, friction=0.0)
 
 
 def _skew(v):
