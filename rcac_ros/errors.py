@@ -26,6 +26,10 @@ class InputError(RcacError, ValueError):
     """A run-time input (state, desired motion, torque) has a wrong shape or is not finite."""
 
 
+class MissingDependency(RcacError, ImportError):
+    """An optional dependency (an extra of setup.py, or ROS 2) is not installed."""
+
+
 def read_yaml(path, label=None):
     """Parse the YAML file at ``path``.
 

@@ -117,7 +117,7 @@ def module_level_imports(name):
 
 
 def test_tools_that_must_stay_apart():
-    """bench imports ros_bench only when asked (--ros); ros_bench does not need the demo."""
+    """bench core never imports bench ros (rclpy); bench ros does not need the demo."""
     assert "rcac_ros.tools.bench.ros" not in module_level_imports("rcac_ros.tools.bench.core")
     assert "rcac_ros.tools.demos.demo" not in graph()["rcac_ros.tools.bench.ros"]
     # the child processes and the ROS context live in launch, below demo and record
@@ -215,6 +215,7 @@ def loaded_after_import(module):
 
 
 @pytest.mark.parametrize("module", ["rcac_ros.tools.bags.record", "rcac_ros.tools.bags.inspect",
+                                    "rcac_ros.tools.bench.commands", "rcac_ros.tools.extras",
                                     "rcac_ros.errors", "rcac_ros.topics", "rcac_ros.tools.cli"])
 def test_light_modules_do_not_load_numba(module):
     assert "numba" not in loaded_after_import(module)

@@ -1,4 +1,4 @@
-"""The stable range of K_D against a delayed effort, offline (``rcac bench --delay-margin``).
+"""The stable range of K_D against a delayed effort, offline (``rcac bench delay-margin``).
 
 Timer mode answers a state up to a period old (issue 9, section 8). This runs the paper's
 closed loop without ROS (core simulator + controller, the CSS arm, the paper's motion and

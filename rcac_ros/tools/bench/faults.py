@@ -1,4 +1,4 @@
-"""The fault benchmark behind ``rcac bench --faults`` (issue 9, section 9).
+"""The fault benchmark behind ``rcac bench faults`` (issue 9, section 9).
 
 The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
 processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go
@@ -25,7 +25,7 @@ of the run tracks within 3x nominal; after the restart, also the first non-watch
 effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
 non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
 3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
-``--soak MINUTES`` runs the nominal case that long and reports the controller's memory
+``rcac bench soak MINUTES`` runs the nominal case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
 
@@ -399,7 +399,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
         cases, duration = ("nominal",), soak_minutes * 60.0
     for case in cases:
         if verbose:
-            print(f"rcac bench --faults: {case} ({duration:g} s)", flush=True)
+            print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
                                 verbose=verbose))
         if verbose:

@@ -1,4 +1,4 @@
-"""``rcac bench --noise``: are the estimates bounded with noisy sensors? (10-minute runs)
+"""``rcac bench noise``: are the estimates bounded with noisy sensors? (10-minute runs)
 
 The paper's experiment (CSS arm, paper gains, ``theta_hat(0) = 0``, the velocity reading
 repeated for the whole run) with white Gaussian measurement noise on what the controller
@@ -305,7 +305,7 @@ def plot(report, laws, path):
     plt.close(fig)
 
 
-#: ``--noise-sources``: label -> (sigma_q scale, sigma_qd scale, gamma, seed), paper law
+#: ``rcac bench noise --sources``: label -> (sigma_q scale, sigma_qd scale, gamma, seed), paper law
 SOURCES = {"both": (1.0, 1.0, None, 2), "both, seed 3": (1.0, 1.0, None, 3),
            "both, half": (0.5, 0.5, None, 2), "q only": (1.0, 0.0, None, 2),
            "qd only": (0.0, 1.0, None, 2), "both, gamma = 0": (1.0, 1.0, 0.0, 2)}

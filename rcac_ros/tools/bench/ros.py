@@ -1,4 +1,4 @@
-"""The ROS 2 loop benchmark behind ``rcac bench --ros``.
+"""The ROS 2 loop benchmark behind ``rcac bench ros``.
 
 The simulator (``mode: realtime``, stepping every dt on absolute deadlines of the steady
 clock) and the controller (``mode: timer`` at ``rate``, the same kind of loop) run free as
@@ -266,14 +266,14 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
                     executor.spin_once(timeout_sec=0.01)
 
             if verbose:
-                print(f"rcac bench --ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
+                print(f"rcac bench ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
                       f"logs {log_dir})", flush=True)
             spin_until(lambda: probe.matched() and probe.latest_state_recv is not None,
                        start_timeout, "while starting")
             t_warm = time.monotonic() + warmup
             spin_until(lambda: time.monotonic() >= t_warm, warmup + 10.0, "during warm-up")
             if verbose:
-                print(f"rcac bench --ros: measuring for {duration:g} s", flush=True)
+                print(f"rcac bench ros: measuring for {duration:g} s", flush=True)
             probe.recording = True
             t0 = time.monotonic()
             spin_until(lambda: time.monotonic() - t0 >= duration, duration + 10.0,

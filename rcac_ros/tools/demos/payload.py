@@ -60,7 +60,8 @@ def load_panda(urdf=None):
     """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``."""
     path = urdf or find_panda_urdf()
     if path is None:
-        raise ConfigError("urdf: example-robot-data's panda.urdf not found; pass --urdf")
+        raise ConfigError("urdf: example-robot-data's panda.urdf not found (the 'robots' "
+                          "extra: pip install 'rcac_ros[robots]'); pass --urdf")
     return model_from_urdf(path, tip_link="panda_link8")
 
 

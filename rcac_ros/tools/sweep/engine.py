@@ -61,11 +61,12 @@ def scheduler_address(text):
     return text
 
 
-def add_arguments(parser):
-    """The run form, or (``rcac sweep report|rerun ...``) the two result subcommands."""
+def add_arguments(parser, argv=()):
+    """The run form, or (``rcac sweep report|rerun ...``: ``argv``, the words after
+    ``sweep``, starts with one) the two result subcommands."""
     parser.epilog = ("also: 'rcac sweep report RESULTS' (summary and plot) and "
                      "'rcac sweep rerun RESULTS INDEX' (one run again, alone)")
-    if sys.argv[2:3] and sys.argv[2] in ACTIONS:
+    if argv[:1] and argv[0] in ACTIONS:
         sub = parser.add_subparsers(dest="action", metavar="ACTION")
         sub.required = True
         rep = sub.add_parser("report", help="failure rate, worst cases, distributions, "
