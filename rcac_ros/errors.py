@@ -26,6 +26,14 @@ class InputError(RcacError, ValueError):
     """A run-time input (state, desired motion, torque) has a wrong shape or is not finite."""
 
 
+class BagError(RcacError, ValueError):
+    """A bag is missing, cut short by a crash, or corrupt (the message names the problem)."""
+
+
+class CutBagError(BagError):
+    """A bag was not closed (its recorder was killed): ``rcac inspect --recover`` salvages it."""
+
+
 class MissingDependency(RcacError, ImportError):
     """An optional dependency (an extra of setup.py, or ROS 2) is not installed."""
 

@@ -11,6 +11,7 @@ import pytest
 import yaml
 from bagtest_support import bag_file, cli_module, read_mcap_ros2, read_rosbags
 
+from rcac_ros.errors import BagError, ConfigError, CutBagError
 from rcac_ros.tools.bags.writer import BagWriter, recover, verify
 
 N_MSG = 2000
@@ -117,6 +118,16 @@ def _inspect_fails_then_recover(tmp_path, capsys, chunk, damage, *words):
     report = recover(str(bag))
     assert report.counts == {"/clock": 1800}
     return report, start
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_damaged_bag_is_a_bag_error_not_a_configuration_error(tmp_path, storage):
+    """Exceptions by kind: verify raises BagError (CutBagError for an unclosed bag), which a
+    handler of configuration errors does not catch."""
+    write_bag(tmp_path / "bag", storage, n=400, close=False)
+    with pytest.raises(CutBagError) as err:
+        verify(str(tmp_path / "bag"))
+    assert isinstance(err.value, BagError) and not isinstance(err.value, ConfigError)
 
 
 def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):

@@ -21,7 +21,7 @@ import os
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import BagError, ConfigError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_int
 from rcac_ros.tools.bags.writer import (bag_info, default_recovered_path, find_bag,
@@ -117,7 +117,7 @@ def read_bag(path, report=None):
         reader = Reader(path)
         reader.open()
     except Exception as err:  # rosbags raises several types for unreadable bags
-        raise ConfigError(f"bag: cannot open {path}: {err}") from err
+        raise BagError(f"bag: cannot open {path}: {err}") from err
     try:
         for conn in reader.connections:
             data.setdefault(conn.topic, TopicData(conn.topic, conn.msgtype))
@@ -415,7 +415,7 @@ def _estimates(td):
     """Parameter estimates as (T, n, 13), using the layout dims when present."""
     vals = td.values
     if not isinstance(vals, np.ndarray) or vals.ndim != 2 or vals.shape[1] % 13:
-        raise ConfigError(f"bag: {td.name} does not hold n x 13 parameter estimates")
+        raise BagError(f"bag: {td.name} does not hold n x 13 parameter estimates")
     n = vals.shape[1] // 13
     if td.dims and len(td.dims) == 2 and td.dims[0][1] * td.dims[1][1] == vals.shape[1]:
         n = td.dims[0][1]
