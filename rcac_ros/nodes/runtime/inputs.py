@@ -58,9 +58,8 @@ class SideInput:
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
-        if topic.startswith("~/"):
-            ns = owner.get_namespace().rstrip("/")
-            topic = f"{ns}/{owner.get_name()}/{topic[2:]}"
+        if topic.startswith("~/"):      # the owner's private topic, not this side node's
+            topic = owner.resolve_topic_name(topic, only_expand=True)
         self.topic = topic
         self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,

@@ -239,8 +239,8 @@ class Timeline:
 
     def __init__(self, data, controller_node=topics.CONTROLLER_NODE):
         self.t0_recv = min((td.recv[0] for td in data.values() if td.count), default=0)
-        js = data.get("/" + topics.JOINT_STATES)
-        ds = data.get(f"/{controller_node}/{topics.DESIRED_STATE[2:]}")
+        js = data.get(topics.resolve(topics.JOINT_STATES))
+        ds = data.get(topics.resolve(topics.DESIRED_STATE, controller_node))
         clock = data.get(topics.CLOCK)
         self.state = None
         if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -440,9 +440,8 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         name -> (t, values) for the plots.
     """
     tl = Timeline(data, controller_node)
-    priv = f"/{controller_node}/"
     metrics, series = {}, {}
-    te = data.get(priv + topics.TRACKING_ERROR[2:])
+    te = data.get(topics.resolve(topics.TRACKING_ERROR, controller_node))
     if te is not None and te.count and isinstance(te.values, np.ndarray):
         t, e = tl.controller_time(te), te.values
         series["tracking_error"] = (t, e)
@@ -466,17 +465,18 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
         metrics.update(measure.torque(eff.values))
-    pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
+    pe = data.get(topics.resolve(topics.PARAMETER_ESTIMATES, controller_node))
     if pe is not None and pe.count:
         est = _estimates(pe)
         series["parameter_estimates"] = (tl.controller_time(pe), est)
         if theta_true is not None and theta_true.shape == est.shape[1:]:
             metrics.update(measure.estimates(est, theta_true))
-    pr = data.get(priv + topics.PREDICTION_ERROR[2:])
+    pr = data.get(topics.resolve(topics.PREDICTION_ERROR, controller_node))
     if pr is not None and pr.count:
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
         metrics.update(measure.prediction(pr.values))
-    prs = data.get(priv + topics.PREDICTION_ERRORS[2:])    # every channel (older bags: none)
+    # every channel (older bags: none)
+    prs = data.get(topics.resolve(topics.PREDICTION_ERRORS, controller_node))
     if prs is not None and prs.count and isinstance(prs.values, np.ndarray) \
             and prs.values.ndim == 2:
         names = topics.channel_names(prs.dims[0][0]) if prs.dims else []

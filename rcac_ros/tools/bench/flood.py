@@ -9,19 +9,20 @@ import sys
 import time
 
 import rclpy
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from rcac_ros import topics
 
 
 def main():
     seconds = float(sys.argv[1])
     rclpy.init()
     node = rclpy.create_node("failsafe_flood")
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                     reliability=ReliabilityPolicy.RELIABLE)
-    pub_state = node.create_publisher(JointState, "/joint_states", qos)
-    pub_traj = node.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory", qos)
+    qos = topics.qos()
+    pub_state = node.create_publisher(JointState, topics.resolve(topics.JOINT_STATES), qos)
+    pub_traj = node.create_publisher(JointTrajectory, topics.resolve(topics.JOINT_TRAJECTORY),
+                                     qos)
     names = [f"joint{i}" for i in range(1, 8)]
     big_state = JointState(name=names, position=[0.0] * 1_000_000)
     big_traj = JointTrajectory(joint_names=names, points=[

@@ -47,11 +47,21 @@ CONTROLLER_MODES = {"timer": "timer", "on_state": "lockstep", "lockstep": "locks
 GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0}
 
 
+def subscribe_diagnostics(node, latest, qos):
+    """Subscribe ``node`` to the diagnostics; each status's values land in
+    ``latest[status name]`` (a dict of key -> value, the latest of each status)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            latest[status.name] = {kv.key: kv.value for kv in status.values}
+    return node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, qos)
+
+
 class Probe:
     """Raw subscriptions that keep (source, receive) stamps of states and efforts."""
 
     def __init__(self, context, depth=1000):
-        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
@@ -65,12 +75,12 @@ class Probe:
         self.state_age = []  # ns, per effort: receive(effort) - receive(newest state)
         self.diagnostics = {}
         self._subs = [
-            self.node.create_subscription(JointState, "/" + topics.JOINT_STATES,
+            self.node.create_subscription(JointState, topics.resolve(topics.JOINT_STATES),
                                           self._on_state, qos, raw=True),
-            self.node.create_subscription(Float64MultiArray, "/" + topics.EFFORT_COMMANDS,
+            self.node.create_subscription(Float64MultiArray,
+                                          topics.resolve(topics.EFFORT_COMMANDS),
                                           self._on_effort, qos, raw=True),
-            self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
-                                          self._on_diag, qos),
+            subscribe_diagnostics(self.node, self.diagnostics, qos),
         ]
 
     def _on_state(self, data, info):
@@ -82,15 +92,11 @@ class Probe:
     def _on_effort(self, data, info):
         if not self.recording:
             return
-        watchdog = b"watchdog" in bytes(data[:96])
+        watchdog = topics.is_watchdog_effort(data)
         recv = info["received_timestamp"]
         self.efforts.append((info["source_timestamp"], recv, watchdog))
         if not watchdog and self.latest_state_recv is not None:
             self.state_age.append(recv - self.latest_state_recv)
-
-    def _on_diag(self, msg):
-        for status in msg.status:
-            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
     def matched(self):
         return all(s.get_publisher_count() > 0 for s in self._subs[:2])

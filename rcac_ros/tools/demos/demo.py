@@ -142,8 +142,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             wall = time.monotonic() - t_start
             # drain what is still in flight: the last states (the simulator publishes states
             # 0..steps) and the controller's answers to them
-            states = "/" + topics.JOINT_STATES
-            answers = f"/{topics.CONTROLLER_NODE}/{topics.DESIRED_STATE[2:]}"
+            states = topics.resolve(topics.JOINT_STATES)
+            answers = topics.resolve(topics.DESIRED_STATE)
             last_state = int(round(duration / dt)) * int(round(dt * 1e9))
             drain_end = time.monotonic() + 2.0
             while time.monotonic() < drain_end and not stop \
