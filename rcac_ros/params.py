@@ -431,7 +431,7 @@ def check_file_params(node, params):
         Naming the first unknown parameter or invalid value.
     """
     known = {p.name: p for p in TABLE[node]}
-    for name, value in _flatten(params):
+    for name, value in flatten(params):
         if name in ("use_sim_time", "start_type_description_service"):
             continue
         if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
@@ -442,10 +442,11 @@ def check_file_params(node, params):
         check(known[name], value)
 
 
-def _flatten(params, prefix=""):
+def flatten(params, prefix=""):
+    """``(dotted name, value)`` of every leaf of a nested ``ros__parameters`` mapping."""
     for key, value in params.items():
         if isinstance(value, dict):
-            yield from _flatten(value, f"{prefix}{key}.")
+            yield from flatten(value, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}", value
 
