@@ -24,14 +24,13 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.errors import RcacError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.closed_loop import closed_loop
+from rcac_ros.tools.scenarios import controller, SCENARIOS
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -64,41 +63,9 @@ COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", 
            ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."))
 
 
-class Scenario:
-    """One closed-loop setting: plant(s), desired motion, gains and the true parameters."""
-
-    def __init__(self, name, model, gains, trajectory, q0, qd0, loaded=None, jump=None):
-        self.name, self.model, self.gains, self.trajectory = name, model, gains, trajectory
-        self.q0, self.qd0, self.loaded, self.jump = q0, qd0, loaded, jump
-        self.theta_end = (loaded or model).theta()
-
-
-def paper_scenario():
-    model = css_arm()
-    q0 = np.array(PAPER_Q0)
-    return Scenario("paper", model, dict(PAPER_GAINS), PaperTrajectory(q0), q0,
-                    np.zeros(model.n))
-
-
-def payload_scenario():
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                              load_panda, with_payload)
-    model = load_panda()
-    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
-    q0, qd0, _ = traj(0.0)
-    return Scenario("payload", model, gains_for(model, law="composite", **GAINS), traj, q0,
-                    qd0, loaded=with_payload(model), jump=5.0)
-
-
-SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
-
-
 def make_controller(scenario, law, laws=None):
     kind, extra = (laws or LAWS)[law]
-    kwargs = dict(scenario.gains, **extra)
-    if kind == "slotine_li":
-        return SlotineLiCompositeController(scenario.model, **kwargs)
-    return RecursiveCompositeController(scenario.model, **kwargs)
+    return controller(kind, scenario.model, dict(scenario.gains, **extra))
 
 
 def run_law(scenario, controller, duration, progress=None):

@@ -33,12 +33,13 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
-from rcac_ros.tools.demos.payload import GAINS as PANDA_GAINS
+from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_for, load_panda,
+                                      READY)
+from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
@@ -214,7 +215,6 @@ def check_trajectory(value, model):
                                     f"{key}.amplitude"),
                    period=number(value.get("period", 20.0), f"{key}.period", 0.0, True))
         return out
-    from rcac_ros.tools.demos.payload import AMPLITUDE, FREQUENCY, READY
     defaults = dict(offset=READY, amplitude=AMPLITUDE, frequency=FREQUENCY) \
         if model == "panda" else {}
     for k in ("offset", "amplitude", "frequency"):
@@ -363,7 +363,6 @@ def nominal_model(name):
     """The controller's model of a scenario (loaded once per process)."""
     if name == "css_arm":
         return css_arm()
-    from rcac_ros.tools.demos.payload import load_panda
     return load_panda()
 
 
@@ -374,18 +373,17 @@ def controller_for(campaign, inputs, model):
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
              gamma=0.0 if law == "direct" else inputs["gamma"], lam=inputs["lam"], h=sc["h"])
     if sc["model"] == "panda":
-        from rcac_ros.tools.demos.payload import gains_for
         gamma = g["gamma"]
         g = gains_for(model, kappa=g["K_D"], Lambda=g["Lambda"], rho=g["P"], gamma=gamma,
                       lam=g["lam"], h=g["h"])
         g["gamma"] = gamma
         g.pop("theta_hat0")
     if law == "slotine_li":
-        return SlotineLiCompositeController(model, **g)
+        return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
         g["channels"] = inputs["channels"]
     try:
-        return RecursiveCompositeController(model, **g)
+        return controller("rcac", model, g)
     except TypeError as err:
         if "channels" in g:
             raise ConfigError(f"channels: this controller does not take channels ({err})") \
