@@ -8,7 +8,7 @@ motion starts again from the next state); deactivate sends one zero effort, then
 ``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.controller.estimate_services`);
 ``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller.controller_state`); doc/nodes.md.
 
-Thin: message -> arrays -> :class:`~rcac_ros.core.rcac.RecursiveCompositeController` ->
+Thin: message -> arrays -> :class:`~rcac_ros.core.composite.RecursiveCompositeController` ->
 message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
 from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
 latest valid state (real arms), on absolute deadlines of the steady clock

@@ -9,7 +9,7 @@ import numpy as np
 
 from rcac_ros import params
 from rcac_ros.core.channels import parse_channels
-from rcac_ros.core.rcac import RecursiveCompositeController
+from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import declare
 from rcac_ros.nodes.controller.estimates import initial_estimates, urdf_child_links

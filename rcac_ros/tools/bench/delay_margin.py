@@ -11,7 +11,7 @@ the delay with the model and the efforts in flight (what ``timer.lookahead`` doe
 import numpy as np
 
 from rcac_ros.core.model import css_arm, PAPER_GAINS, PAPER_Q0
-from rcac_ros.core.rcac import RecursiveCompositeController
+from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.core.simulator import rk4_kernel, Simulator
 from rcac_ros.core.trajectory import PaperTrajectory
 

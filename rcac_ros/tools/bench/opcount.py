@@ -90,16 +90,17 @@ KINDS = {
 
 
 def _count_in_process(kind, n_links):
-    from rcac_ros.core import css_arm, rcac, slotine_li
+    from rcac_ros.core import composite, css_arm, slotine_li
     model = css_arm().repeated(max(1, n_links // 7))
     rng = np.random.default_rng(0)
     vecs = rng.normal(size=(5, model.n)) * 0.1
     theta_hat0 = rng.normal(size=(model.n, 13))
     # the controllers call their kernel by its module name: count through the public step
     if KINDS[kind] is not None:
-        rcac.rcac_step_kernel = _counting(rcac.rcac_step_kernel)
-        rcac.paper_step = _counting(rcac.paper_step)
-        c = rcac.RecursiveCompositeController(model, theta_hat0=theta_hat0, **KINDS[kind])
+        composite.rcac_step_kernel = _counting(composite.rcac_step_kernel)
+        composite.paper_step = _counting(composite.paper_step)
+        c = composite.RecursiveCompositeController(model, theta_hat0=theta_hat0,
+                                                   **KINDS[kind])
     else:
         slotine_li.slotine_li_step_kernel = _counting(slotine_li.slotine_li_step_kernel)
         c = slotine_li.SlotineLiCompositeController(model, theta_hat0=theta_hat0)
