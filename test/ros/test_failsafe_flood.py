@@ -1,4 +1,5 @@
-"""Issue 9.3: a flood of huge messages does not starve the 500 Hz loop (processes over DDS)."""
+"""doc/failsafe.md, "starvation": a flood of huge messages does not starve the 500 Hz loop
+(processes over DDS)."""
 
 import subprocess
 import sys

@@ -1,6 +1,7 @@
-"""Corrupt bags give one clear line and a non-zero exit, never silent partial data (issue 9
-item 6); ``--recover`` says what it salvaged and lost; ``rcac inspect`` finds the bag in a
-parent folder (issue 11). The bags are written by the package's writer and read back by
+"""Corrupt bags give one clear line and a non-zero exit, never silent partial data
+(doc/tools.md, "rcac inspect"); ``--recover`` says what it salvaged and lost; ``rcac inspect``
+finds the bag in a
+parent folder. The bags are written by the package's writer and read back by
 rosbags and by ``mcap`` + ``mcap-ros2-support``."""
 
 import importlib
@@ -211,7 +212,7 @@ def test_inspect_finds_the_bag_in_a_parent_folder(tmp_path, capsys):
 
 def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     """efforts.png names the joints, prediction_error.png shows log |E|, and the loop-timing
-    figure says which stamps it comes from (issue 11)."""
+    figure says which stamps it comes from."""
     import matplotlib.figure
     import numpy as np
 

@@ -166,7 +166,7 @@ def test_the_payload_must_attach_before_the_end(tmp_path, capsys, monkeypatch):
                                   ["experiment", "--duration", "0"],
                                   ["payload-demo", "--duration", "-1"]])
 def test_the_cases_a_new_user_hit(argv):
-    """As typed in a shell (issue 11): no traceback, one line naming --duration, exit 2."""
+    """As typed in a shell: no traceback, one line naming --duration, exit 2."""
     out = subprocess.run([sys.executable, "-m", "rcac_ros.tools.cli", *argv],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2

@@ -165,7 +165,7 @@ def test_groups_keep_apart(rules):
     assert not bad, "imports across groups that stay apart:\n" + "\n".join(sorted(bad))
 
 
-#: the most lines a node module may have (issue 11: each node file < 300 lines)
+#: the most lines a node module may have (one concern a module, doc/testing.md)
 NODE_FILE_LINES = 300
 
 

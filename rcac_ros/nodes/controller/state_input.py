@@ -1,6 +1,6 @@
 """The controller's state input: ``/joint_states`` in, the latest valid ``(q, qd)`` out.
 
-:class:`StateInput` subscribes with the size cap checked on the serialised bytes (issue 9;
+:class:`StateInput` subscribes with the size cap checked on the serialised bytes (doc/failsafe.md;
 in timer mode in its own thread, :class:`~rcac_ros.nodes.runtime.inputs.SideInput`, so the loop
 thread only ticks), reads each message into model order
 (:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`), judges its stamp

@@ -1,7 +1,7 @@
 """Inputs received off the control thread, and size caps checked before deserialising.
 
-The control loop (500 Hz) must never wait for the parsing of a large input (issue 9,
-section 3). :class:`SideInput` subscribes on a helper node spun by its own executor in
+The control loop (500 Hz) must never wait for the parsing of a large input (doc/failsafe.md,
+"starvation"). :class:`SideInput` subscribes on a helper node spun by its own executor in
 its own thread: a big trajectory is deserialised and checked there, and only the result
 is handed over (one attribute assignment, atomic under the GIL). The process's
 interpreter switch interval is lowered so that a Python loop in that thread yields the

@@ -1,4 +1,4 @@
-"""Parameters that are wrong, not only invalid (issue 9, section 7).
+"""Parameters that are wrong, not only invalid (doc/failsafe.md, "parameters").
 
 * :func:`check_params_files` reads every ``--params-file`` of the command line before
   ``rclpy.init`` does, so that a malformed file gives one line naming it (and the CLI

@@ -1,6 +1,6 @@
 """The stable range of K_D against a delayed effort, offline (``rcac bench delay-margin``).
 
-Timer mode answers a state up to a period old (issue 9, section 8). This runs the paper's
+Timer mode answers a state up to a period old (doc/failsafe.md, "Measured"). This runs the paper's
 closed loop without ROS (core simulator + controller, the CSS arm, the paper's motion and
 gains but K_D) with the effort applied ``d`` periods late, ``d`` = 0 (lockstep), 1, 2, for
 a grid of K_D, and reports the tracking RMS over the second half of the run (``inf``:

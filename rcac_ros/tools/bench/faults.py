@@ -1,4 +1,4 @@
-"""The fault benchmark behind ``rcac bench faults`` (issue 9, section 9).
+"""The fault benchmark behind ``rcac bench faults`` (doc/failsafe.md, "Measured").
 
 The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
 processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go

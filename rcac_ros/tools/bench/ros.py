@@ -43,7 +43,7 @@ BENCH_CONTROLLER = {"K_D": 1000.0, "monitor_decimation": 10}
 #: the bench's names of the controller's timing: its own timer, or one answer per state
 CONTROLLER_MODES = {"timer": "timer", "on_state": "lockstep", "lockstep": "lockstep"}
 
-#: goals on the 2-core machine (issue 3, section 7)
+#: goals on the 2-core machine (doc/tools.md, "rcac bench ros")
 GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0}
 
 

@@ -215,6 +215,11 @@ def run(args):
               f"{start:.3f} s; the controller's topics, and the metrics, cover the whole run")
     print("Metrics (as rcac experiment):")
     print(format_metrics(result["metrics"]))
+    watchdog = result["metrics"].get("watchdog_efforts")
+    if watchdog:
+        print(f"rcac demo: note: watchdog_efforts {watchdog}: the controller's safe effort while "
+              "it had no valid state (before the simulator's first state, or in a silence), "
+              "tagged: the simulator ignores them and the metrics leave them out")
     for line in result["notes"]:
         print(f"rcac demo: note: {line}")
     print("Wrote:")
