@@ -552,6 +552,8 @@ def plot_timing(timing, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from rcac_ros.tools.plots import save
+
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, key, title in ((axes[0], "period_ms", "period between joint states"),
                            (axes[1], "latency_ms", "joint state -> effort latency")):
@@ -575,9 +577,7 @@ def plot_timing(timing, path):
                    "messages queued meanwhile are stamped together,\nso a cluster near 0 ms "
                    "is the recorder catching up, not the loop.")
     fig.text(0.01, 0.01, caption, fontsize=8, va="bottom")
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path, 110, rect=(0, 0.08, 1, 1))
 
 
 def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="ROS 2"):

@@ -184,7 +184,7 @@ def markdown(report, n_links=None):
 
 def plot(series, report, out_dir):
     """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     paths = []
     for name, runs in series.items():
         fig, axes = plt.subplots(1, 4, figsize=(24, 5))
@@ -213,10 +213,8 @@ def plot(series, report, out_dir):
         axes[3].set_ylim(bottom=1e-12)
         axes[0].legend(fontsize=7, ncol=2)
         fig.suptitle(f"rcac compare: {name} scenario")
-        fig.tight_layout()
         path = os.path.join(out_dir, f"compare_{name}.png")
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        save(fig, path, 110)
         paths.append(path)
     return paths
 

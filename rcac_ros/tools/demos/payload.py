@@ -100,8 +100,7 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
 
 def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
     """metrics.json and the three figures into ``out_dir``."""
-    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
-    import matplotlib.pyplot as plt     # rcac_ros.tools.plots selected the Agg backend
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors, plt, save
 
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
@@ -130,9 +129,7 @@ def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "payload_summary.png"), dpi=110)
-    plt.close(fig)
+    save(fig, os.path.join(out_dir, "payload_summary.png"), 110)
 
 
 def add_arguments(parser):
