@@ -41,6 +41,8 @@ from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
 from rcac_ros.errors import GainError
+from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, friction_step_kernel, paper_friction_step)
 from .least_squares import initial_factor
 
 UPDATES = ("implicit", "explicit")
@@ -75,7 +77,7 @@ class RecursiveCompositeController:
         The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
         ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
     update : {"implicit", "explicit"}
-        Discretisation of the prediction-error term (module docstring).
+        Discretisation of the prediction-error term (:mod:`rcac_ros.core.adaptation`).
     adaptation : {"gradient", "least_squares", "least_squares_prediction"}
         ``P_i`` fixed (default), least squares with bounded-gain forgetting on both terms,
         or least squares on the prediction term only (the tracking term keeps ``P``).
@@ -88,7 +90,17 @@ class RecursiveCompositeController:
         none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
     theta_bounds : None, "mass" or (theta_min, theta_max)
         Projection after each step: none (default), mass >= 0, or a box (each bound a
-        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
+        joint terms >= 0 with ``joint_friction``).
+    joint_friction : bool
+        Also estimate each joint's armature, viscous and Coulomb friction
+        (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).
+        False (default): the paper's law, to the last bit.
+    friction_hat0 : array_like (n, 3), optional
+        Initial joint estimates (armature, damping, friction); default the model's.
+    P_friction : float, (3,) or (n, 3)
+        Diagonal adaptation gains of the joint terms, positive (default
+        :data:`~rcac_ros.core.joint_friction.P_FRICTION`).
 
     Raises
     ------
@@ -101,7 +113,8 @@ class RecursiveCompositeController:
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
-                 theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None):
+                 theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
+                 joint_friction=False, friction_hat0=None, P_friction=P_FRICTION):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -121,6 +134,9 @@ class RecursiveCompositeController:
         self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
+        self.joint_friction = bool(joint_friction)
+        if self.joint_friction:
+            self._joint_terms(friction_hat0, P_friction, m)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
         self._choose_kernel()               # after every scalar the choice reads
@@ -143,9 +159,28 @@ class RecursiveCompositeController:
         self._scal[I_LEAK] = self.leakage
         self._const[:, LEAK_M0] = self.leakage_bound
 
+    def _joint_terms(self, friction_hat0, P_friction, m):
+        """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
+        n = self.n
+        self.P_friction = friction_gain(P_friction, n)
+        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+            as_array(friction_hat0, (n, 3), "friction_hat0")
+        self._jdata = np.zeros((n, JOINT_COLS))
+        self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
+        self._jdata[:, F_VC] = self.model.friction_velocity
+        self._jfilt = np.zeros((m, n, JFILT_COLS))
+
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
-        through :func:`rcac_step_kernel`), else the general kernel."""
+        through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
+        :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
+        :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
+        if self.joint_friction:
+            kernel = paper_friction_step if is_paper_law(self._chan, self._scal) else \
+                friction_step_kernel
+            jdata, jfilt = self._jdata, self._jfilt
+            self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
+            return
         self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
             rcac_step_kernel
 
@@ -215,10 +250,19 @@ class RecursiveCompositeController:
         """Number of prediction channels."""
         return len(self.channels)
 
-    def reset(self, theta_hat0=None):
-        """Restart: estimates to ``theta_hat0`` (default 0), filters, gains and step count."""
+    def reset(self, theta_hat0=None, friction_hat0=None):
+        """Restart: estimates to ``theta_hat0`` (default 0), filters, gains and step count.
+
+        With ``joint_friction``, the joint estimates go to ``friction_hat0`` (default: the
+        constructor's).
+        """
         th = np.zeros((self.n, 13)) if theta_hat0 is None else \
             as_array(theta_hat0, (self.n, 13), "theta_hat0")
+        if self.joint_friction:
+            fh = self.friction_hat0 if friction_hat0 is None else \
+                as_array(friction_hat0, (self.n, 3), "friction_hat0")
+            self._jdata[:, F_HAT:F_HAT + 3] = fh
+            self._jfilt[:] = 0.0
         self._state[:] = 0.0
         self._state[:, THETA_HAT:THETA_HAT + 13] = th
         self._state[:, P_FACTOR:P_FACTOR + 169] = initial_factor(self.P)
@@ -292,6 +336,21 @@ class RecursiveCompositeController:
     def theta_hat(self):
         """Current estimates ``theta_hat``, shape (n, 13) (a copy)."""
         return self._state[:, THETA_HAT:THETA_HAT + 13].copy()
+
+    @property
+    def friction_hat(self):
+        """Joint estimates (armature, damping, friction), shape (n, 3) (a copy); None without
+        ``joint_friction`` (doc/design.md §7)."""
+        if not self.joint_friction:
+            return None
+        return self._jdata[:, F_HAT:F_HAT + 3].copy()
+
+    def set_friction_hat(self, friction_hat):
+        """Set the joint estimates (n, 3), e.g. restored from a file; filters keep running."""
+        if not self.joint_friction:
+            raise GainError("friction_hat: the controller has no joint terms "
+                            "(joint_friction=False)")
+        self._jdata[:, F_HAT:F_HAT + 3] = as_array(friction_hat, (self.n, 3), "friction_hat")
 
     @property
     def E(self):

@@ -1,9 +1,9 @@
 """The scenarios the tools share: the paper's (CSS arm) and the Panda with a payload.
 
-* The paper's Section 4 experiment: the CSS arm (Table 1, g = 0), ``PAPER_Q0``,
-  ``PAPER_GAINS`` and :class:`~rcac_ros.core.PaperTrajectory` (:func:`paper_scenario`).
+* The paper's Section 4 experiment is the core's: the CSS arm (Table 1, g = 0),
+  ``PAPER_Q0``, ``PAPER_GAINS`` and :class:`~rcac_ros.core.PaperTrajectory`.
 * The Panda (example-robot-data's URDF, gravity on) tracking sinusoids about its "ready"
-  posture, with a payload attached to link 7 (:func:`payload_scenario`, the gains at its
+  posture, with a payload attached to link 7 (:func:`with_payload`, the gains at its
   scale of :func:`gains_for`); ``rcac payload-demo`` runs it, ``rcac compare`` and the
   ``panda`` model of a campaign use it.
 * Which controller class runs a law (:func:`controller`).
@@ -13,9 +13,7 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import (ConfigError, PAPER_GAINS, PAPER_Q0, PaperTrajectory,
-                           RecursiveCompositeController, SinusoidTrajectory,
-                           SlotineLiCompositeController, css_arm)
+from rcac_ros.core import ConfigError, RecursiveCompositeController, SlotineLiCompositeController
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools.robots import example_robot_urdf
 
@@ -39,13 +37,18 @@ def find_panda_urdf():
     return example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
 
 
-def load_panda(urdf=None):
-    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``."""
+def load_panda(urdf=None, joint_terms=False):
+    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``.
+
+    Rigid unless ``joint_terms``: the URDF's ``<dynamics damping="0.003">`` is dropped, so
+    the payload experiments isolate the payload (joint terms: doc/design.md §7).
+    """
     path = urdf or find_panda_urdf()
     if path is None:
         raise ConfigError("urdf: example-robot-data's panda.urdf not found (the 'robots' "
                           "extra: pip install 'rcac_ros[robots]'); pass --urdf")
-    return model_from_urdf(path, tip_link="panda_link8")
+    model = model_from_urdf(path, tip_link="panda_link8")
+    return model if joint_terms else model.replace(damping=0.0, friction=0.0)
 
 
 def _skew(v):
@@ -99,33 +102,6 @@ def gains_for(model, kappa, Lambda, rho, gamma, lam, h, adapt_all=False, law="co
             P[:] = scaled
     return dict(K_D=K_D, Lambda=Lambda, P=P, gamma=gamma if law == "composite" else 0.0,
                 lam=lam, h=h, theta_hat0=model.theta())
-
-
-class Scenario:
-    """One closed-loop setting: plant(s), desired motion, gains and the true parameters."""
-
-    def __init__(self, name, model, gains, trajectory, q0, qd0, loaded=None, jump=None):
-        self.name, self.model, self.gains, self.trajectory = name, model, gains, trajectory
-        self.q0, self.qd0, self.loaded, self.jump = q0, qd0, loaded, jump
-        self.theta_end = (loaded or model).theta()
-
-
-def paper_scenario():
-    model = css_arm()
-    q0 = np.array(PAPER_Q0)
-    return Scenario("paper", model, dict(PAPER_GAINS), PaperTrajectory(q0), q0,
-                    np.zeros(model.n))
-
-
-def payload_scenario():
-    model = load_panda()
-    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
-    q0, qd0, _ = traj(0.0)
-    return Scenario("payload", model, gains_for(model, law="composite", **GAINS), traj, q0,
-                    qd0, loaded=with_payload(model), jump=5.0)
-
-
-SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
 
 
 #: the kind of a law -> the controller class that runs it

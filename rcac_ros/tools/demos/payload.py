@@ -30,8 +30,8 @@ import numpy as np
 
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import (add_gain_arguments, finite_float, non_negative_float,
-                                 positive_float)
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, finite_float,
+                                 non_negative_float, positive_float)
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
                                       READY, with_payload)
@@ -76,10 +76,12 @@ def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None)
 
 
 def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02, 0.08),
-             gains=None, adapt_all=False, urdf=None, progress=True, laws=None):
+             gains=None, adapt_all=False, urdf=None, progress=True, laws=None,
+             engine="builtin"):
     """The three laws on the Panda with a payload attached at ``jump``.
 
-    Returns ``(model, loaded, runs, report)``.
+    ``engine``: the plant (``builtin`` or ``mujoco``, doc/plants.md). Returns ``(model,
+    loaded, runs, report)``.
     """
     g = dict(GAINS, **(gains or {}))
     model = load_panda(urdf)
@@ -91,7 +93,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
                                                                law=law, **g))
         t0 = time.perf_counter()
         runs[law] = closed_loop(ctrl, trajectory, duration, events=((jump, loaded),), strict=True,
-                                progress=f"{law:>9s}" if progress else None, progress_every=250)
+                                progress=f"{law:>9s}" if progress else None, progress_every=250,
+                                engine=engine)
         report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1],
                               effort_limit=model.effort_limit)
         report[law]["wall_time_s"] = time.perf_counter() - t0
@@ -155,6 +158,7 @@ def add_arguments(parser):
         ("h", "control period, s")))
     parser.add_argument("--adapt-all", action="store_true",
                         help="adapt links 1-6 too (default: only link 7)")
+    add_engine_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -163,13 +167,15 @@ def run(args):
     if args.jump >= args.duration:
         raise ConfigError(f"--jump: the payload must attach before the end of the run "
                           f"(--duration {args.duration:g} s), got {args.jump:g} s")
+    engine = args.engine or "builtin"
     model, loaded, runs, report = run_demo(args.duration, args.jump, args.payload_mass,
                                            args.payload_com, gains, args.adapt_all, args.urdf,
-                                           progress=not args.quiet)
+                                           progress=not args.quiet, engine=engine)
     settings = dict(gains, duration=args.duration, jump=args.jump,
                     payload_mass=args.payload_mass, payload_com_flange=list(args.payload_com),
                     adapt_all=args.adapt_all, model=model.name, tip_link="panda_link8",
-                    q_center=list(READY), amplitude=list(AMPLITUDE), frequency=list(FREQUENCY))
+                    q_center=list(READY), amplitude=list(AMPLITUDE), frequency=list(FREQUENCY),
+                    engine=engine)
     write_outputs(model, loaded, runs, report, args.out, settings, args.jump)
     laws = list(report)
     keys = [k for k in report[laws[0]] if not isinstance(report[laws[0]][k], list)

@@ -11,6 +11,7 @@ A campaign (YAML, see ``doc/campaigns.md``) is a ``scenario`` (the fixed part) a
       law: composite        # direct | composite | slotine_li
       trajectory: {type: paper, reading: velocity}
       duration: 5.0
+      engine: builtin       # builtin | mujoco: the plant (doc/plants.md)
       gains: {K_D: 1.0e4, Lambda: 1.0, P: 100.0, gamma: 0.1, lam: 10.0, h: 0.002}
     vary:
       noise_q: {uniform: {low: 0.0, high: 1.0e-4}}
@@ -35,6 +36,7 @@ import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.errors import ConfigError, read_yaml
+from rcac_ros.plants import check_engine, ENGINES
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
 from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_for, load_panda,
@@ -80,7 +82,7 @@ MODEL_DEFAULTS = {
                   trajectory=dict(type="sinusoid")),
 }
 SCENARIO_KEYS = ("model", "law", "trajectory", "duration", "gains", "substeps", "error_limit",
-                 "initial_estimate", "payload_time")
+                 "initial_estimate", "payload_time", "engine")
 TOP_KEYS = ("name", "seed", "samples", "scenario", "vary")
 TRAJECTORY_KEYS = {"paper": ("type", "reading", "amplitude", "period"),
                    "sinusoid": ("type", "offset", "amplitude", "frequency")}
@@ -269,6 +271,9 @@ def validate(doc, source="campaign"):
         substeps=number(sc.get("substeps", 1), "scenario.substeps", 1, integer=True),
         error_limit=number(sc.get("error_limit", 1.0), "scenario.error_limit", 0.0, True),
         payload_time=number(sc.get("payload_time", 0.0), "scenario.payload_time", 0.0))
+    engine = check_engine(sc.get("engine", ENGINES[0]), "scenario.engine")
+    if engine != ENGINES[0]:         # recorded only when not the default: older results resume
+        out["scenario"]["engine"] = engine
     vary = mapping(doc.get("vary") or {}, "vary", tuple(QUANTITIES))
     out["vary"] = {q: check_spec(q, vary[q], f"vary.{q}") for q in QUANTITIES if q in vary}
     return out
@@ -426,6 +431,7 @@ def setup(campaign, index):
     kwargs = dict(trajectory=trajectory, duration=sc["duration"], plant=plant, q0=q0, qd0=qd0,
                   noise_q=inputs["noise_q"], noise_qd=inputs["noise_qd"],
                   delay=inputs["delay"], rng=rng, events=events, substeps=sc["substeps"],
+                  engine=sc.get("engine", ENGINES[0]),
                   error_limit=sc["error_limit"],
                   theta_hat0=perturbed_estimates(base, theta, inputs["estimate_error"], rng))
     return inputs, controller, kwargs
