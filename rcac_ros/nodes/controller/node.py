@@ -45,18 +45,9 @@ class ControllerNode(ManagedNode):
     :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
     parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
 
-    Attributes
-    ----------
-    ctrl : RecursiveCompositeController
-        The core controller (built at configure, :mod:`~rcac_ros.nodes.controller.params`).
-    states : StateInput
-        The latest valid state (:mod:`~rcac_ros.nodes.controller.state_input`).
-    watchdog : Watchdog
-        The safe effort and the spells of it (:mod:`~rcac_ros.nodes.safety.watchdog`).
-    failsafe : ControllerGuards
-        The guards built from the parameters (:mod:`~rcac_ros.nodes.safety.failsafe`).
-    filters_stale : bool
-        The filters of eqs 21-24 missed states: the next control step restarts them.
+    Attributes: ``ctrl`` (the core controller), ``states`` (:class:`StateInput`, the latest
+    valid state), ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the filters of
+    eqs 21-24 missed states: the next control step restarts them).
     """
 
     PARAMETERS = params.CONTROLLER
@@ -86,11 +77,17 @@ class ControllerNode(ManagedNode):
             channels=self.channel_names, joint_friction=self.ctrl.joint_friction))
         self._steps = self._deadline_misses = self._late_ticks = self._nonfinite = 0
         self.watchdog = Watchdog(
-            self.failsafe.stop, self._send_safe_effort, lambda: self.states.received,
+            self.failsafe.stop, lambda: self._outputs.effort(self.safe_effort, watchdog=True),
+            lambda: self.states.received,
             self.state_timeout, self.mode == "lockstep", self.get_logger(),
-            stepped=lambda: self._steps > 0, filters_missed=self._filters_missed,
+            stepped=lambda: self._steps > 0,
+            filters_missed=lambda: setattr(self, "filters_stale", True),
             replan=self._replan)
-        self.states = self.keep(StateInput.close, StateInput(self))
+        self.states = self.keep(StateInput.close, StateInput(
+            self, self.model.joint_names, self.mode == "lockstep", self.h, self.velocity_cutoff,
+            self.failsafe, self.watchdog, self._outputs, self._throttle.warn,
+            is_running=lambda: self.running, steps=lambda: self._steps,
+            restarted=self._stream_restarted, control=self._control))
         self._reset_motion()
         self._fjt = None                    # the FollowJointTrajectory server, if any
         if self.trajectory_source == "topic":   # checked aside, applied in this thread
@@ -126,11 +123,10 @@ class ControllerNode(ManagedNode):
         self.filters_stale = False          # the loop restarts the filters at its next step
         self._outputs.last_answer = None
 
-    def _send_safe_effort(self):
-        self._outputs.effort(self.safe_effort, watchdog=True)
-
-    def _filters_missed(self):
-        self.filters_stale = True           # the next control step restarts them
+    def _stream_restarted(self):
+        """The state stream restarted: the motion starts at the new state, the filters too."""
+        self.restart_motion(self.paper_q0)
+        self.filters_stale = self._steps > 0
 
     def _replan(self, held):
         """The watchdog held the safe effort ``held`` s: the motion restarts from the arm."""
