@@ -65,9 +65,9 @@ def controller_overrides(args):
 def add_ros(p):
     p.add_argument("--duration", type=positive_float, default=60.0,
                    help="seconds of the run (default 60)")
-    p.add_argument("--mode", choices=("timer", "on_state"), default="timer",
-                   help="the controller on its 500 Hz timer (default) or answering each "
-                        "joint state")
+    p.add_argument("--mode", choices=("timer", "on_state"), default="on_state",
+                   help="the controller answering each joint state (default, the node's "
+                        "default mode) or on its 500 Hz timer")
     add_controller(p)
 
 
