@@ -34,10 +34,6 @@ class CutBagError(BagError):
     """A bag was not closed (its recorder was killed): ``rcac inspect --recover`` salvages it."""
 
 
-class MissingDependency(RcacError, ImportError):
-    """An optional dependency (an extra of setup.py, or ROS 2) is not installed."""
-
-
 def read_yaml(path, label=None):
     """Parse the YAML file at ``path``.
 
@@ -74,4 +70,5 @@ def read_yaml(path, label=None):
 
 
 class DependencyError(RcacError, ImportError):
-    """An optional dependency a command needs is not installed (the message names it)."""
+    """An optional dependency a command needs is not installed (the message names it: an
+    extra of setup.py, or ROS 2)."""

@@ -8,7 +8,7 @@ says how to get it.
 
 import importlib.util
 
-from rcac_ros.errors import MissingDependency
+from rcac_ros.errors import DependencyError
 
 #: extra of setup.py -> the top-level modules it provides (test_dependencies.py checks them
 #: against the installed distributions)
@@ -30,15 +30,15 @@ def missing(modules):
 
 
 def require(*needs):
-    """Raise :class:`MissingDependency` naming the first of ``needs`` (extras, or ``"ros"``)
+    """Raise :class:`DependencyError` naming the first of ``needs`` (extras, or ``"ros"``)
     whose modules are not all installed."""
     for need in needs:
         gone = missing(ROS if need == "ros" else EXTRAS[need])
         if not gone:
             continue
         if need == "ros":
-            raise MissingDependency(
+            raise DependencyError(
                 "needs ROS 2 Jazzy (rclpy not found): source /opt/ros/jazzy/setup.bash, or "
                 "pip install -r requirements.txt (doc/install.md)")
-        raise MissingDependency(f"needs the '{need}' extra (missing {', '.join(gone)}): "
-                                f"pip install 'rcac_ros[{need}]'")
+        raise DependencyError(f"needs the '{need}' extra (missing {', '.join(gone)}): "
+                              f"pip install 'rcac_ros[{need}]'")

@@ -145,7 +145,7 @@ def test_every_imported_distribution_is_declared():
 
 def test_a_missing_extra_is_named_in_one_line(monkeypatch):
     monkeypatch.setitem(extras.EXTRAS, "sweep", ("dask", "no_such_module_rcac"))
-    with pytest.raises(extras.MissingDependency) as err:
+    with pytest.raises(extras.DependencyError) as err:
         extras.require("bags", "sweep")
     assert str(err.value) == ("needs the 'sweep' extra (missing no_such_module_rcac): "
                               "pip install 'rcac_ros[sweep]'")
