@@ -175,7 +175,8 @@ BENCHMARKS = {
     "ros": ("the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)",
             add_ros, run_ros, ("ros",)),
     "faults": ("the closed loop over ROS under faults (drops, jitter, noise, simulator "
-               "restart, frozen /clock, flood)", add_faults, run_faults, ("ros",)),
+               "restart, frozen /clock, flood, hostile flood, starved machine)",
+               add_faults, run_faults, ("ros",)),
     "soak": ("the nominal fault case for MINUTES (memory growth, late ticks)",
              add_soak, run_soak, ("ros",)),
     "delay-margin": ("offline, tracking RMS against K_D with the effort 0-2 periods late",
