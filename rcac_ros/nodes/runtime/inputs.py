@@ -1,7 +1,7 @@
 """Inputs received off the control thread, and size caps checked before deserialising.
 
-The control loop (500 Hz) must never wait for the parsing of a large input (issue 9,
-section 3). :class:`SideInput` subscribes on a helper node and takes in its own thread
+The control loop (500 Hz) must never wait for the parsing of a large input (doc/failsafe.md,
+"starvation"). :class:`SideInput` subscribes on a helper node and takes in its own thread
 without the interpreter lock (:mod:`~rcac_ros.nodes.runtime.rawtake`): a sample above the
 cap is never turned into Python objects, one within it is deserialised and checked there,
 and only the result is handed over (one attribute assignment, atomic under the GIL). The
@@ -63,9 +63,8 @@ class SideInput:
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
-        if topic.startswith("~/"):
-            ns = owner.get_namespace().rstrip("/")
-            topic = f"{ns}/{owner.get_name()}/{topic[2:]}"
+        if topic.startswith("~/"):      # the owner's private topic, not this side node's
+            topic = owner.resolve_topic_name(topic, only_expand=True)
         self.topic = topic
         self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,

@@ -1,4 +1,4 @@
-"""The fault benchmark behind ``rcac bench --faults`` (issue 9, section 9).
+"""The fault benchmark behind ``rcac bench faults`` (doc/failsafe.md, "Measured").
 
 The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
 processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go
@@ -30,7 +30,7 @@ of the run tracks within 3x nominal; after the restart, also the first non-watch
 effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
 non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
 3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
-``--soak MINUTES`` runs the nominal case that long and reports the controller's memory
+``rcac bench soak MINUTES`` runs the nominal case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
 
@@ -45,6 +45,7 @@ import time
 
 import numpy as np
 
+from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 
 CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood",
@@ -68,17 +69,17 @@ print(" ".join(str(x) for x in t))
 BUSY = "while True:\n    pass\n"
 FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "flood.py")
 BOUND = 1e6                 # |theta_hat| above this: not bounded
+#: the namespace the simulator's states and clock are remapped into, ahead of the relay
+SIM = "/sim"
 
 
 class Relay:
     """Forward the simulator's states and clock, with drops, jitter and a clock freeze."""
 
     def __init__(self, node, h, seed=0):
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                         reliability=ReliabilityPolicy.RELIABLE)
+        qos = topics.qos()
         self.drop = 0.0
         self.jitter = 0.0           # s: each message delayed by U(0, jitter)
         self.freeze_clock = False
@@ -87,11 +88,12 @@ class Relay:
         self.dropped = 0
         self._rng = np.random.default_rng(seed)
         self._queue = queue.Queue()
-        self._pub_state = node.create_publisher(JointState, "/joint_states", qos)
-        self._pub_clock = node.create_publisher(Clock, "/clock", qos)
-        self._subs = [node.create_subscription(JointState, "/sim/joint_states", self._on_state,
-                                               qos, raw=True),
-                      node.create_subscription(Clock, "/sim/clock", self._on_clock, qos,
+        states = topics.resolve(topics.JOINT_STATES)
+        self._pub_state = node.create_publisher(JointState, states, qos)
+        self._pub_clock = node.create_publisher(Clock, topics.CLOCK, qos)
+        self._subs = [node.create_subscription(JointState, SIM + states, self._on_state, qos,
+                                               raw=True),
+                      node.create_subscription(Clock, SIM + topics.CLOCK, self._on_clock, qos,
                                                raw=True)]
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -135,11 +137,10 @@ class Probe:
     """Efforts (sender's stamps), tracking errors, estimates and diagnostics."""
 
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from std_msgs.msg import Float64MultiArray
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                         reliability=ReliabilityPolicy.RELIABLE)
+
+        from rcac_ros.tools.bench.ros import subscribe_diagnostics
+        qos = topics.qos(topics.MONITOR_DEPTH)
         self.recording = False
         self.efforts = []           # (source ns, receive steady ns, watchdog)
         self.tracking = []          # (receive steady ns, |q - q_d|)
@@ -147,18 +148,19 @@ class Probe:
         self.theta_finite = True
         self.diagnostics = {}
         self.subs = [
-            node.create_subscription(Float64MultiArray, "/effort_controller/commands",
+            node.create_subscription(Float64MultiArray, topics.resolve(topics.EFFORT_COMMANDS),
                                      self._on_effort, qos, raw=True),
-            node.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+            node.create_subscription(Float64MultiArray, topics.resolve(topics.TRACKING_ERROR),
                                      self._on_tracking, qos),
-            node.create_subscription(Float64MultiArray, "/rcac_controller/parameter_estimates",
+            node.create_subscription(Float64MultiArray,
+                                     topics.resolve(topics.PARAMETER_ESTIMATES),
                                      self._on_theta, qos),
-            node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos)]
+            subscribe_diagnostics(node, self.diagnostics, qos)]
 
     def _on_effort(self, data, info):
         if self.recording:
             self.efforts.append((info["source_timestamp"], time.monotonic_ns(),
-                                 b"watchdog" in bytes(data[:96])))
+                                 topics.is_watchdog_effort(data)))
 
     def _on_tracking(self, msg):
         if self.recording:
@@ -170,10 +172,6 @@ class Probe:
             self.theta_finite &= bool(np.all(np.isfinite(theta)))
             if theta.size and np.all(np.isfinite(theta)):
                 self.theta_max = max(self.theta_max, float(np.max(np.abs(theta))))
-
-    def _on_diag(self, msg):
-        for status in msg.status:
-            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
 
 def rss_kb(pid):
@@ -208,7 +206,8 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
     if case == "noise":
         sim_over.update(position_noise=1e-4, velocity_noise=1e-3)
-    remap = ["-r", "joint_states:=/sim/joint_states", "-r", "/clock:=/sim/clock"]
+    remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
+             "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
     children, ctx, executor, flood, relay = [], None, None, None, None
     plain, busy, window = None, [], None
     out = {"case": case, "rate": float(rate)}
@@ -476,7 +475,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
         cases, duration = ("nominal",), soak_minutes * 60.0
     for case in cases:
         if verbose:
-            print(f"rcac bench --faults: {case} ({duration:g} s)", flush=True)
+            print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
                                 verbose=verbose))
         if verbose:

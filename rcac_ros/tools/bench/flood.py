@@ -12,9 +12,10 @@ import argparse
 import time
 
 import rclpy
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from rcac_ros import topics
 
 
 def messages(names, points):
@@ -38,10 +39,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     rclpy.init()
     node = rclpy.create_node("failsafe_flood")
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                     reliability=ReliabilityPolicy.RELIABLE)
-    pub_state = node.create_publisher(JointState, "/joint_states", qos)
-    pub_traj = node.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory", qos)
+    qos = topics.qos()
+    pub_state = node.create_publisher(JointState, topics.resolve(topics.JOINT_STATES), qos)
+    pub_traj = node.create_publisher(JointTrajectory, topics.resolve(topics.JOINT_TRAJECTORY),
+                                     qos)
     big_state, big_traj = messages(args.names, args.points)
     end = time.monotonic() + 30.0
     while time.monotonic() < end and (pub_state.get_subscription_count() == 0

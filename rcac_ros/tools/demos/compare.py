@@ -36,8 +36,7 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.errors import RcacError
@@ -46,7 +45,7 @@ from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.demos.friction import P_FRICTION
-from rcac_ros.tools.demos.payload import FIXED_P
+from rcac_ros.tools.scenarios import controller, FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -139,8 +138,8 @@ def paper_scenario():
 
 
 def payload_scenario():
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                              load_panda, with_payload)
+    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                          load_panda, with_payload)
     model = load_panda()
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
     q0, qd0, _ = traj(0.0)
@@ -150,8 +149,8 @@ def payload_scenario():
 
 def joint_scenario(name):
     """The panda on MuJoCo with the joint terms of :data:`JOINT_PLANTS` ``[name]``."""
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                              load_panda)
+    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                          load_panda)
     model = load_panda()
     damping, friction, armature = JOINT_PLANTS[name]
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
@@ -177,10 +176,7 @@ def scenario_names(names):
 
 def make_controller(scenario, law, laws=None):
     kind, extra = (laws or LAWS)[law]
-    kwargs = dict(scenario.gains, **extra)
-    if kind == "slotine_li":
-        return SlotineLiCompositeController(scenario.model, **kwargs)
-    return RecursiveCompositeController(scenario.model, **kwargs)
+    return controller(kind, scenario.model, dict(scenario.gains, **extra))
 
 
 def run_law(scenario, controller, duration, progress=None, engine=None):
@@ -324,7 +320,7 @@ def markdown(report, n_links=None):
 
 def plot(series, report, out_dir):
     """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     paths = []
     for name, runs in series.items():
         fig, axes = plt.subplots(1, 4, figsize=(24, 5))
@@ -353,10 +349,8 @@ def plot(series, report, out_dir):
         axes[3].set_ylim(bottom=1e-12)
         axes[0].legend(fontsize=7, ncol=2)
         fig.suptitle(f"rcac compare: {name} scenario")
-        fig.tight_layout()
         path = os.path.join(out_dir, f"compare_{name}.png")
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        save(fig, path, 110)
         paths.append(path)
     return paths
 
