@@ -30,8 +30,8 @@ setup(
     entry_points={
         "console_scripts": [
             "rcac = rcac_ros.tools.cli:main",
-            "controller = rcac_ros.nodes.controller_node:main",
-            "simulator = rcac_ros.nodes.simulator_node:main",
+            "controller = rcac_ros.nodes.controller.node:main",
+            "simulator = rcac_ros.nodes.simulator.node:main",
         ],
     },
 )

@@ -3,7 +3,7 @@
 Each :class:`Param` row gives a parameter's name, type, default, range, whether it can be
 changed at run time, and its description. The table drives:
 
-* the declaration (:func:`rcac_ros.nodes.base.declare_parameters` builds each
+* the declaration (:func:`rcac_ros.nodes.runtime.base.declare_parameters` builds each
   ``ParameterDescriptor`` from its row);
 * the validation, at start-up and in the controller's on-set callback (:func:`check`: one
   line naming the parameter);
@@ -242,7 +242,7 @@ CONTROLLER = _robot("controller") + (
           "~/save_estimates writes the estimates here (YAML), and the physically consistent "
           "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
-    # fail-safe (issue 9): rcac_ros.nodes.guards, .state_guards, .realtime
+    # fail-safe (issue 9): rcac_ros.nodes.safety.guards, .state_guards, .realtime
     Param("max_state_bytes", "integer", 65_536,
           "JointStates larger than this (serialised) are refused before deserialising, "
           "bytes; 0: no cap", lo=0, hi=2 ** 31 - 1),

@@ -12,7 +12,7 @@ from .load import load_model
 from .aba import forward_dynamics
 from .crba import mass_matrix
 from .kinematics import energy, forward_kinematics
-from .rcac import RecursiveCompositeController
+from .composite import RecursiveCompositeController
 from .slotine_li import SlotineLiCompositeController
 from .regressor import (coriolis_gravity_regressor, link_matrices, link_regressor,
                         mass_regressor)

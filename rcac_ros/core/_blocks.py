@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._packing import I_ERR, KD0, LAM, PG0, TH
+from ._packing import GAIN_K_D, I_ERR, LAMBDA
 from rcac_ros.errors import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
@@ -54,8 +54,8 @@ def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
     """
     joint_rotation(row, RF0, q, C, i)
     px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
-    qdr = qd_d - row[LAM] * (q - q_d)
-    qddr = qdd_d - row[LAM] * (qd - qd_d)
+    qdr = qd_d - row[LAMBDA] * (q - q_d)
+    qddr = qdd_d - row[LAMBDA] * (qd - qd_d)
     vx, vy, vz, wx, wy, wz = transform_motion(C, i, px, py, pz, V[0], V[1], V[2], V[3], V[4],
                                               V[5])
     Vr, Vdr = propagate(C, i, px, py, pz, qd, Vr, Vdr, qdr, qddr)   # Tdot with the actual qd
@@ -71,28 +71,11 @@ def feedback_wrench(row, Fs, s, kd_diag, F):
     for r in range(6):
         acc = Fs[r]
         if kd_diag:
-            acc -= row[KD0 + 7 * r] * s[r]
+            acc -= row[GAIN_K_D + 7 * r] * s[r]
         else:
             for k in range(6):
-                acc -= row[KD0 + 6 * r + k] * s[k]
+                acc -= row[GAIN_K_D + 6 * r + k] * s[k]
         F[r] += acc
-
-
-@njit(cache=True, inline="always")
-def gain_step(row, p_diag, st, grad, h, R, i):
-    """``R_i = theta_hat_i - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part).
-
-    ``st`` is link i's state row (``theta_hat_i`` at ``TH``).
-    """
-    if p_diag:
-        for a in range(13):
-            R[i, a] = st[TH + a] - h * row[PG0 + 14 * a] * grad[a]
-    else:
-        for a in range(13):
-            acc = 0.0
-            for c in range(13):
-                acc += row[PG0 + 13 * a + c] * grad[c]
-            R[i, a] = st[TH + a] - h * acc
 
 
 @njit(cache=True)

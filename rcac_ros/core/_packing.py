@@ -29,22 +29,22 @@ from .spatial import P0, RF0
 
 # ---- per-link constants: data[i, :CONST_COLS] ----------------------------------------------
 #: p_i (3) and R_fix_i (9) at the columns of :mod:`rcac_ros.core.spatial` (P0, RF0)
-LAM = 12            #: Lambda_i (eq 18)
-KD0 = 13            #: K_Di, 6x6 row-major (eq 19b)
-PG0 = 49            #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain
-TLO = 218           #: lower bounds of theta_i (13): projection
-THI = 231           #: upper bounds of theta_i (13)
-PMAX = 244          #: k_0 of link i: the bound on trace(P_i) (least squares)
-TH0 = 245           #: theta_0i (13), the nominal estimates the leakage pulls toward
+LAMBDA = 12         #: Lambda_i (eq 18)
+GAIN_K_D = 13       #: K_Di, 6x6 row-major (eq 19b)
+GAIN_P = 49         #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain
+THETA_MIN = 218     #: lower bounds of theta_i (13): projection
+THETA_MAX = 231     #: upper bounds of theta_i (13)
+TRACE_MAX = 244     #: k_0 of link i: the bound on trace(P_i) (least squares)
+THETA_0 = 245       #: theta_0i (13), the nominal estimates the leakage pulls toward
 LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
 CONST_COLS = 259
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
-TH = 0              #: theta_hat_i (13)
-S0 = 13             #: s_i = V_i - V_ri (6)
+THETA_HAT = 0       #: theta_hat_i (13)
+S_LINK = 13         #: s_i = V_i - V_ri (6)
 TAU = 19            #: the torque of joint i applied over the last period
-QPREV = 20          #: q_i at the last step (the power channel's tau^T dq)
-SQ = 21             #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
+Q_PREV = 20         #: q_i at the last step (the power channel's tau^T dq)
+P_FACTOR = 21       #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
 STATE_COLS = 190
 LINK_COLS = CONST_COLS + STATE_COLS
 
@@ -66,7 +66,7 @@ I_FORGET = 15       #: lambda_0 of the bounded-gain forgetting, 1/s
 I_FROZEN = 16       #: 1: adaptation frozen (set_adaptation(False)): theta_hat and P held
 I_DZ_S = 17         #: dead zone on max |qd - qd_r| (0: none)
 I_DZ_E = 18         #: dead zone on |E_c| (0: none)
-I_PROJECT = 19      #: 1: clip theta_hat to [TLO, THI] after each step
+I_PROJECT = 19      #: 1: clip theta_hat to [THETA_MIN, THETA_MAX] after each step
 I_E = 20            #: E of the first channel (the paper's scalar E)
 I_Y = 21            #: y of the first channel
 I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
@@ -76,12 +76,12 @@ SCAL_LEN = 24
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 
 # ---- channel c, link j: filt[c, j, :] ------------------------------------------------------
-PHF = 0             #: phi^f (13)
-PSF = 13            #: psi^f (13)
-PHP = 26            #: phi at the last step (13)
-PSP = 39            #: psi at the last step (13)
-WR = 52             #: W_cj (13)
-UR = 65             #: U_cj = P_j W_cj^T (13)
+PHI_F = 0           #: phi^f (13)
+PSI_F = 13          #: psi^f (13)
+PHI_PREV = 26       #: phi at the last step (13)
+PSI_PREV = 39       #: psi at the last step (13)
+W_ROW = 52          #: W_cj (13)
+U_ROW = 65          #: U_cj = P_j W_cj^T (13)
 FILT_COLS = 78
 
 # ---- channel c: chan[c, :] -----------------------------------------------------------------
@@ -89,20 +89,20 @@ CH_JOINT = 0        #: 0-based joint k of the channel, or POWER
 CH_Y = 1            #: y_c: the filtered applied c^T tau
 CH_E = 2            #: E_c = sum_j W_cj theta_hat_j - y_c
 CH_ACTIVE = 3       #: 1 if E_c adapts at this step (outside the dead zone)
-CH_A = 4            #: a_j (6), the channel's axis in frame j, during the forward pass
-CH_AD = 10          #: adot_j (6)
+CH_AXIS = 4         #: a_j (6), the channel's axis in frame j, during the forward pass
+CH_AXIS_DOT = 10    #: adot_j (6)
 CHAN_COLS = 16
 POWER = -1.0
 
 #: Python-side slices of the blocks above (per-link state columns are relative to CONST_COLS).
 BLOCKS = {
-    "theta_hat": slice(CONST_COLS + TH, CONST_COLS + TH + 13),
-    "s": slice(CONST_COLS + S0, CONST_COLS + S0 + 6),
-    "S": slice(CONST_COLS + SQ, CONST_COLS + SQ + 169),
-    "W": slice(WR, WR + 13),
-    "theta_lo": slice(TLO, TLO + 13),
-    "theta_hi": slice(THI, THI + 13),
-    "theta_0": slice(TH0, TH0 + 13),
+    "theta_hat": slice(CONST_COLS + THETA_HAT, CONST_COLS + THETA_HAT + 13),
+    "s": slice(CONST_COLS + S_LINK, CONST_COLS + S_LINK + 6),
+    "S": slice(CONST_COLS + P_FACTOR, CONST_COLS + P_FACTOR + 169),
+    "W": slice(W_ROW, W_ROW + 13),
+    "theta_lo": slice(THETA_MIN, THETA_MIN + 13),
+    "theta_hi": slice(THETA_MAX, THETA_MAX + 13),
+    "theta_0": slice(THETA_0, THETA_0 + 13),
 }
 
 
@@ -149,11 +149,11 @@ class Gains:
         const, scal = data[:n], data[n]
         const[:, P0:P0 + 3] = model.p
         const[:, RF0:RF0 + 9] = model.R_fix.reshape(n, 9)
-        const[:, LAM] = self.Lambda
-        const[:, KD0:KD0 + 36] = self.K_D.reshape(n, 36)
-        const[:, PG0:PG0 + 169] = self.P.reshape(n, 169)
-        const[:, TLO:TLO + 13] = -np.inf
-        const[:, THI:THI + 13] = np.inf
+        const[:, LAMBDA] = self.Lambda
+        const[:, GAIN_K_D:GAIN_K_D + 36] = self.K_D.reshape(n, 36)
+        const[:, GAIN_P:GAIN_P + 169] = self.P.reshape(n, 169)
+        const[:, THETA_MIN:THETA_MIN + 13] = -np.inf
+        const[:, THETA_MAX:THETA_MAX + 13] = np.inf
         scal[I_G:I_G + 3] = model.gravity
         scal[I_LAM], scal[I_H], scal[I_GAMMA] = self.lam, self.h, self.gamma
         scal[I_FE:I_FB1 + 1] = filter_coefficients(self.lam, self.h)

@@ -36,12 +36,17 @@ Discretisation and its error (with the true parameters, E_c measures only this):
 import numpy as np
 from numba import njit
 
-from ._packing import CH_JOINT, CH_Y, I_FB0, I_FE, I_H, POWER, QPREV, TAU
+from ._packing import (CH_ACTIVE, CH_AXIS, CH_AXIS_DOT, CH_E, CH_JOINT, CH_Y, I_DZ_E, I_E, I_FB0,
+                       I_FE, I_H, I_Y, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, TAU,
+                       THETA_HAT, W_ROW)
 from rcac_ros.errors import GainError
 from .regressor import bias_terms, momentum_terms
+from .spatial import P0, propagate
 
 #: The value of ``channels`` that gives every joint.
 ALL = "all"
+AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
+AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def parse_channels(value, n):
@@ -104,11 +109,6 @@ def channel_codes(channels):
     return np.array([POWER if c == "power" else c - 1 for c in channels], dtype=float)
 
 
-def first_link(code):
-    """The first link (0-based) whose W row a channel can make non-zero."""
-    return 0 if code == POWER else int(code)
-
-
 @njit(cache=True)
 def axis_terms(A, Ad, V, g):
     """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22) for
@@ -157,6 +157,88 @@ def filtered_output(chan, c, state, scal, q, first):
     else:
         u = 0.0
         for j in range(q.shape[0]):
-            u += state[j, TAU] * (q[j] - state[j, QPREV])
+            u += state[j, TAU] * (q[j] - state[j, Q_PREV])
         u /= scal[I_H]
     return scal[I_FE] * chan[c, CH_Y] + scal[I_FB0] * u
+
+
+@njit(cache=True, inline="always")
+def channel_start(code):
+    """The first link (0-based) the channel of ``CH_JOINT`` code ``code`` reaches."""
+    return 0 if code == POWER else int(code)
+
+
+@njit(cache=True, inline="always")
+def start_channels(chan, state, scal, q, first):
+    """Each ``y_c`` for this step (the filtered applied output), ``E_c`` reset to 0."""
+    for c in range(chan.shape[0]):
+        chan[c, CH_Y] = filtered_output(chan, c, state, scal, q, first)
+        chan[c, CH_E] = 0.0
+
+
+@njit(cache=True, inline="always")
+def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
+    """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i`` (eqs 22-23).
+
+    A joint channel k carries its axis in ``chan[c]``: ``a_k = z6``, ``adot_k = 0``, then
+    ``a_j = T_j a_j-1``, ``adot_j = Tdot_j a_j-1 + T_j adot_j-1`` (doc/design.md §4). The
+    filters use a first-order hold on the samples and start at ``phi(0)`` and 0, so that E
+    is exact from the first step. The channel loop calls no helper taking an array (each
+    would cost atomic reference counts per channel and link): it updates them in place.
+    ``phi_ci``, ``psi_ci`` go through the scratch ``pp`` (26): the filter loop then reads an
+    array, not a 13-tuple at a varying index (a switch per read).
+    """
+    fe, fb0, fb1, lam = coef
+    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+    for c in range(chan.shape[0]):
+        code = chan[c, CH_JOINT]
+        if code == POWER:
+            phi, psi = power_terms(V, g)
+        elif i < code:
+            continue
+        else:
+            if i == code:
+                A, Ad = AXIS_Z, AXIS_0
+            else:
+                A = (chan[c, CH_AXIS], chan[c, CH_AXIS + 1], chan[c, CH_AXIS + 2],
+                     chan[c, CH_AXIS + 3], chan[c, CH_AXIS + 4], chan[c, CH_AXIS + 5])
+                Ad = (chan[c, CH_AXIS_DOT], chan[c, CH_AXIS_DOT + 1], chan[c, CH_AXIS_DOT + 2],
+                      chan[c, CH_AXIS_DOT + 3], chan[c, CH_AXIS_DOT + 4], chan[c, CH_AXIS_DOT + 5])
+                A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
+            for r in range(6):
+                chan[c, CH_AXIS + r] = A[r]
+                chan[c, CH_AXIS_DOT + r] = Ad[r]
+            phi, psi = axis_terms(A, Ad, V, g)
+        (pp[0], pp[1], pp[2], pp[3], pp[4], pp[5], pp[6], pp[7], pp[8], pp[9], pp[10],
+         pp[11], pp[12]) = phi
+        (pp[13], pp[14], pp[15], pp[16], pp[17], pp[18], pp[19], pp[20], pp[21], pp[22],
+         pp[23], pp[24], pp[25]) = psi
+        E = chan[c, CH_E]
+        for k in range(13):
+            ph = pp[k]
+            ps = pp[13 + k]
+            if first:
+                filt[c, i, PHI_F + k] = ph
+                filt[c, i, PSI_F + k] = 0.0
+            else:
+                php = filt[c, i, PHI_PREV + k]
+                psp = filt[c, i, PSI_PREV + k]
+                filt[c, i, PHI_F + k] = fe * filt[c, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
+                filt[c, i, PSI_F + k] = fe * filt[c, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[c, i, PHI_PREV + k] = ph
+            filt[c, i, PSI_PREV + k] = ps
+            w = lam * (ph - filt[c, i, PHI_F + k]) + filt[c, i, PSI_F + k]
+            filt[c, i, W_ROW + k] = w
+            E += w * st[THETA_HAT + k]
+        chan[c, CH_E] = E
+
+
+@njit(cache=True, inline="always")
+def close_channels(chan, scal):
+    """``E_c -= y_c`` and the dead zone on E: a channel adapts only if ``|E_c| > dz``."""
+    dz = scal[I_DZ_E]
+    for c in range(chan.shape[0]):
+        chan[c, CH_E] -= chan[c, CH_Y]
+        chan[c, CH_ACTIVE] = 1.0 if dz <= 0.0 or abs(chan[c, CH_E]) > dz else 0.0
+    scal[I_E] = chan[0, CH_E]
+    scal[I_Y] = chan[0, CH_Y]

@@ -15,12 +15,13 @@ joint-space gain is the one the recursive law applies through its link gains
 For ``gamma > 0`` this one uses the prediction errors of all n filtered joint
 torques (eq 6), the recursive one that of joint 1 only (eqs 21-24).
 
-Discretisation matches :mod:`rcac_ros.core.rcac`: exact filters (zero-order hold
-for the applied torque, first-order hold for Phi and Psi), explicit Euler in the
-tracking term and, in the prediction-error term, implicit Euler (``update="implicit"``,
-the default), solved by the Woodbury identity with an n x n Cholesky factorisation, or
-explicit Euler (``update="explicit"``). With the same choice the recursive law with
-``channels="all"`` is this law, step by step.
+Discretisation matches the recursive law's (:mod:`rcac_ros.core.channels`,
+:mod:`rcac_ros.core.adaptation`): exact filters (zero-order hold for the applied torque,
+first-order hold for Phi and Psi), explicit Euler in the tracking term and, in the
+prediction-error term, implicit Euler (``update="implicit"``, the default), solved by the
+Woodbury identity with an n x n Cholesky factorisation, or explicit Euler
+(``update="explicit"``). With the same choice the recursive law with ``channels="all"`` is
+this law, step by step.
 Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
 """
 
@@ -29,8 +30,8 @@ from numba import njit
 
 from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_error, \
     reference_motion
-from ._packing import (CONST_COLS, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA, I_H,
-                       I_IMPLICIT, I_K, I_LAM, I_Y, KD0, LAM, PG0, Gains, new_data)
+from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
+                       I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
 from ._validate import as_array
 from rcac_ros.errors import GainError
 from .regressor import fill_regressor
@@ -83,7 +84,7 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
     V, Vr, Vdr = zero, zero, zero
     g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
     for i in range(n):
-        s[i] = qd[i] - (qd_d[i] - const[i, LAM] * (q[i] - q_d[i]))
+        s[i] = qd[i] - (qd_d[i] - const[i, LAMBDA] * (q[i] - q_d[i]))
         y[i] = 0.0 if first else fe * filt[0, i, m] + fb0 * filt[1, i, m]
     for i in range(n):
         row = const[i]
@@ -142,7 +143,7 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
             for r in range(6):
                 kj = 0.0
                 for c in range(6):
-                    kj += const[i, KD0 + 6 * r + c] * J[i, c, a]
+                    kj += const[i, GAIN_K_D + 6 * r + c] * J[i, c, a]
                 for b in range(n):
                     K[b, a] += J[i, r, b] * kj
     tau = np.empty(n, q.dtype)
@@ -176,12 +177,12 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
         for a in range(13):
             acc = 0.0
             for c in range(13):
-                acc += const[i, PG0 + 13 * a + c] * g[13 * i + c]
+                acc += const[i, GAIN_P + 13 * a + c] * g[13 * i + c]
             r[13 * i + a] = theta_hat[13 * i + a] - h * acc
             for k in range(n if implicit else 0):
                 acc = 0.0
                 for c in range(13):
-                    acc += const[i, PG0 + 13 * a + c] * W[k, 13 * i + c]
+                    acc += const[i, GAIN_P + 13 * a + c] * W[k, 13 * i + c]
                 PWt[13 * i + a, k] = acc
     if not implicit:
         theta_hat[:] = r
@@ -213,7 +214,7 @@ class SlotineLiCompositeController:
     """The composite adaptive controller of Slotine and Li (eqs 2, 7), non-recursive.
 
     Same parameters (up to ``update``), defaults and exceptions as
-    :class:`~rcac_ros.core.rcac.RecursiveCompositeController`; ``K_D`` are the link
+    :class:`~rcac_ros.core.composite.RecursiveCompositeController`; ``K_D`` are the link
     gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
     filtered joint torques (``E`` has n entries).
     """

@@ -10,7 +10,7 @@ field ``packed``, see :func:`pack_kinematics`) is ``[p (3), R_fix row-major (9),
 All kernels are scalar code compiled by numba with ``cache=True``. They never
 allocate from another dtype than their inputs, so running them with
 ``NUMBA_DISABLE_JIT=1`` on object arrays counts their arithmetic exactly
-(:mod:`rcac_ros.tools.opcount`).
+(:mod:`rcac_ros.tools.bench.opcount`).
 """
 
 import math

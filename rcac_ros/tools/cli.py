@@ -13,16 +13,18 @@ import sys
 
 #: subcommand -> (module, one-line help)
 SUBCOMMANDS = {
-    "experiment": ("rcac_ros.tools.experiment",
+    "experiment": ("rcac_ros.tools.demos.experiment",
                    "run the paper's Section 4 experiment (both laws)"),
-    "bench": ("rcac_ros.tools.bench", "time the controller against Pinocchio and the baseline"),
-    "record": ("rcac_ros.tools.record", "record the package's topics into a rosbag2 bag"),
-    "inspect": ("rcac_ros.tools.inspect_bag", "summarise a bag and plot what it holds"),
-    "demo": ("rcac_ros.tools.demo", "simulator + controller over ROS 2, bag, summary and plots"),
-    "payload-demo": ("rcac_ros.tools.payload_demo",
+    "bench": ("rcac_ros.tools.bench.core",
+              "time the controller against Pinocchio and the baseline"),
+    "record": ("rcac_ros.tools.bags.record", "record the package's topics into a rosbag2 bag"),
+    "inspect": ("rcac_ros.tools.bags.inspect", "summarise a bag and plot what it holds"),
+    "demo": ("rcac_ros.tools.demos.demo",
+             "simulator + controller over ROS 2, bag, summary and plots"),
+    "payload-demo": ("rcac_ros.tools.demos.payload",
                      "panda with an unknown 2 kg payload attached"),
-    "sweep": ("rcac_ros.tools.sweep", "Monte Carlo campaigns of closed-loop runs on Dask"),
-    "compare": ("rcac_ros.tools.compare",
+    "sweep": ("rcac_ros.tools.sweep.engine", "Monte Carlo campaigns of closed-loop runs on Dask"),
+    "compare": ("rcac_ros.tools.demos.compare",
                 "every adaptive law on the paper's run and the payload demo"),
 }
 

@@ -16,8 +16,8 @@ from rcac_ros.errors import ConfigError, RcacError
 
 #: node -> (executable, module, params file)
 NODES = {
-    "controller": ("controller", "rcac_ros.nodes.controller_node", "controller.yaml"),
-    "simulator": ("simulator", "rcac_ros.nodes.simulator_node", "simulator.yaml"),
+    "controller": ("controller", "rcac_ros.nodes.controller.node", "controller.yaml"),
+    "simulator": ("simulator", "rcac_ros.nodes.simulator.node", "simulator.yaml"),
 }
 
 

@@ -6,7 +6,7 @@ from conftest import random_chain
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm, inverse_dynamics)
-from rcac_ros.tools.experiment import PAPER_Q0, run_experiment
+from rcac_ros.tools.demos.experiment import PAPER_Q0, run_experiment
 
 Q0 = np.array(PAPER_Q0)
 

@@ -15,11 +15,11 @@ from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray  # noqa: E402
 
 from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
-from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
 
 H = 0.002
 DURATION = 1.0

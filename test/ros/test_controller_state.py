@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 from rcac_ros.errors import ConfigError  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
 
 PARTS = ("reference", "feedback", "error", "output")
 

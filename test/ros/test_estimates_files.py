@@ -9,8 +9,8 @@ from conftest import random_chain
 
 from rcac_ros.core.model import css_arm
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.nodes.estimates import (initial_estimates, load, rigid_body, save,
-                                      urdf_child_links, urdf_path)
+from rcac_ros.nodes.controller.estimates import (initial_estimates, load, rigid_body, save,
+                                                 urdf_child_links, urdf_path)
 
 URDF_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.urdf")
 with open(URDF_PATH, encoding="utf-8") as _f:

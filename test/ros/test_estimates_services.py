@@ -8,7 +8,7 @@ from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
-from rcac_ros.nodes.estimates import load  # noqa: E402
+from rcac_ros.nodes.controller.estimates import load  # noqa: E402
 
 NODE = "/rcac_controller"
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes.guards import check_end, check_goal, DesiredLimiter, oversize, Rejected
-from rcac_ros.nodes.paramcheck import (check_params_files, foreign_sections, load_params_file,
-                                       unknown_parameters)
-from rcac_ros.nodes.state_guards import SafeStop, StampGate
+from rcac_ros.nodes.safety.guards import check_end, check_goal, DesiredLimiter, oversize, Rejected
+from rcac_ros.nodes.runtime.paramcheck import (check_params_files, foreign_sections,
+                                               load_params_file, unknown_parameters)
+from rcac_ros.nodes.safety.state_guards import SafeStop, StampGate
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -182,7 +182,7 @@ def test_unknown_keys_get_the_nearest_name(tmp_path):
 def test_state_predictor_against_constant_acceleration():
     """One joint about its axis, torque held: q(T) = q + qd T + tau T^2 / (2 I), exactly."""
     from rcac_ros.core.model import RobotModel
-    from rcac_ros.nodes.lookahead import StatePredictor
+    from rcac_ros.nodes.controller.lookahead import StatePredictor
     model = RobotModel([[0.0, 0.0, 0.0]], [np.eye(3)], [3.0], [[0.0, 0.0, 0.0]],
                        [np.diag([1.0, 1.0, 2.0])], (0.0, 0.0, 0.0))
     pred = StatePredictor(model, lookahead=0.002)

@@ -27,8 +27,8 @@ from rclpy.action import ActionClient  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
-from rcac_ros.nodes import follow_joint_trajectory as fjt  # noqa: E402
-from rcac_ros.nodes.trajectory_msg import ActiveTrajectory  # noqa: E402
+from rcac_ros.nodes.fjt import server as fjt  # noqa: E402
+from rcac_ros.nodes.msgs.trajectory import ActiveTrajectory  # noqa: E402
 
 needs_control_msgs = pytest.mark.skipif(
     fjt.FollowJointTrajectory is None,
@@ -364,7 +364,7 @@ class Loop:
         from test_nodes_support import PAPER_Q0, Probe
         from rcac_ros.core.model import css_arm
         from rcac_ros.core.simulator import Simulator
-        from rcac_ros.nodes.controller_node import ControllerNode
+        from rcac_ros.nodes.controller.node import ControllerNode
         # no watchdog trip on a slow step: a trip restarts the filters (not deterministic)
         self.node = ControllerNode(context=ctx, parameter_overrides=[
             Parameter("trajectory", value="topic"), Parameter("state_timeout", value=1.0)])

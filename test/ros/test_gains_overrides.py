@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes.gains import parse_overrides, per_joint_gains
+from rcac_ros.nodes.controller.gains import parse_overrides, per_joint_gains
 
 JOINTS = ("shoulder", "elbow", "wrist")
 SCALARS = {"K_D": 1e4, "Lambda": 1.0, "P": 100.0}

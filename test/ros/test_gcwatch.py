@@ -1,11 +1,11 @@
-"""The garbage collector around the loop (nodes/gcwatch.py): every collection timed, and the
-node process reports it in its diagnostics."""
+"""The garbage collector around the loop (nodes/runtime/gcwatch.py): every collection timed,
+and the node process reports it in its diagnostics."""
 
 import gc
 
 from failsafe_harness import controller, first_answer, session, wait
 
-from rcac_ros.nodes import gcwatch
+from rcac_ros.nodes.runtime import gcwatch
 
 
 def test_watch_times_each_collection():

@@ -13,10 +13,10 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
-from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
 
 H_NS = 2_000_000
 

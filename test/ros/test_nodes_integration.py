@@ -13,7 +13,7 @@ from test_nodes_support import (CONFIG, DEEP, JOINTS, node_cmd, NS, PAPER_Q0, Pr
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
-from rcac_ros.core.rcac import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 

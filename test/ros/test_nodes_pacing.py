@@ -10,9 +10,9 @@ from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 
 from rcac_ros import topics  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
-from rcac_ros.nodes.pacing import DeadlineLoop  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
-from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402
+from rcac_ros.nodes.runtime.pacing import DeadlineLoop  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
 H = 0.002
 H_NS = 2_000_000

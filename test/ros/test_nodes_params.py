@@ -8,8 +8,8 @@ from rclpy.exceptions import ParameterUninitializedException  # noqa: E402  (aft
 from rclpy.parameter import Parameter  # noqa: E402
 
 from rcac_ros import params  # noqa: E402
-from rcac_ros.nodes.controller_node import ControllerNode  # noqa: E402
-from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402
+from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
+from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
 RCLPY_OWN = {"use_sim_time", "start_type_description_service"}
 

@@ -15,7 +15,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayou
 from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.core.model import css_arm  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
-from rcac_ros.nodes.simulator_node import SimulatorNode  # noqa: E402
+from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
 DT_NS = 2_000_000
 

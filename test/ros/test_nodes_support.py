@@ -92,9 +92,14 @@ def two_link_urdf(shoulder=(-3, 3), elbow=(-3, 3), velocity=2):
 </robot>"""
 
 
+#: the node processes the tests start, by the names they use
+NODE_MODULES = {"controller_node": "rcac_ros.nodes.controller.node",
+                "simulator_node": "rcac_ros.nodes.simulator.node"}
+
+
 def node_cmd(module, *overrides, params_file=None):
-    """The command line of node ``rcac_ros.nodes.<module>`` with ``-p`` overrides."""
-    cmd = [sys.executable, "-m", f"rcac_ros.nodes.{module}", "--ros-args"]
+    """The command line of node ``module`` (a key of NODE_MODULES) with ``-p`` overrides."""
+    cmd = [sys.executable, "-m", NODE_MODULES[module], "--ros-args"]
     if params_file is not None:
         cmd += ["--params-file", str(params_file)]
     for o in overrides:

@@ -327,6 +327,6 @@ def test_sigint_during_recording_leaves_a_readable_bag(tmp_path, procs):
     assert len(data["/clock"]) > 10
     assert len(data["/effort_controller/commands"]) > 10
     # the inspector reads it too
-    from rcac_ros.tools.inspect_bag import inspect
+    from rcac_ros.tools.bags.inspect import inspect
     result = inspect(str(bag))
     assert result["summary"]["topics"]["/joint_states"]["count"] == len(data["/joint_states"])

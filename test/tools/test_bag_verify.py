@@ -11,7 +11,7 @@ import pytest
 import yaml
 from bagtest_support import bag_file, cli_module, read_mcap_ros2, read_rosbags
 
-from rcac_ros.tools.bag_io import BagWriter, recover, verify
+from rcac_ros.tools.bags.writer import BagWriter, recover, verify
 
 N_MSG = 2000
 
@@ -204,7 +204,7 @@ def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     import matplotlib.figure
     import numpy as np
 
-    from rcac_ros.tools.inspect_bag import write_plots
+    from rcac_ros.tools.bags.inspect import write_plots
     figures = {}
 
     def capture(fig, path, **kwargs):

@@ -60,7 +60,7 @@ def test_short_demo(tmp_path):
     # state left unanswered for 0.5 s on a badly loaded machine) must match it.
     sim_log = (out / "logs" / "simulator.log").read_text()
     if "lockstep misses 0," in sim_log and m["unanswered_states"] == 0:
-        from rcac_ros.tools.experiment import run_experiment
+        from rcac_ros.tools.demos.experiment import run_experiment
         _, _, report = run_experiment(duration=2.0, progress=False)
         ref = report["composite"]
         for key in ("rms_tracking_error", "max_tracking_error", "max_abs_torque",
@@ -74,7 +74,7 @@ def test_short_demo(tmp_path):
 def test_demo_reports_a_failing_node(tmp_path, monkeypatch):
     """A node that cannot start gives a non-zero exit and a message naming it."""
     pytest.importorskip("domain_coordinator")
-    from rcac_ros.tools import demo
+    from rcac_ros.tools.demos import demo
     orig = demo.demo_overrides
 
     def bad(duration, dt):

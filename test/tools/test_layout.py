@@ -118,11 +118,51 @@ def module_level_imports(name):
 
 def test_tools_that_must_stay_apart():
     """bench imports ros_bench only when asked (--ros); ros_bench does not need the demo."""
-    assert "rcac_ros.tools.ros_bench" not in module_level_imports("rcac_ros.tools.bench")
-    assert "rcac_ros.tools.demo" not in graph()["rcac_ros.tools.ros_bench"]
+    assert "rcac_ros.tools.bench.ros" not in module_level_imports("rcac_ros.tools.bench.core")
+    assert "rcac_ros.tools.demos.demo" not in graph()["rcac_ros.tools.bench.ros"]
     # the child processes and the ROS context live in launch, below demo and record
-    for mod in ("rcac_ros.tools.ros_bench", "rcac_ros.tools.record"):
-        assert "rcac_ros.tools.demo" not in graph()[mod]
+    for mod in ("rcac_ros.tools.bench.ros", "rcac_ros.tools.bags.record"):
+        assert "rcac_ros.tools.demos.demo" not in graph()[mod]
+
+
+def group(module):
+    """``nodes.controller``, ``tools.bags``, ... : the subpackage of a module (or its part)."""
+    return ".".join(module.split(".")[1:3])
+
+
+#: the groups of rcac_ros/nodes: a group never imports the groups listed against it
+NODE_GROUPS_APART = {
+    "nodes.controller": {"nodes.simulator"},
+    "nodes.simulator": {"nodes.controller", "nodes.fjt", "nodes.safety"},
+    "nodes.fjt": {"nodes.controller", "nodes.simulator"},
+    "nodes.safety": {"nodes.controller", "nodes.simulator", "nodes.fjt"},
+    "nodes.runtime": {"nodes.controller", "nodes.simulator", "nodes.fjt"},
+    "nodes.msgs": {"nodes.controller", "nodes.simulator", "nodes.fjt", "nodes.safety",
+                   "nodes.runtime"},
+}
+
+#: the groups of rcac_ros/tools that must not reach into others
+TOOL_GROUPS_APART = {
+    "tools.bags": {"tools.demos", "tools.sweep", "tools.bench"},
+    "tools.sweep": {"tools.bags", "tools.bench"},
+    "tools.bench": {"tools.bags", "tools.sweep"},
+}
+
+
+def test_nodes_and_tools_are_grouped_by_job():
+    """nodes/ and tools/ hold subpackages by job; their top levels stay small."""
+    for name, most in (("nodes", 1), ("tools", 12)):
+        top = [f for f in os.listdir(os.path.join(PACKAGE, name)) if f.endswith(".py")]
+        assert len(top) <= most, f"rcac_ros/{name}/ holds {sorted(top)}: group them by job"
+    assert set(NODE_GROUPS_APART) == {group(m) for m in modules()
+                                      if m.startswith("rcac_ros.nodes.")}
+
+
+@pytest.mark.parametrize("rules", [NODE_GROUPS_APART, TOOL_GROUPS_APART])
+def test_groups_keep_apart(rules):
+    bad = [f"{mod} -> {target}" for mod, targets in graph().items()
+           for target in targets if group(target) in rules.get(group(mod), ())]
+    assert not bad, "imports across groups that stay apart:\n" + "\n".join(sorted(bad))
 
 
 #: the most lines a node module may have (issue 11: each node file < 300 lines)
@@ -131,14 +171,16 @@ NODE_FILE_LINES = 300
 
 def test_node_files_are_short():
     """Every module of rcac_ros/nodes stays under NODE_FILE_LINES lines: split it along a
-    concern (controller_input, controller_watchdog, ...) when it grows."""
+    concern (controller/state_input, safety/watchdog, ...) when it grows."""
     folder = os.path.join(PACKAGE, "nodes")
     sizes = {}
-    for name in sorted(os.listdir(folder)):
-        if name.endswith(".py"):
-            with open(os.path.join(folder, name), encoding="utf-8") as f:
-                sizes[name] = sum(1 for _ in f)
-    assert "controller_node.py" in sizes and len(sizes) > 10     # the folder was found
+    for where, _, files in os.walk(folder):
+        for name in sorted(files):
+            if name.endswith(".py"):
+                path = os.path.join(where, name)
+                with open(path, encoding="utf-8") as f:
+                    sizes[os.path.relpath(path, folder)] = sum(1 for _ in f)
+    assert os.path.join("controller", "node.py") in sizes and len(sizes) > 10  # found
     long = {name: n for name, n in sizes.items() if n >= NODE_FILE_LINES}
     assert not long, f"node modules of {NODE_FILE_LINES} lines or more: {long}"
 
@@ -172,14 +214,14 @@ def loaded_after_import(module):
     return set(out.stdout.split())
 
 
-@pytest.mark.parametrize("module", ["rcac_ros.tools.record", "rcac_ros.tools.inspect_bag",
+@pytest.mark.parametrize("module", ["rcac_ros.tools.bags.record", "rcac_ros.tools.bags.inspect",
                                     "rcac_ros.errors", "rcac_ros.topics", "rcac_ros.tools.cli"])
 def test_light_modules_do_not_load_numba(module):
     assert "numba" not in loaded_after_import(module)
 
 
-@pytest.mark.parametrize("module", ["rcac_ros.core", "rcac_ros.tools.experiment",
-                                    "rcac_ros.tools.bench", "rcac_ros.params"])
+@pytest.mark.parametrize("module", ["rcac_ros.core", "rcac_ros.tools.demos.experiment",
+                                    "rcac_ros.tools.bench.core", "rcac_ros.params"])
 def test_offline_modules_do_not_load_rclpy(module):
     assert "rclpy" not in loaded_after_import(module)
 

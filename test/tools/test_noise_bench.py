@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from rcac_ros.core import css_arm
-from rcac_ros.tools import cli, noise_bench
+from rcac_ros.tools import cli
+from rcac_ros.tools.bench import noise as noise_bench
 
 
 @pytest.mark.parametrize("n,steps", [(1, 1000), (7, 300_000)])

@@ -4,7 +4,7 @@ import json
 import subprocess
 import sys
 
-from rcac_ros.tools.opcount import count_step
+from rcac_ros.tools.bench.opcount import count_step
 
 
 def test_recursive_step_operation_count_is_exactly_linear():

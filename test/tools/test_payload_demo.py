@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from rcac_ros.tools import payload_demo as demo
+from rcac_ros.tools.demos import payload as demo
 
 pin = pytest.importorskip("pinocchio")
 pytestmark = pytest.mark.skipif(demo.find_panda_urdf() is None,

@@ -15,8 +15,8 @@ import yaml
 
 pytest.importorskip("distributed")
 
-from rcac_ros.tools import campaign as cp  # noqa: E402
-from rcac_ros.tools import sweep  # noqa: E402
+from rcac_ros.tools.sweep import campaign as cp  # noqa: E402
+from rcac_ros.tools.sweep import engine as sweep  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ENV = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))

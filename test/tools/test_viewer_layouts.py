@@ -15,7 +15,7 @@ LAYOUTS = os.path.join(ROOT, "config", "layouts")
 
 def _recorded():
     try:
-        from rcac_ros.tools.record import recorded_topics
+        from rcac_ros.tools.bags.record import recorded_topics
     except ImportError:
         from rcac_ros.bag import recorded_topics
     return dict(recorded_topics())

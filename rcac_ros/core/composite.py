@@ -1,0 +1,343 @@
+"""The recursive composite adaptive controller (eqs 18-24, doc/design.md §3-4), with m channels.
+
+Per control period ``h``, with ``s_i = V_i - V_ri``:
+
+    qd_r = qd_d - Lambda (q - q_d),   qdd_r = qdd_d - Lambda (qd - qd_d)           (eq 18)
+    V_ri = T V_r,i-1 + z6 qd_ri
+    Vdot_ri = T Vdot_r,i-1 + Tdot V_r,i-1 + z6 qdd_ri         (Tdot with the actual qd_i)
+    F_ri = (i+1 T_i)^T F_r,i+1 + Y_ri theta_hat_i + K_Di (V_ri - V_i)              (eq 19b)
+    tau_i = z6^T F_ri                                                               (eq 20)
+    W_cj, y_c, E_c = sum_j W_cj theta_hat_j - y_c      for each channel c (eqs 21-23)
+    theta_hat_dot_i = -P_i (Y_ri^T s_i + gamma sum_c W_ci^T E_c)                     (eq 24)
+                      - P_i sigma_i (theta_hat_i - theta_0i)          (leakage, optional)
+
+The paper predicts one channel, the filtered torque of joint 1 (``channels=[1]``, the
+default). More channels (:mod:`rcac_ros.core.channels`) predict more filtered torques;
+``channels="all"`` is the Slotine-Li composite law, computed recursively.
+
+Discretisation (the paper leaves it open): filters exact (zero-order hold on the applied
+Where each part lives (doc/design.md §3-4):
+
+- :mod:`rcac_ros.core.channels`: the prediction channels, eqs 21-23 (``W_cj``, ``y_c``,
+  ``E_c``), filters exact (zero-order hold on the applied torque, first-order hold on
+  ``phi``, ``psi``);
+- :mod:`rcac_ros.core.adaptation`: eq 24, the adaptation step and its discretisation
+  (implicit or explicit), least squares, dead zones, projection, leakage;
+- :mod:`rcac_ros.core.composite_kernels`: the compiled step (the general kernel and the
+  paper's fused one), on the packed arrays of :mod:`rcac_ros.core._packing`;
+- here: the controller, which validates and packs the gains and options, chooses a kernel
+  and reads the state back. With the defaults the law is the paper's, to the last bit.
+"""
+
+import numpy as np
+
+from ._blocks import INPUT_NAMES, input_error
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS, CH_ACTIVE, CH_E,
+                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR,
+                       I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_PROJECT, I_TRACKING, I_Y,
+                       LEAK_M0, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block,
+                       new_data)
+from ._validate import as_array, joint_values, scalar
+from .channels import channel_codes, parse_channels
+from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
+from rcac_ros.errors import GainError
+from .least_squares import initial_factor
+
+UPDATES = ("implicit", "explicit")
+ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
+               "least_squares_prediction": ADAPT_LS_PREDICTION}
+
+
+class RecursiveCompositeController:
+    """The recursive composite adaptive controller of eqs 18-24, O(m n) per step.
+
+    Parameters
+    ----------
+    model : RobotModel
+        Kinematics (``p``, ``R_fix``) and gravity; its inertial parameters are *not*
+        used: the controller knows only ``theta_hat``.
+    K_D : float, (6,), (6, 6) or (n, 6, 6)
+        Link feedback gains ``K_Di`` (eq 19), symmetric positive definite.
+    Lambda : float, (n,) or diagonal (n, n)
+        ``Lambda`` of eq 18, positive (per joint).
+    P : float, (13,), (13, 13) or (n, 13, 13)
+        Adaptation gains ``P_i`` (eq 24), symmetric positive definite; with least squares,
+        their initial value.
+    gamma : float
+        Weight of the prediction errors (eq 24); ``0`` gives the direct adaptive law.
+    lam : float
+        Bandwidth ``lambda`` of the filter ``lambda / (p + lambda)``, rad/s (the paper gives none).
+    h : float
+        Control period, s.
+    theta_hat0 : array_like (n, 13), optional
+        Initial estimates (default zero, as in the paper).
+    channels : int, str or sequence, optional
+        The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
+        ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
+    update : {"implicit", "explicit"}
+        Discretisation of the prediction-error term (module docstring).
+    adaptation : {"gradient", "least_squares", "least_squares_prediction"}
+        ``P_i`` fixed (default), least squares with bounded-gain forgetting on both terms,
+        or least squares on the prediction term only (the tracking term keeps ``P``).
+    forgetting : float
+        ``lambda_0`` of the bounded-gain forgetting, 1/s (least squares).
+    P_max : float, optional
+        ``k_0``: bound on every ``trace(P_i)`` (default: each link's ``trace(P_i(0))``).
+    dead_zone_s, dead_zone_E : float
+        No adaptation of the tracking term while ``max_j |qd_j - qd_rj| <= dead_zone_s``, and
+        none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
+    theta_bounds : None, "mass" or (theta_min, theta_max)
+        Projection after each step: none (default), mass >= 0, or a box (each bound a
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
+
+    Raises
+    ------
+    GainError
+        On a gain or option of wrong shape or value, naming the field.
+    InputError
+        On a ``theta_hat0`` of wrong shape or not finite.
+    """
+
+    def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
+                 theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
+                 forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
+                 theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None):
+        self.model = model
+        n = model.n
+        gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
+        self.K_D, self.P, self.Lambda = gains.K_D, gains.P, gains.Lambda
+        self.gamma, self.lam, self.h = gains.gamma, gains.lam, gains.h
+        self.channels = parse_channels(channels, n)
+        self._data = new_data(n)
+        gains.pack(model, self._data)
+        self._const = self._data[:n, :CONST_COLS]
+        self._state = self._data[:n, CONST_COLS:]       # views into the one kernel argument
+        self._scal = self._data[n]
+        self._configure(update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
+                        theta_bounds)
+        m = len(self.channels)
+        self._buf = np.zeros((m, n + 1, FILT_COLS))    # the kernel's second argument:
+        self._filt = self._buf[:, :n]                  # filt[c, :n], and chan as row n
+        self._chan = self._buf[:, n, :CHAN_COLS]
+        self._chan[:, CH_JOINT] = channel_codes(self.channels)
+        self.adapting = True
+        self.reset(theta_hat0)
+        self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
+        self._choose_kernel()               # after every scalar the choice reads
+
+    def _leakage(self, leakage, leakage_bound, theta_0):
+        self.leakage = scalar(leakage, "leakage", GainError, minimum=0.0)
+        self.leakage_bound = joint_values(leakage_bound, self.n, "leakage_bound", GainError)
+        if np.any(self.leakage_bound < 0.0):
+            raise GainError("leakage_bound: must be >= 0")
+        self.theta_0 = np.zeros((self.n, 13)) if theta_0 is None else \
+            as_array(theta_0, (self.n, 13), "theta_0", GainError)
+        if self.adaptation == "least_squares":
+            top = float(self._const[:, TRACE_MAX].max())
+        else:
+            top = float(np.linalg.eigvalsh(self.P).max())
+        if self.h * self.leakage * top >= 1.0:
+            raise GainError(f"leakage: h * leakage * lambda_max(P) = "
+                            f"{self.h * self.leakage * top:.3g}, must be < 1 (explicit Euler)")
+        self._const[:, block("theta_0")] = self.theta_0
+        self._scal[I_LEAK] = self.leakage
+        self._const[:, LEAK_M0] = self.leakage_bound
+
+    def _choose_kernel(self):
+        """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
+        through :func:`rcac_step_kernel`), else the general kernel."""
+        self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
+            rcac_step_kernel
+
+    def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
+                   theta_bounds):
+        if update not in UPDATES:
+            raise GainError(f"update: expected 'implicit' or 'explicit', got {update!r}")
+        if adaptation not in ADAPTATIONS:
+            raise GainError(f"adaptation: expected one of {', '.join(ADAPTATIONS)}, "
+                            f"got {adaptation!r}")
+        self.update, self.adaptation = update, adaptation
+        scal = self._scal
+        scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
+        scal[I_ADAPT] = ADAPTATIONS[adaptation]
+        scal[I_FORGET] = scalar(forgetting, "forgetting", GainError, minimum=0.0)
+        self._const[:, TRACE_MAX] = np.trace(self.P, axis1=1, axis2=2) if P_max is None else \
+            scalar(P_max, "P_max", GainError, minimum=0.0, strict=True)
+        scal[I_DZ_S] = scalar(dead_zone_s, "dead_zone_s", GainError, minimum=0.0)
+        scal[I_DZ_E] = scalar(dead_zone_E, "dead_zone_E", GainError, minimum=0.0)
+        self.theta_min, self.theta_max = self._bounds(theta_bounds)
+        if self.theta_min is not None:
+            self._const[:, block("theta_lo")] = self.theta_min
+            self._const[:, block("theta_hi")] = self.theta_max
+            scal[I_PROJECT] = 1.0
+
+    def _bounds(self, theta_bounds):
+        n = self.n
+        if theta_bounds is None:
+            return None, None
+        if isinstance(theta_bounds, str):
+            if theta_bounds != "mass":
+                raise GainError(f"theta_bounds: expected None, 'mass' or (theta_min, "
+                                f"theta_max), got {theta_bounds!r}")
+            lo, hi = np.full((n, 13), -np.inf), np.full((n, 13), np.inf)
+        else:
+            try:
+                lo, hi = theta_bounds
+            except (TypeError, ValueError):
+                raise GainError("theta_bounds: expected None, 'mass' or (theta_min, "
+                                "theta_max)") from None
+            lo = self._bound(lo, "theta_min")
+            hi = self._bound(hi, "theta_max")
+            if np.any(lo > hi):
+                raise GainError("theta_bounds: theta_min > theta_max somewhere")
+        lo[:, 0] = np.maximum(lo[:, 0], 0.0)          # mass >= 0
+        if np.any(hi[:, 0] < 0.0):
+            raise GainError("theta_bounds: theta_max of a mass is < 0")
+        return lo, hi
+
+    def _bound(self, value, name):
+        try:
+            arr = np.broadcast_to(np.asarray(value, dtype=float), (self.n, 13)).copy()
+        except (TypeError, ValueError):
+            raise GainError(f"{name}: expected a scalar, (13,) or ({self.n}, 13) values") \
+                from None
+        if np.any(np.isnan(arr)):
+            raise GainError(f"{name}: contains NaN")
+        return arr
+
+    @property
+    def n(self):
+        """Number of joints."""
+        return self.model.n
+
+    @property
+    def m(self):
+        """Number of prediction channels."""
+        return len(self.channels)
+
+    def reset(self, theta_hat0=None):
+        """Restart: estimates to ``theta_hat0`` (default 0), filters, gains and step count."""
+        th = np.zeros((self.n, 13)) if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0")
+        self._state[:] = 0.0
+        self._state[:, THETA_HAT:THETA_HAT + 13] = th
+        self._state[:, P_FACTOR:P_FACTOR + 169] = initial_factor(self.P)
+        self._filt[:] = 0.0
+        self._chan[:, CH_Y:] = 0.0
+        self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
+
+    def step(self, q, qd, q_d, qd_d, qdd_d):
+        """One control period: returns the joint torques ``tau`` (eq 20) and adapts (eq 24).
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (n,)
+            Measured joint positions and velocities.
+        q_d, qd_d, qdd_d : array_like, shape (n,)
+            Desired position, velocity and acceleration.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+
+        Raises
+        ------
+        InputError
+            If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
+        """
+        try:
+            tau = self._kernel(self._data, self._buf, q, qd, q_d, qd_d, qdd_d)
+        except TypeError:  # not float64 1-D contiguous arrays: convert once, then retry
+            values = (q, qd, q_d, qd_d, qdd_d)
+            args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
+            tau = self._kernel(self._data, self._buf, *args)
+        if tau.shape[0] == 0:
+            raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        return tau
+
+    def set_adaptation(self, enabled):
+        """Freeze (``False``) or resume (``True``) the adaptation of eq 24, keeping ``theta_hat``.
+
+        Frozen, ``theta_hat`` (and a least-squares gain) stay where they are, the torque of
+        eqs 19-20 uses them, and the filters and ``E`` keep running (``E`` then measures the
+        frozen estimates).
+        """
+        self._scal[I_FROZEN] = 0.0 if enabled else 1.0
+        self.adapting = bool(enabled)
+        self._choose_kernel()
+
+    def set_applied_torque(self, tau):
+        """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.
+
+        By default ``y`` filters the torque :meth:`step` returned. When the arm receives
+        another one (clipped to an effort limit, or a safe effort), pass it here, or the
+        prediction errors ``E`` compare the model with a torque the arm never felt.
+
+        Raises
+        ------
+        InputError
+            If ``tau`` has the wrong length or holds NaN/Inf.
+        """
+        self._state[:, TAU] = as_array(tau, (self.n,), "tau")
+
+    def restart_filters(self):
+        """Restart the filters of eqs 21-24 at the next step, keeping ``theta_hat``.
+
+        For a gap in the measurements (a watchdog trip): the filters start again as at
+        t = 0 (``phi^f = phi``, ``psi^f = 0``, ``y = 0``), so ``E`` is exact from there on.
+        """
+        self._scal[I_K] = 0.0
+
+    @property
+    def theta_hat(self):
+        """Current estimates ``theta_hat``, shape (n, 13) (a copy)."""
+        return self._state[:, THETA_HAT:THETA_HAT + 13].copy()
+
+    @property
+    def E(self):
+        """Prediction errors ``E_c = sum_j W_cj theta_hat_j - y_c`` of the last step, (m,)."""
+        return self._chan[:, CH_E].copy()
+
+    @property
+    def y(self):
+        """Filtered applied outputs ``y_c`` (e.g. ``tau_1^f``) at the last step, (m,)."""
+        return self._chan[:, CH_Y].copy()
+
+    @property
+    def link_velocity_error(self):
+        """``s_i = V_i - V_ri`` of the last step, shape (n, 6) (a copy)."""
+        return self._state[:, S_LINK:S_LINK + 6].copy()
+
+    @property
+    def W(self):
+        """The filtered regressor rows ``W_cj`` of the last step, (m, n, 13) (a copy)."""
+        return self._filt[:, :, W_ROW:W_ROW + 13].copy()
+
+    @property
+    def gain(self):
+        """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares."""
+        if self.adaptation == "gradient":
+            return self.P.copy()
+        S = self._state[:, P_FACTOR:P_FACTOR + 169].reshape(self.n, 13, 13)
+        return S @ S.transpose(0, 2, 1)
+
+    @property
+    def adapted(self):
+        """Whether the tracking term and each channel adapted at the last step (dead zones)."""
+        return bool(self._scal[I_TRACKING]), self._chan[:, CH_ACTIVE] != 0.0
+
+    def lyapunov(self, theta):
+        """Eqs 25-26: ``sum_i (s_i^T M_i s_i + theta_tilde_i^T P_i^-1 theta_tilde_i) / 2``.
+
+        Uses the link velocity errors of the last step and the true parameters ``theta`` (n, 13).
+        """
+        from .regressor import link_matrices
+        theta = as_array(theta, (self.n, 13), "theta")
+        s = self.link_velocity_error
+        tt = self.theta_hat - theta
+        P = self.gain
+        total = 0.0
+        for i in range(self.n):
+            M = link_matrices(theta[i], np.zeros(3))[0]
+            total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(P[i], tt[i])
+        return float(total)

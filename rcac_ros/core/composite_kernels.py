@@ -1,0 +1,274 @@
+"""The step kernels of the recursive composite law: one control period of eqs 18-24.
+
+Two compiled bodies of one law, tested against each other bit for bit
+(test/core/test_channels.py):
+
+- :func:`rcac_step_kernel`, the general one: any channels (:mod:`rcac_ros.core.channels`),
+  any option of the adaptation step (:mod:`rcac_ros.core.adaptation`);
+- :func:`paper_step`, the paper's law (:func:`is_paper_law`) fused in one loop body: one
+  channel (joint 1), the fixed gain, the implicit update. It is the speed (doc/tools.md,
+  ``rcac bench``).
+
+Both read and write the packed arrays of :mod:`rcac_ros.core._packing`; the controller
+(:class:`~rcac_ros.core.composite.RecursiveCompositeController`) chooses one.
+"""
+
+import numpy as np
+from numba import njit
+
+from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
+from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
+                       GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
+                       I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_PROJECT,
+                       I_P_DIAG, I_TRACKING, I_Y, PHI_F, PHI_PREV, PSI_F, PSI_PREV, Q_PREV,
+                       S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+from .adaptation import (adapt_link, implicit_solve, project, tracking_active,
+                         update_least_squares)
+from .channels import (axis_terms, close_channels, filtered_output, predict_link,
+                       start_channels)
+from .regressor import reference_wrench, regressor_row, regressor_terms
+from .spatial import P0, propagate, transform_force_T
+
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
+
+
+@njit(cache=True, inline="always")
+def is_paper_law(chan, scal):
+    """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
+    update, no dead zone, no projection, no leakage, adapting. :func:`paper_step` then runs
+    it."""
+    return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
+            and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0)
+
+
+@njit(RCAC_SIGNATURE, cache=True)
+def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
+    """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+
+    The controller calls it directly for that law: one compiled call, as the kernel's.
+
+    The same equations, in the same floating-point order, as the general kernel with
+    ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
+    are computed in place, with no per-link helper taking arrays (each such argument
+    costs an atomic reference count in the loop). One allocation besides ``tau``.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    chan = filt[:, n]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    work = np.empty(n * 41 + 6, q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
+    tau = np.empty(n, q.dtype)
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    kd_diag = scal[I_KD_DIAG] != 0.0
+    p_diag = scal[I_P_DIAG] != 0.0
+    y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
+    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    E = 0.0
+    for i in range(n):
+        row = data[i]                                  # link i: constants, then state
+        qdi = qd[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
+        if i == 0:
+            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            A, Ad = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qdi, A, Ad, 0.0, 0.0)
+        svx, svy, svz, swx, swy, swz = vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz
+        state[i, S_LINK], state[i, S_LINK + 1], state[i, S_LINK + 2] = svx, svy, svz
+        state[i, S_LINK + 3], state[i, S_LINK + 4], state[i, S_LINK + 5] = swx, swy, swz
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(row, CONST_COLS + THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        gr = regressor_terms(svx, svy, svz, swx, swy, swz, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(13):
+            G[i, k] = gr[k]
+        phi, psi = axis_terms(A, Ad, V, g)                           # eq 22
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[0, i, PHI_F + k] = ph
+                filt[0, i, PSI_F + k] = 0.0
+            else:
+                php = filt[0, i, PHI_PREV + k]
+                psp = filt[0, i, PSI_PREV + k]
+                filt[0, i, PHI_F + k] = fe * filt[0, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
+                filt[0, i, PSI_F + k] = fe * filt[0, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHI_PREV + k] = ph
+            filt[0, i, PSI_PREV + k] = ps
+            w = lam * (ph - filt[0, i, PHI_F + k]) + filt[0, i, PSI_F + k]     # eq 23
+            filt[0, i, W_ROW + k] = w
+            E += w * state[i, THETA_HAT + k]
+    E -= y
+    chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
+    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        if i < n - 1:
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
+                F[0], F[1], F[2], F[3], F[4], F[5])
+        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
+        for r in range(6):
+            acc = Fs[i, r]
+            if kd_diag:
+                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
+            else:
+                for k in range(6):
+                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
+            F[r] += acc
+        tau[i] = F[5]                                                        # eq 20
+        # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
+        for k in range(13):
+            G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
+        if p_diag:
+            for a in range(13):
+                R[i, a] = state[i, THETA_HAT + a] - h * const[i, GAIN_P + 14 * a] * G[i, a]
+                filt[0, i, U_ROW + a] = const[i, GAIN_P + 14 * a] * filt[0, i, W_ROW + a]
+        else:
+            for a in range(13):
+                acc_r = 0.0
+                acc_u = 0.0
+                for c in range(13):
+                    acc_r += const[i, GAIN_P + 13 * a + c] * G[i, c]
+                    acc_u += const[i, GAIN_P + 13 * a + c] * filt[0, i, W_ROW + c]
+                R[i, a] = state[i, THETA_HAT + a] - h * acc_r
+                filt[0, i, U_ROW + a] = acc_u
+    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
+    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
+    w_dot_r = 0.0
+    w_dot_u = 0.0
+    for i in range(n):
+        for k in range(13):
+            w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
+            w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
+    kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
+    for i in range(n):
+        for k in range(13):
+            state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
+        state[i, TAU] = tau[i]
+        state[i, Q_PREV] = q[i]
+    scal[I_K] += 1.0
+    return tau
+
+
+@njit(RCAC_SIGNATURE, cache=True)
+def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
+    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
+
+    ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    chan = filt[:, n]
+    if is_paper_law(chan, scal):
+        return paper_step(data, filt, q, qd, q_d, qd_d, qdd_d)
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    m = chan.shape[0]
+    work = np.empty(n * 41 + 84 + m * (m + 29), q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
+        work[41 * n + 65:41 * n + 78]
+    F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
+    o = 41 * n + 84                               # the implicit solve's scratch:
+    A = work[o:o + m * m]                         # the m x m system (flat),
+    z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
+    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels by first link,
+    start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
+    Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at link i
+    Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # as columns
+    coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
+    tau = np.empty(n, q.dtype)
+    first = scal[I_K] == 0.0
+    start_channels(chan, state, scal, q, first)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    for i in range(n):
+        row = const[i]
+        st = state[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qd[i], q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        st[S_LINK], st[S_LINK + 1], st[S_LINK + 2] = vx - rvx, vy - rvy, vz - rvz
+        st[S_LINK + 3], st[S_LINK + 4], st[S_LINK + 5] = wx - rwx, wy - rwy, wz - rwz
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(st, THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy,
+                             rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
+                      dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                      wx, wy, wz, gx, gy, gz)
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
+    close_channels(chan, scal)
+    frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
+    tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
+    scal[I_TRACKING] = 1.0 if tracking else 0.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        row = const[i]
+        st = state[i]
+        if i < n - 1:
+            r = const[i + 1]
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
+        feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
+        tau[i] = F[5]                                                              # eq 20
+        if not frozen:
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
+    if frozen:
+        pass
+    elif scal[I_IMPLICIT] != 0.0:
+        implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
+    else:
+        for i in range(n):
+            for k in range(13):
+                state[i, THETA_HAT + k] = R[i, k]
+    if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
+        update_least_squares(chan, filt, const, state, scal, grad, Pg)
+    if not frozen and scal[I_PROJECT] != 0.0:
+        project(const, state)
+    for i in range(n):
+        state[i, TAU] = tau[i]
+        state[i, Q_PREV] = q[i]
+    scal[I_K] += 1.0
+    return tau

@@ -1,0 +1,84 @@
+"""The operator's estimate services of the controller (std_srvs).
+
+* ``~/reset_estimates`` (Trigger): ``theta_hat`` back to the ``initial_estimates``, the
+  filters restarted;
+* ``~/set_adaptation`` (SetBool): ``false`` freezes the adaptation of eq 24 (the estimates
+  are held and still used), ``true`` resumes it;
+* ``~/save_estimates`` (Trigger): writes the estimates to the parameter ``estimates_file``
+  (YAML) and the physically consistent links as URDF ``<inertial>`` blocks next to it
+  (:mod:`rcac_ros.nodes.controller.estimates`); the response names both files and every
+  link left out, with the reason.
+
+They exist while the node is configured (inactive or active).
+"""
+
+from std_srvs.srv import SetBool, Trigger
+
+from rcac_ros.nodes.controller import estimates
+
+
+class EstimateServices:
+    """The three services on ``node`` (which has ``ctrl``, ``model``, ``theta0``).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The controller: ``node.ctrl`` (the core controller), ``node.model``,
+        ``node.theta0`` (the initial estimates, model order), ``node.urdf_links`` (or
+        ``None``), and the parameter ``estimates_file``.
+    """
+
+    def __init__(self, node):
+        self.node = node
+        self.services = [
+            node.create_service(Trigger, "~/reset_estimates", self._reset),
+            node.create_service(SetBool, "~/set_adaptation", self._set_adaptation),
+            node.create_service(Trigger, "~/save_estimates", self._save)]
+
+    def destroy(self):
+        """Remove the services (cleanup)."""
+        for srv in self.services:
+            self.node.destroy_service(srv)
+        self.services = []
+
+    def _reset(self, request, response):
+        node = self.node
+        node.ctrl.reset(node.theta0)
+        response.success = True
+        response.message = f"estimates reset to the initial estimates " \
+                           f"({node.get_parameter('initial_estimates').value})"
+        node.get_logger().info(response.message)
+        return response
+
+    def _set_adaptation(self, request, response):
+        node = self.node
+        node.ctrl.set_adaptation(bool(request.data))
+        response.success = True
+        response.message = "adaptation resumed" if request.data else \
+            "adaptation frozen: the estimates are held (and still used)"
+        node.get_logger().info(response.message)
+        return response
+
+    def _save(self, request, response):
+        node = self.node
+        path = node.get_parameter("estimates_file").value
+        if not path:
+            response.success = False
+            response.message = "estimates_file: not set (set the parameter to a .yaml path)"
+            return response
+        try:
+            yaml_path, urdf, problems = estimates.save(
+                path, node.ctrl.theta_hat, node.model.joint_names, node.model.name,
+                node.urdf_links)
+        except OSError as err:
+            response.success = False
+            response.message = f"estimates_file: cannot write {path!r} ({err.strerror})"
+            return response
+        n = node.model.n
+        response.success = True
+        response.message = (f"saved the estimates of {n} links to {yaml_path}; URDF inertials "
+                            f"of {n - len(problems)} links to {urdf}")
+        if problems:
+            response.message += "; not physical, left out of the URDF: " + "; ".join(problems)
+        node.get_logger().info(response.message)
+        return response

@@ -1,0 +1,268 @@
+"""The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
+
+A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`, ``~/get_state``,
+``~/change_state``): configure reads the parameters, the model, the gains (and their
+overrides ``gains.<joint>.<gain>``) and warms the kernels; activate starts the efforts (the
+motion starts again from the next state); deactivate sends one zero effort, then silence;
+``autostart`` (default) does both at start-up. Services ``~/reset_estimates``,
+``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.controller.estimate_services`);
+``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller.controller_state`); doc/nodes.md.
+
+Thin: message -> arrays -> :class:`~rcac_ros.core.composite.RecursiveCompositeController` ->
+message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
+from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
+latest valid state (real arms), on absolute deadlines of the steady clock
+(:class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
+Its parts: the state input (:mod:`~rcac_ros.nodes.controller.state_input`: stamps through a
+:class:`~rcac_ros.nodes.safety.state_guards.StampGate`, a restart followed, a stamp in the future
+refused; in timer mode in its own thread, so the loop only ticks); the watchdog
+(:mod:`~rcac_ros.nodes.safety.watchdog`: ``safe_effort`` while no valid state has
+arrived for ``state_timeout`` s of the steady clock, or no tick of ``/clock`` comes; after
+``watchdog.replan_after`` s of it the motion restarts from the measured state,
+doc/failsafe.md); the trajectory sources (:mod:`~rcac_ros.nodes.controller.trajectory_input`:
+size caps checked before deserialising, parsed in their own thread, checked against the
+model's limits); the outputs (:mod:`~rcac_ros.nodes.controller.outputs`). The fail-safe
+guards (issue 9) are built by :class:`~rcac_ros.nodes.safety.failsafe.ControllerGuards`; the
+desired state is rate-limited. Parameters: ``config/controller.yaml``, doc/parameters.md.
+"""
+
+import sys
+import time
+
+import numpy as np
+
+from rcac_ros import params, topics
+from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.controller.diagnostics import diagnostics
+from rcac_ros.nodes.controller.state_input import StateInput
+from rcac_ros.nodes.controller.outputs import ControllerOutputs
+from rcac_ros.nodes.controller.params import read_parameters
+from rcac_ros.nodes.controller.trajectory_input import ActionSink, TrajectoryInput
+from rcac_ros.nodes.safety.watchdog import Watchdog
+from rcac_ros.nodes.controller.estimate_services import EstimateServices
+from rcac_ros.nodes.safety.failsafe import ControllerGuards
+from rcac_ros.nodes.fjt.server import create_server, FollowJointTrajectoryServer
+from rcac_ros.nodes.controller.lookahead import StatePredictor
+from rcac_ros.nodes.runtime.managed import ManagedNode
+from rcac_ros.nodes.runtime.pacing import DeadlineLoop
+from rcac_ros.nodes.runtime.stats import Percentiles
+from rcac_ros.nodes.msgs.trajectory import DesiredMotion
+
+
+class ControllerNode(ManagedNode):
+    """The recursive composite adaptive controller as a managed ROS 2 node.
+
+    Constructed as :class:`~rcac_ros.nodes.runtime.managed.ManagedNode` (keyword arguments of
+    :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
+    parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
+
+    Attributes
+    ----------
+    ctrl : RecursiveCompositeController
+        The core controller (built at configure, :mod:`~rcac_ros.nodes.controller.params`).
+    states : StateInput
+        The latest valid state (:mod:`~rcac_ros.nodes.controller.state_input`).
+    watchdog : Watchdog
+        The safe effort and the spells of it (:mod:`~rcac_ros.nodes.safety.watchdog`).
+    failsafe : ControllerGuards
+        The guards built from the parameters (:mod:`~rcac_ros.nodes.safety.failsafe`).
+    filters_stale : bool
+        The filters of eqs 21-24 missed states: the next control step restarts them.
+    """
+
+    PARAMETERS = params.CONTROLLER
+
+    def __init__(self, **kwargs):
+        self.ctrl = None
+        self.loop = None                    # the steady-clock pacing of timer mode
+        super().__init__(topics.CONTROLLER_NODE, **kwargs)
+
+    # ------------------------------------------------------------------ lifecycle
+    def _configure(self, values):
+        """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
+        read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
+                                         self.get_logger().warning)
+        self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
+            else StatePredictor(self.model, values["timer.lookahead"])
+        offset = values["timer.phase_offset"]
+        if offset is not None and offset >= self.h:
+            raise ConfigError(f"timer.phase_offset: must be < one period ({self.h:g} s), got "
+                              f"{offset:g}")
+        self._phase_offset_ns = None if offset is None else round(offset * 1e9)
+        self.phase_error_ns = 0
+        self._stats = Percentiles()
+        self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
+            self, self.joints, self._out, tagged=self.mode == "lockstep",
+            channels=self.channel_names))
+        self._steps = self._deadline_misses = self._late_ticks = self._nonfinite = 0
+        self.watchdog = Watchdog(self)
+        self.states = self.keep(StateInput.close, StateInput(self))
+        self._reset_motion()
+        self._fjt = None                    # the FollowJointTrajectory server, if any
+        if self.trajectory_source == "topic":   # checked aside, applied in this thread
+            self.keep(TrajectoryInput.close, TrajectoryInput(self))
+            self._fjt = create_server(self, ActionSink(self), defaults=self.tolerances)
+            if self._fjt is not None:
+                self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
+        timer = self.destroy_timer
+        if self.mode == "timer" and self.get_parameter("use_sim_time").value:
+            self.keep(timer, self.create_timer(self.h, self._on_tick))  # ticks on /clock
+        elif self.mode == "timer":
+            self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
+            self.keep(lambda _: setattr(self, "loop", None), self.loop)
+        if self.loop is None:               # lockstep, or timer mode on /clock
+            self.keep(timer, self.watchdog.timer())
+        self.keep(EstimateServices.destroy, EstimateServices(self))
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
+        self.get_logger().info(
+            f"configured: {self.mode} mode, model {self.model.name} (n={self.model.n}), "
+            f"trajectory {self.trajectory_source}, h={self.h * 1e3:g} ms, "
+            f"joints {list(self.joints)}")
+
+    def _reset_motion(self):
+        """A fresh start: the motion, the state input and the watchdog restart."""
+        self.restart_motion(self.paper_q0)
+        self.states.reset()
+        self.watchdog.reset()
+        self._last_tick = None
+        self.filters_stale = False          # the loop restarts the filters at its next step
+        self._outputs.last_answer = None
+
+    def restart_motion(self, q0=None):
+        """The desired motion starts again, from ``q0`` or the measured state."""
+        self._motion = DesiredMotion(self.paper, q0)
+        self.failsafe.limiter.reset()       # the new motion starts at the measured state
+
+    def _activate(self):
+        """Efforts on; the motion starts again from the next valid state."""
+        self._reset_motion()
+        self.ctrl.restart_filters()
+        if self.loop is not None:
+            self.loop.start()
+        self.get_logger().info("active: publishing efforts")
+
+    def _deactivate(self):
+        """One zero effort, then silence (the lifecycle publishers are disabled next)."""
+        if self.loop is not None:
+            self.loop.stop()
+        if self._fjt is not None:
+            self._fjt.abort("the controller was deactivated")
+        self._outputs.zero_effort()
+        self.get_logger().info("inactive: one zero effort sent, then silence")
+
+    def on_interrupt(self):
+        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered."""
+        if self.running:
+            self.running = False
+            self._deactivate()
+
+    def follow(self, parsed):
+        """Follow a parsed trajectory (:func:`parse_trajectory`) from the desired state now.
+
+        The entry point of every trajectory source (the topic, an action server). Returns
+        ``False`` (nothing started) before the first joint state or when not active.
+        """
+        if not self.running:
+            return False
+        return self._motion.follow(parsed, self._time_now_ns(), self.states.q)
+
+    def hold_position(self):
+        """Stop any trajectory and hold the measured position (``False``: no state yet)."""
+        if not self.running or self.states.q is None:
+            return False
+        self._motion.hold(self.states.q)
+        return True
+
+    # ------------------------------------------------------------------ parameters
+    def _apply_parameters(self, changed):
+        """Post-set callback: the run-time parameters take effect."""
+        for p in changed:
+            if p.name == "state_timeout":
+                self.state_timeout = float(p.value)
+            elif p.name == "monitor_decimation":
+                self.publish_every = int(p.value)
+
+    # ------------------------------------------------------------------ time
+    def _now_ns(self):
+        return self.get_clock().now().nanoseconds
+
+    def _time_now_ns(self):
+        """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
+        if self.mode == "lockstep":
+            stamp = self.states.stamp
+            return stamp if stamp else self._steps * round(self.h * 1e9)
+        return self._now_ns()
+
+    # ------------------------------------------------------------------ control
+    def _control(self, t_ns, stamp=None):
+        q, qd = self.states.latest          # one snapshot (timer mode: set by another thread)
+        self.watchdog.resume()              # a spell of safe effort ends here
+        if self.filters_stale:
+            self.filters_stale = False
+            self.ctrl.restart_filters()
+        if self._lookahead is not None:     # timer mode: the state when the effort acts
+            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self.states.received)
+        q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
+        start = time.perf_counter()
+        theta_before = self.ctrl.theta_hat
+        try:
+            tau = self.ctrl.step(q, qd, q_d, qd_d, qdd_d)
+        except RcacError as err:
+            self._throttle.warn("step", str(err))
+            tau = None
+        elapsed = time.perf_counter() - start
+        self._stats.add(elapsed)
+        if elapsed > self.h:
+            self._deadline_misses += 1
+        self._steps += 1
+        if tau is None or not np.all(np.isfinite(tau)):
+            self._nonfinite += 1
+            self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
+                                "publishing the safe effort, estimates restored")
+            self.ctrl.reset(theta_before)       # not poisoned for good: the last finite ones
+            self._outputs.effort(self.safe_effort, stamp)
+            return
+        tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
+        if self._lookahead is not None:
+            self._lookahead.applied = tau
+        self._outputs.effort(tau[self._out], stamp)
+        if self._steps % self.publish_every == 0:
+            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
+                                   qd_d, qdd_d, tau, stamp)
+        if self._fjt is not None:
+            self._fjt.update(t_ns, self.states.q, self.states.qd, q_d, qd_d, qdd_d)
+
+    def _on_tick(self):
+        """Timer mode: one control step on the latest valid state."""
+        if not self.running:
+            return
+        now = self._now_ns()
+        if self.loop is None and self._last_tick is not None \
+                and now - self._last_tick > 1.5 * self.h * 1e9:
+            self._late_ticks += 1           # ROS-time timer (the loop counts its own)
+        self._last_tick = now
+        self.watchdog.ticked()
+        if self.watchdog.state_is_stale():
+            return self.watchdog.send_safe(no_state=True)
+        self._control(now)
+        if self._phase_offset_ns is not None and self.loop is not None:
+            self.phase_error_ns = self.loop.lock_phase(self.states.received,
+                                                       self._phase_offset_ns)
+
+    # ------------------------------------------------------------------ diagnostics
+    def diagnostics(self):
+        """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
+        return diagnostics(self)
+
+
+def main(args=None):
+    """Entry point of ``controller``."""
+    sys.exit(run(ControllerNode, "controller", args))
+
+
+if __name__ == "__main__":
+    main()

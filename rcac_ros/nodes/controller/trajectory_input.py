@@ -1,0 +1,106 @@
+"""The controller's trajectory sources (``trajectory: topic``): the topic and the action.
+
+Both feed the node's desired motion through :meth:`ControllerNode.follow` and
+:meth:`ControllerNode.hold_position`, and both change it only in the node's executor
+thread (the control thread), where the FollowJointTrajectory server also runs:
+
+* :class:`TrajectoryInput` (``~/joint_trajectory``): the message is deserialised, parsed
+  and checked (size cap, joints, times, the model's limits, an end in the past) in its own
+  thread (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`, issue 9); only the result crosses
+  over, through a guard condition whose callback runs in the executor. There it starts
+  (or, empty, holds) the motion and aborts a running goal, as a goal does in the action
+  server's callbacks.
+* :class:`ActionSink`: what the
+  :class:`~rcac_ros.nodes.fjt.server.FollowJointTrajectoryServer` drives.
+"""
+
+from collections import deque
+
+from trajectory_msgs.msg import JointTrajectory
+
+from rcac_ros import topics
+from rcac_ros.nodes.runtime.base import QOS
+from rcac_ros.nodes.safety.guards import Rejected
+from rcac_ros.nodes.runtime.inputs import SideInput
+from rcac_ros.nodes.msgs.trajectory import parse_trajectory, TrajectoryRejected
+
+_HOLD = None        # the parsed form of an empty trajectory: hold the position
+
+
+class TrajectoryInput:
+    """``~/joint_trajectory`` of a controller ``node``: checked aside, applied in its executor.
+
+    Parameters
+    ----------
+    node : ControllerNode
+        Configured: its ``model``, ``failsafe`` guards, ``_throttle`` and ``_fjt`` (the
+        action server or ``None``) are read.
+    """
+
+    def __init__(self, node):
+        self.node = node
+        self._pending = deque(maxlen=1)     # the latest checked trajectory (atomic ops)
+        self._wake = node.create_guard_condition(self._apply)
+        self._side = SideInput(
+            node, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_message,
+            node.failsafe.max_trajectory_bytes, "trajectory", self._warn)
+
+    def _warn(self, kind, text):
+        self.node._throttle.warn(f"trajectory {kind}", text)
+
+    def _on_message(self, msg):
+        """Side thread: parse and check, then hand over to the executor."""
+        parsed = _HOLD              # as JTC: an empty trajectory holds the position
+        if msg.points:
+            node = self.node
+            try:
+                parsed = parse_trajectory(msg, node.model.joint_names)
+                node.failsafe.check_goal(parsed, node._time_now_ns())
+            except (TrajectoryRejected, Rejected) as err:
+                return self._warn(err.kind, str(err))
+        self._pending.append(parsed)        # a newer one replaces one not yet applied
+        self._wake.trigger()
+
+    def _apply(self):
+        """Executor thread: follow (or hold) the handed-over trajectory."""
+        try:
+            parsed = self._pending.popleft()
+        except IndexError:
+            return
+        node = self.node
+        started = node.hold_position() if parsed is _HOLD else node.follow(parsed)
+        if not started:
+            return self._warn("early", "no joint state received yet")
+        if node._fjt is not None:
+            node._fjt.abort("replaced by a ~/joint_trajectory message")
+
+    def close(self):
+        """Stop the side thread and remove the guard condition (cleanup)."""
+        self._side.close()
+        self.node.destroy_guard_condition(self._wake)
+
+
+class ActionSink:
+    """What the FollowJointTrajectory server drives: the controller's desired motion."""
+
+    def __init__(self, node):
+        self.node = node
+        self.joint_names = node.model.joint_names
+
+    def refusal(self):
+        if not self.node.running:
+            return "the controller is not active"
+        return None if self.node.states.q is not None else "no joint state received yet"
+
+    def now_ns(self):
+        return self.node._time_now_ns()
+
+    def check(self, parsed):
+        """The model's limits, as for ``~/joint_trajectory`` (the server checks the end)."""
+        self.node.failsafe.check_goal(parsed, None)
+
+    def follow(self, parsed):
+        return self.node._motion.active if self.node.follow(parsed) else None
+
+    def hold(self):
+        self.node.hold_position()

@@ -1,0 +1,1 @@
+"""The FollowJointTrajectory action server: goals accepted, tolerances, outcome (doc/nodes.md)."""

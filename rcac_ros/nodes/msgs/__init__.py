@@ -1,0 +1,1 @@
+"""Messages to arrays: sensor_msgs/JointState and trajectory_msgs/JointTrajectory."""

@@ -1,0 +1,248 @@
+"""What the controller and simulator nodes share (they never import each other).
+
+Start-up (every parameter of the table declared and checked, the robot loaded, or nothing
+left behind), the QoS profiles, diagnostics, on-set parameter checks, and :func:`run`: the
+``main`` of a node (clean start-up refusal with one line and exit 2, clean shutdown on
+SIGINT/SIGTERM). Throttled warnings and compute-time statistics:
+:mod:`rcac_ros.nodes.runtime.stats`.
+"""
+
+import signal
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from rcac_ros import params, topics
+from rcac_ros.core.load import load_model
+from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.nodes.runtime import gcwatch, paramcheck
+from rcac_ros.nodes.runtime.description import wait_for_description
+from rcac_ros.nodes.runtime.diagnosed import RcacNodeMixin
+from rcac_ros.nodes.runtime.pacing import spin_node_once
+from rcac_ros.nodes.runtime.realtime import Realtime
+from rcac_ros.nodes.runtime.stats import Throttle
+
+#: reliable, keep-last 10: the control topics (what ros2_control uses)
+QOS = topics.qos()
+#: reliable, keep-last 1000: the topics a recorder or a test reads
+QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
+
+
+# ------------------------------------------------------------------ parameters
+def declare(node, p):
+    """Declare the parameter of row ``p`` (:mod:`rcac_ros.params`); return its checked value.
+
+    Returns ``None`` for a row without default that the user left unset.
+
+    Raises
+    ------
+    ConfigError
+        If the value given by the user has the wrong type or is invalid; the message
+        names the parameter.
+    """
+    desc = ParameterDescriptor(description=p.description, read_only=p.read_only,
+                               additional_constraints=p.constraints)
+    if p.lo is not None and p.type == "integer":
+        desc.integer_range = [IntegerRange(from_value=int(p.lo), to_value=int(p.hi), step=0)]
+    elif p.lo is not None and p.type == "double":
+        desc.floating_point_range = [FloatingPointRange(from_value=float(p.lo),
+                                                        to_value=float(p.hi), step=0.0)]
+    default = Parameter.Type[p.type.upper()] if p.default is None else p.default
+    try:
+        if not node.has_parameter(p.name):     # a managed node configures more than once
+            node.declare_parameter(p.name, default, desc)
+        value = node.get_parameter(p.name).value
+    except InvalidParameterTypeException as err:
+        raise ConfigError(f"{p.name}: wrong type, expected {p.type} ({_first_line(err)})") \
+            from None
+    except InvalidParameterValueException:
+        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]") from None
+    except ParameterUninitializedException:
+        return None
+    if p.type.endswith("_array"):
+        value = list(value)         # rclpy gives array.array for double arrays
+    return params.check(p, value)
+
+
+def _first_line(err):
+    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+
+
+def declare_parameters(node, rows, description=None):
+    """Declare every row of a node's table (:mod:`rcac_ros.params`) and load its robot.
+
+    ``description`` (URDF XML received on ``description_topic``) replaces
+    ``robot_description`` when given.
+
+    Returns
+    -------
+    values : dict
+        name -> checked value (``None``: unset).
+    model : RobotModel
+        ``robot_description`` (URDF XML or a file path) when it is set, else ``model``
+        (a preset, a YAML or a URDF file), with ``gravity`` if given.
+    joints : tuple of str
+        The joint order of the node's messages (``joints``, default the model's).
+
+    Raises
+    ------
+    ConfigError
+        Naming the parameter whose value is invalid or could not be turned into a model.
+    """
+    values = {p.name: declare(node, p) for p in rows}
+    urdf = description or values["robot_description"]
+    which = "description_topic" if description else \
+        "robot_description" if urdf else "model"
+    try:
+        if urdf:
+            model = model_from_urdf(urdf, base_link=values["base_link"] or None,
+                                    tip_link=values["tip_link"] or None)
+        else:
+            model = load_model(values["model"])
+    except RcacError as err:
+        raise ConfigError(f"{which}: {err}") from None
+    except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
+        raise ConfigError(f"{which}: cannot load ({_first_line(err)})") from None
+    if values["gravity"] is not None:
+        model = model.replace(gravity=list(values["gravity"]))
+    return values, model, _joints(values["joints"], model)
+
+
+def _joints(joints, model):
+    if joints is None:
+        return tuple(model.joint_names)
+    if len(set(joints)) != len(joints):
+        raise ConfigError(f"joints: duplicate names in {list(joints)}")
+    if set(joints) != set(model.joint_names):
+        raise ConfigError(f"joints: {list(joints)} does not match the model's joints "
+                          f"{list(model.joint_names)}")
+    return tuple(joints)
+
+
+# ------------------------------------------------------------------ node
+class RcacNode(RcacNodeMixin, Node):
+    """The start-up of a plain node: read and check every parameter, or leave nothing behind.
+
+    ``RcacNode(name, **kwargs)``: ``kwargs`` go to :class:`rclpy.node.Node` (``context``,
+    ``parameter_overrides``, ...); an invalid parameter raises :class:`ConfigError` naming
+    it. A subclass names its rows of the parameter table in ``PARAMETERS`` and implements
+    ``_read_parameters(values)``, ``diagnostics()`` (a DiagnosticStatus, published every
+    ``diagnostics_period`` s of the steady clock) and ``on_interrupt()``. It finds the robot
+    in ``model``, the joint order of its messages in ``joints``; ``finished`` and
+    ``exit_code`` tell :func:`run` when and how to stop. With a ``description_topic`` row
+    set, it waits for the robot description first. (The controller is managed:
+    :class:`rcac_ros.nodes.runtime.managed.ManagedNode`.)
+    """
+
+    #: the node's rows of :mod:`rcac_ros.params`
+    PARAMETERS = ()
+
+    def __init__(self, name, **kwargs):
+        super().__init__(name, **kwargs)
+        self.finished = False
+        self.exit_code = 0
+        try:
+            topic = [declare(self, p) for p in self.PARAMETERS if p.name == "description_topic"]
+            xml = wait_for_description(self, topic[0], SingleThreadedExecutor) \
+                if topic and topic[0] else None
+            values, self.model, self.joints = declare_parameters(self, self.PARAMETERS, xml)
+            # index arrays: model order -> message (joints) order, and back
+            self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
+            self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
+            self._read_parameters(values)
+            self._check_unknown_parameters(values["strict_parameters"])
+        except Exception:
+            self.destroy_node()     # leave no half-built node (and its rosout logger) behind
+            raise
+        self._throttle = Throttle(self.get_logger())
+        self._rows = {p.name: p for p in self.PARAMETERS}
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, QOS)
+        self.create_timer(values["diagnostics_period"], self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+# ------------------------------------------------------------------ main
+def _raise_interrupt(signum, frame):
+    # one interrupt starts the clean shutdown; later ones must not cut it short
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def _realtime(node):
+    """Apply the node's opt-in real-time options to this thread (the control loop's)."""
+    options = getattr(getattr(node, "failsafe", None), "realtime", None)
+    if options is None or not options.any:
+        return None
+    rt = Realtime(options, warn=node.get_logger().warning)
+    if rt.applied:
+        node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
+    return rt
+
+
+def run(node_factory, prog, args=None):
+    """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
+
+    A node with a ``loop`` attribute (a :class:`DeadlineLoop`) is paced by it; otherwise
+    the executor is spun. The node's ``on_interrupt()`` runs after an interrupt (the
+    controller publishes a zero effort there). A :class:`RcacError` at start-up (a bad
+    parameter) prints one line naming the parameter and returns 2.
+
+    Returns
+    -------
+    int
+        The process exit code.
+    """
+    # rclpy's own SIGINT handler would shut the context down before we could publish the
+    # final zero effort: handle both signals in Python instead.
+    args = sys.argv if args is None else args
+    try:
+        paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except (RcacError, _rclpy.RCLError) as err:
+        print(f"{prog}: error: {_first_line(err)}", file=sys.stderr, flush=True)
+        return 2
+    signal.signal(signal.SIGINT, _raise_interrupt)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+    node = rt = None
+    code = 0
+    try:
+        node = node_factory()
+        gcwatch.WATCH.install()             # the collector's pauses, in the diagnostics
+        rt = _realtime(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while rclpy.ok() and not node.finished:
+            spin_node_once(executor, node)
+        code = node.exit_code
+    except RcacError as err:
+        print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
+        code = 2
+    except KeyboardInterrupt:
+        if node is not None:
+            node.on_interrupt()
+    except ExternalShutdownException:
+        pass
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        gcwatch.WATCH.close()
+        if rt is not None:
+            rt.release()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code

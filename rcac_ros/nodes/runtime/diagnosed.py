@@ -1,0 +1,65 @@
+"""What both kinds of node (plain :class:`~rcac_ros.nodes.runtime.base.RcacNode` and managed
+:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`) share: on-set checks against the parameter
+table and the periodic diagnostics."""
+
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
+
+from rcac_ros import params, topics
+from rcac_ros.errors import ConfigError
+from rcac_ros.nodes.runtime import gcwatch, paramcheck
+
+
+class RcacNodeMixin:
+    """Parameter checks and diagnostics of both nodes (plain or managed): uses ``_rows``
+    (name -> :class:`rcac_ros.params.Param`), ``model``, ``_pub_diag``, ``diagnostics()``."""
+
+    def _check_unknown_parameters(self, strict):
+        """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
+        unknown = paramcheck.unknown_parameters(self._parameter_overrides, self._parameters)
+        if unknown:
+            text = paramcheck.describe_unknown(unknown, self.get_name())
+            if strict:
+                raise ConfigError(f"strict_parameters: {text}")
+            self.get_logger().warning(text)
+        files = paramcheck.check_params_files(sys.argv)
+        nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE]
+        for path, section, hint in paramcheck.foreign_sections(files, nodes):
+            self.get_logger().warning(
+                f"{path}: section '{section}' addresses no node of rcac_ros"
+                + (f" (did you mean '{hint}'?)" if hint else ""))
+
+    def _check_parameters(self, changed):
+        """On-set callback: validate against the table (a subclass applies them post-set)."""
+        for p in changed:
+            if p.name == "use_sim_time" and p.value != self.get_parameter(p.name).value:
+                return SetParametersResult(
+                    successful=False, reason="use_sim_time: cannot change at run time (the "
+                    "watchdog and the pacing are set up for one time source): restart the node")
+            row = self._rows.get(p.name)
+            if row is None:
+                continue                # rclpy's own
+            value = p.value
+            if row.type.endswith("_array") and value is not None:
+                value = list(value)
+            try:
+                params.check(row, value)
+            except ConfigError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        return SetParametersResult(successful=True)
+
+    def _publish_diagnostics(self):
+        msg = DiagnosticArray(status=[self.diagnostics()])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._pub_diag.publish(msg)
+
+    def status(self, level, name, message, values):
+        """A DiagnosticStatus of this node from a ``{key: value}`` dict (plus the garbage
+        collector's pauses when :func:`rcac_ros.nodes.runtime.base.run` runs the node)."""
+        if gcwatch.WATCH.active:
+            values = dict(values, **gcwatch.WATCH.values())
+        return DiagnosticStatus(level=level, name=f"{self.get_name()}: {name}", message=message,
+                                hardware_id=self.model.name,
+                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

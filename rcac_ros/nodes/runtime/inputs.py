@@ -1,0 +1,90 @@
+"""Inputs received off the control thread, and size caps checked before deserialising.
+
+The control loop (500 Hz) must never wait for the parsing of a large input (issue 9,
+section 3). :class:`SideInput` subscribes on a helper node spun by its own executor in
+its own thread: a big trajectory is deserialised and checked there, and only the result
+is handed over (one attribute assignment, atomic under the GIL). The process's
+interpreter switch interval is lowered so that a Python loop in that thread yields the
+interpreter to the control thread within half a millisecond.
+
+:func:`capped` wraps a raw (serialised) subscription callback: the byte count is
+checked first, and only a message within the cap is deserialised.
+"""
+
+import sys
+import threading
+
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+
+from rcac_ros.nodes.safety.guards import oversize, Rejected
+
+#: the interpreter switch interval of a node process with a side thread, s (default 5 ms:
+#: 2.5 periods at 500 Hz)
+SWITCH_INTERVAL = 0.0005
+
+
+def capped(msg_type, cap, what, callback, reject):
+    """A raw-subscription callback: size check, then ``callback(deserialised message)``.
+
+    ``reject(kind, text)`` is called for a message above ``cap`` bytes (0: no cap).
+    """
+    def on_raw(data):
+        try:
+            oversize(len(data), cap, what)
+        except Rejected as err:
+            return reject(err.kind, str(err))
+        return callback(deserialize_message(data, msg_type))
+    return on_raw
+
+
+class SideInput:
+    """A subscription served by a helper node in its own thread.
+
+    Parameters
+    ----------
+    owner : rclpy.node.Node
+        The node whose topic it is (the name is resolved in its namespace: ``~/x`` stays
+        ``/<owner>/x``, remappings of the owner do not apply).
+    msg_type, topic, qos :
+        As for ``create_subscription``.
+    callback : callable
+        Called in the side thread with each message within the cap.
+    cap : int
+        Size cap in bytes (0: none); above it ``reject(kind, text)`` is called instead.
+    what : str
+        Name of the input in the rejection text (``max_<what>_bytes`` is the parameter).
+    """
+
+    def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
+        if topic.startswith("~/"):
+            ns = owner.get_namespace().rstrip("/")
+            topic = f"{ns}/{owner.get_name()}/{topic[2:]}"
+        self.topic = topic
+        self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
+                         context=owner.context, start_parameter_services=False,
+                         enable_rosout=False)
+        self.subscription = self.node.create_subscription(
+            msg_type, topic, capped(msg_type, cap, what, callback, reject), qos, raw=True)
+        self._executor = SingleThreadedExecutor(context=owner.context)
+        self._executor.add_node(self.node)
+        self._stop = threading.Event()
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
+        self._thread = threading.Thread(target=self._spin, name=f"{what} input", daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        try:
+            while not self._stop.is_set() and self.node.context.ok():
+                self._executor.spin_once(timeout_sec=0.05)
+        except (ExternalShutdownException, RuntimeError):
+            pass        # the context went down under us: the owner is shutting down
+
+    def close(self):
+        """Stop the thread and destroy the helper node."""
+        self._stop.set()
+        self._thread.join(2.0)
+        self._executor.remove_node(self.node)
+        self._executor.shutdown()
+        self.node.destroy_node()

@@ -1,0 +1,56 @@
+"""The controller's fail-safe guards and real-time options, built from its parameters (issue 9).
+
+:class:`ControllerGuards` holds the objects the node's hooks call: the stamp gate, the size
+caps, the goal check against the model's limits, the limiter of the desired state, the
+spells of safe effort and how control resumes after them (:mod:`rcac_ros.nodes.safety.guards`,
+:mod:`rcac_ros.nodes.safety.state_guards`) and the real-time options
+(:mod:`rcac_ros.nodes.runtime.realtime`).
+The parameters are rows of :mod:`rcac_ros.params`.
+"""
+
+import numpy as np
+
+from rcac_ros.nodes.safety.guards import check_goal, DesiredLimiter
+from rcac_ros.nodes.runtime.realtime import RealtimeOptions
+from rcac_ros.nodes.safety.state_guards import SafeStop, StampGate
+
+
+class ControllerGuards:
+    """The guards of one controller node.
+
+    Parameters
+    ----------
+    values : dict
+        The node's checked parameter values (name -> value).
+    model : RobotModel
+        Its position and velocity limits bound the accepted trajectories.
+    h : float
+        The control period, s.
+    effort_limit : ndarray (n,)
+        The node's effort limits (model order).
+    warn : callable
+        Called with one line per joint set without an effort limit.
+    """
+
+    def __init__(self, values, model, h, effort_limit, warn):
+        self.model = model
+        self.max_state_bytes = values["max_state_bytes"]
+        self.max_trajectory_bytes = values["max_trajectory_bytes"]
+        self.gate = StampGate(values["stamp.max_jump"], values["stamp.restart_count"])
+        self.stop = SafeStop(values["watchdog.replan_after"])
+        self.limiter = DesiredLimiter(values["desired.max_position_step"],
+                                      values["desired.max_velocity_step"], h, model.n)
+        self.realtime = RealtimeOptions(
+            priority=values["realtime.priority"], lock_memory=values["realtime.lock_memory"],
+            cpus=values["realtime.cpus"] or (), dma_latency_us=values["realtime.cpu_dma_latency"])
+        free = [model.joint_names[i] for i in np.flatnonzero(~np.isfinite(effort_limit))]
+        if free:
+            warn(f"no effort limit for joints {free} (neither the model nor effort_limit gives "
+                 "one): their efforts are not bounded")
+
+    def check_goal(self, parsed, now_ns):
+        """Refuse a parsed trajectory (:func:`rcac_ros.nodes.safety.guards.check_goal`)."""
+        start_ns, times, pos, vel, _ = parsed
+        m = self.model
+        check_goal(start_ns, times, pos, vel, now_ns, m.position_lower, m.position_upper,
+                   m.velocity_limit)

@@ -1,0 +1,1 @@
+"""rosbag2 bags: writing, verifying and recovering, recording, inspecting (doc/tools.md)."""

@@ -1,0 +1,1 @@
+"""Benchmarks behind ``rcac bench``: one module per benchmark (doc/tools.md)."""

@@ -1,0 +1,363 @@
+"""``rcac bench``: the recursive controller against Pinocchio, the Slotine-Li baseline and itself.
+
+Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
+median over blocks of the mean time per call (µs), measured in one run on this
+machine; the ratios are what the targets are about. The operation count is
+exact (:mod:`rcac_ros.tools.bench.opcount`).
+
+Besides the paper's law (channels ``[1]``) the table times the recursive law with the
+channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with the
+least-squares gain (channels ``[1]``), against n.
+"""
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
+                           css_arm)
+from rcac_ros.tools.args import non_negative_float, positive_float
+from rcac_ros.tools.bench import noise as noise_bench
+
+SIZES = (7, 14, 28, 56, 112, 224)
+
+#: column -> options of the recursive law timed besides the paper's default
+VARIANTS = {
+    "power_us": dict(channels=[1, "power"]),
+    "all_us": dict(channels="all"),
+    "all_explicit_us": dict(channels="all", update="explicit"),
+    "least_squares_us": dict(adaptation="least_squares", forgetting=1.0),
+}
+
+
+def _timed(fn, reps):
+    """Seconds for ``reps`` calls of ``fn()``."""
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        fn()
+    return time.perf_counter() - t0
+
+
+def _reps(budget_s, blocks, *fns):
+    """Calls per block so that ``blocks`` blocks of every ``fn`` take about ``budget_s``.
+
+    Each ``fn`` is called once first (compilation, caches), then timed once.
+    """
+    for fn in fns:
+        fn()
+    once = max(sum(_timed(fn, 1) for fn in fns), 1e-7)
+    return max(1, int(budget_s / blocks / once))
+
+
+def median_us(fn, budget_s=0.3, blocks=7):
+    """Median over ``blocks`` of the mean µs per call of ``fn()``, about ``budget_s`` in all."""
+    reps = _reps(budget_s, blocks, fn)
+    return float(np.median([_timed(fn, reps) / reps * 1e6 for _ in range(blocks)]))
+
+
+def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
+    """Median over blocks of ``time(fa) / time(fb)``, the two timed alternately.
+
+    On a shared machine the load changes between cells; timed side by side, block by
+    block, the ratio is far steadier than the ratio of two medians.
+    """
+    reps = _reps(budget_s, blocks, fa, fb)
+    return float(np.median([_timed(fa, reps) / _timed(fb, reps) for _ in range(blocks)]))
+
+
+def goal_ratios(budget_s=1.0):
+    """The issue's cost goals, each measured side by side (:func:`interleaved_ratio`)."""
+    rng = np.random.default_rng(0)
+    out = {}
+    for n in (7, 56):
+        model = css_arm().repeated(n // 7)
+        args = tuple(rng.normal(size=(5, n)) * 0.1)
+        paper = RecursiveCompositeController(model, theta_hat0=model.theta())
+        every = RecursiveCompositeController(model, theta_hat0=model.theta(), channels="all")
+        if n == 7:
+            rnea = _pin_rnea(model)
+            if rnea is not None:
+                out["paper_over_pin_rnea_n7"] = interleaved_ratio(
+                    lambda: paper.step(*args), lambda: rnea(args[0], args[1], args[4]), budget_s)
+            out["all_over_paper_n7"] = interleaved_ratio(lambda: every.step(*args),
+                                                         lambda: paper.step(*args), budget_s)
+            for key, kwargs in VARIANTS.items():
+                if key != "all_us":
+                    c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+                    out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
+                        lambda: c.step(*args), lambda: paper.step(*args), budget_s)
+        else:
+            sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
+            out["all_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: every.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+            expl = RecursiveCompositeController(model, theta_hat0=model.theta(),
+                                                channels="all", update="explicit")
+            out["all_explicit_over_slotine_li_n56"] = interleaved_ratio(
+                lambda: expl.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+    return out
+
+
+def _pin_rnea(model):
+    try:
+        import pinocchio as pin
+    except ImportError:
+        return None
+    pm = pin.Model()
+    parent = 0
+    for i in range(model.n):
+        parent = pm.addJoint(parent, pin.JointModelRZ(),
+                             pin.SE3(np.array(model.R_fix[i]), np.array(model.p[i])), f"j{i}")
+        pm.appendBodyToJoint(parent, pin.Inertia(float(model.mass[i]), np.array(model.com[i]),
+                                                 np.array(model.inertia[i])), pin.SE3.Identity())
+    pm.gravity.linear = np.array(model.gravity)
+    data = pm.createData()
+    return lambda q, qd, qdd: pin.rnea(pm, data, q, qd, qdd)
+
+
+def bench_model(model, label, baseline=True, budget_s=0.3):
+    """One row: µs per controller step, pin.rnea, Slotine-Li step and simulator step."""
+    rng = np.random.default_rng(0)
+    q, qd, q_d, qd_d, qdd_d = rng.normal(size=(5, model.n)) * 0.1
+    ctrl = RecursiveCompositeController(model, theta_hat0=model.theta())
+    row = {"model": label, "n": model.n,
+           "controller_us": median_us(lambda: ctrl.step(q, qd, q_d, qd_d, qdd_d), budget_s)}
+    for key, kwargs in VARIANTS.items():
+        c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+        row[key] = median_us(lambda: c.step(q, qd, q_d, qd_d, qdd_d), budget_s,
+                             blocks=3 if model.n > 100 else 7)
+    rnea = _pin_rnea(model)
+    row["pin_rnea_us"] = None if rnea is None else median_us(lambda: rnea(q, qd, qdd_d), budget_s)
+    if baseline:
+        sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
+        row["slotine_li_us"] = median_us(lambda: sl.step(q, qd, q_d, qd_d, qdd_d), budget_s,
+                                         blocks=3 if model.n > 100 else 7)
+    else:
+        row["slotine_li_us"] = None
+    sim = Simulator(model, q0=q)
+    tau = np.zeros(model.n)
+    row["simulator_us"] = median_us(lambda: sim.step(tau), budget_s)
+    return row
+
+
+def urdf_models():
+    """The panda (to panda_link8) and the ur5 from example-robot-data, if both are installed."""
+    from rcac_ros.core.urdf import model_from_urdf
+    from rcac_ros.tools.robots import example_robot_urdf
+    out = []
+    for label, rel, tip in (("panda", "panda_description/urdf/panda.urdf", "panda_link8"),
+                            ("ur5", "ur_description/urdf/ur5_robot.urdf", None)):
+        path = example_robot_urdf(rel)
+        if path is None:
+            print(f"(example-robot-data not installed: no {label} row)")
+            continue
+        out.append((label, model_from_urdf(path, tip_link=tip)))
+    return out
+
+
+def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
+    """All rows, the ratios and the operation counts, as a dict."""
+    rows = []
+    base = css_arm()
+    for n in sizes:
+        rows.append(bench_model(base.repeated(n // 7), f"css x{n // 7}", budget_s=budget_s))
+        print(_format_row(rows[-1]), flush=True)
+    if with_urdf:
+        for label, model in urdf_models():
+            rows.append(bench_model(model, label, budget_s=budget_s))
+            print(_format_row(rows[-1]), flush=True)
+    by_n = {r["n"]: r for r in rows if r["model"].startswith("css")}
+    ratios = {}
+    if 7 in by_n and by_n[7]["pin_rnea_us"]:
+        ratios["controller_n7_over_pin_rnea_n7"] = (by_n[7]["controller_us"]
+                                                    / by_n[7]["pin_rnea_us"])
+    if 224 in by_n and 28 in by_n:
+        ratios["controller_n224_over_n28"] = by_n[224]["controller_us"] / by_n[28]["controller_us"]
+    if 56 in by_n and by_n[56]["slotine_li_us"]:
+        ratios["slotine_li_over_controller_n56"] = (by_n[56]["slotine_li_us"]
+                                                    / by_n[56]["controller_us"])
+        ratios["all_over_slotine_li_n56"] = by_n[56]["all_us"] / by_n[56]["slotine_li_us"]
+        ratios["all_explicit_over_slotine_li_n56"] = (by_n[56]["all_explicit_us"]
+                                                      / by_n[56]["slotine_li_us"])
+    if 7 in by_n:
+        for key in VARIANTS:
+            ratios[f"{key[:-3]}_over_paper_n7"] = by_n[7][key] / by_n[7]["controller_us"]
+    for r in rows:
+        if r["model"] in ("panda", "ur5") and r["pin_rnea_us"]:
+            ratio = r["controller_us"] / r["pin_rnea_us"]
+            ratios[f"controller_over_pin_rnea_{r['model']}"] = ratio
+    result = {"rows": rows, "ratios": ratios, "goals": goal_ratios()}
+    if ops:
+        from rcac_ros.tools.bench.opcount import count_step
+        c7, c14 = count_step("rcac", 7), count_step("rcac", 14)
+        result["operations"] = {
+            "rcac_n7": c7, "rcac_n14": c14,
+            "rcac_per_link_mul": (c14["mul"] + c14["div"] - c7["mul"] - c7["div"]) / 7,
+            "rcac_per_link_add": (c14["add"] - c7["add"]) / 7,
+            "slotine_li_n7": count_step("slotine_li", 7),
+            "paper_per_link": {"mul": 606, "add": 501},
+        }
+        # the all-channel law: a n^2 + b n + c multiplications, fitted on n = 7, 14, 21
+        counts = {k: count_step("rcac_all", k) for k in (7, 14, 21)}
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            result["operations"][f"{kind}_n7"] = count_step(kind, 7)
+        ns = np.array([7.0, 14.0, 21.0])
+        mul = np.array([counts[k]["mul"] + counts[k]["div"] for k in (7, 14, 21)])
+        a, b, c = np.linalg.solve(np.vander(ns, 3), mul)
+        result["operations"]["rcac_all"] = {str(k): v for k, v in counts.items()}
+        result["operations"]["rcac_all_mul_fit"] = {"n2": a, "n": b, "1": c,
+                                                    "wang_n2": 7730}
+    return result
+
+
+def _format_row(r):
+    def f(v):
+        return f"{v:12.2f}" if v is not None else f"{'-':>12s}"
+    return (f"{r['model']:>10s} {r['n']:5d} {f(r['controller_us'])} {f(r['pin_rnea_us'])} "
+            f"{f(r['slotine_li_us'])} {f(r['simulator_us'])}"
+            + "".join(f"     {f(r[k])}" for k in VARIANTS))
+
+
+def add_arguments(parser):
+    parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    parser.add_argument("--ros", action="store_true",
+                        help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
+    parser.add_argument("--duration", type=positive_float, default=60.0,
+                        help="seconds of the --ros run (default 60)")
+    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
+                        help="--ros: the controller on its 500 Hz timer (default) or answering "
+                             "each joint state")
+    parser.add_argument("--budget", type=positive_float, default=0.3,
+                        help="seconds of timing per cell (default 0.3)")
+    parser.add_argument("--rt", action="store_true",
+                        help="--ros/--faults: the controller with its real-time options "
+                             "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
+    parser.add_argument("--K_D", type=positive_float, default=None,
+                        help="--ros/--faults: the controller's K_D (default: the bench's)")
+    parser.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
+                        help="--ros/--faults: the controller's timer.lookahead (state "
+                             "prediction; default: none)")
+    parser.add_argument("--phase-offset", type=non_negative_float, default=None,
+                        metavar="SECONDS",
+                        help="--ros/--faults: the controller's timer.phase_offset (ticks "
+                             "locked to the states' arrival plus this; default: not locked)")
+    parser.add_argument("--faults", action="store_true",
+                        help="instead: the closed loop over ROS under faults (drops, jitter, "
+                             "noise, simulator restart, frozen /clock, flood); --duration "
+                             "per case (default 60)")
+    parser.add_argument("--cases", default=None,
+                        help="--faults: comma-separated cases (default: all)")
+    parser.add_argument("--soak", type=positive_float, default=None, metavar="MINUTES",
+                        help="--faults: instead, the nominal case for MINUTES (memory growth, "
+                             "late ticks)")
+    parser.add_argument("--plot", metavar="FILE",
+                        help="--faults: tracking errors per case; --delay-margin: RMS vs K_D")
+    parser.add_argument("--delay-margin", action="store_true",
+                        help="instead: offline, tracking RMS against K_D with the effort 0-2 "
+                             "periods late (the stable range of timer mode)")
+    parser.add_argument("--noise", action="store_true",
+                        help="instead: 10-minute closed loops with sensor noise, plain and with "
+                             "dead zones + projection (are the estimates bounded?)")
+    parser.add_argument("--noise-duration", type=positive_float, default=600.0,
+                        help="seconds of each --noise run (default 600)")
+    parser.add_argument("--noise-sources", action="store_true",
+                        help="--noise: instead, where the paper law's drift comes from (noise "
+                             "on q only, qd only, another seed, half, gamma = 0)")
+    parser.add_argument("--noise-laws", type=noise_laws, default=None,
+                        help="--noise: laws, ';'-separated, among paper; 4,6; all (default: "
+                             "all three)")
+    parser.add_argument("--noise-variants", type=noise_variants, default=None,
+                        help="--noise: variants, comma-separated, among plain, dead zone, "
+                             "sigma, switching (default: all; the clean run always)")
+    parser.add_argument("--out", default="results/noise", help="--noise: output directory")
+
+
+def _choices(text, sep, known):
+    items = [v.strip() for v in text.split(sep)]
+    bad = [v for v in items if v not in known]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown {', '.join(bad)} (known: "
+                                         f"{sep.join(known)})")
+    return items
+
+
+def noise_laws(text):
+    """``--noise-laws``: ';'-separated names of :data:`noise_bench.LAWS`."""
+    return _choices(text, ";", tuple(noise_bench.LAWS))
+
+
+def noise_variants(text):
+    """``--noise-variants``: comma-separated names of :data:`noise_bench.VARIANTS`."""
+    return tuple(_choices(text, ",", noise_bench.VARIANTS))
+
+
+#: the controller's real-time options of ``--rt``
+RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
+              "realtime.cpu_dma_latency": 0}
+
+
+def run(args):
+    if args.noise:
+        from rcac_ros.tools.bench.noise import run_noise_bench, run_noise_sources
+        if args.noise_sources:
+            run_noise_sources(args.noise_duration, args.out)
+            return 0
+        run_noise_bench(args.noise_duration, args.out, laws=args.noise_laws,
+                        variants=args.noise_variants or noise_bench.VARIANTS)
+        return 0
+    over = dict(RT_OPTIONS) if args.rt else {}
+    if args.K_D is not None:
+        over["K_D"] = float(args.K_D)
+    if args.lookahead is not None:
+        over["timer.lookahead"] = float(args.lookahead)
+    if args.phase_offset is not None:
+        over["timer.phase_offset"] = float(args.phase_offset)
+    if args.delay_margin:
+        from rcac_ros.tools.bench.delay_margin import run_delay_margin
+        run_delay_margin(plot_path=args.plot)
+        return 0
+    if args.faults:
+        from rcac_ros.tools.bench.faults import CASES, run_faults
+        from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
+        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+        run_faults(args.duration, cases, dict(BENCH_CONTROLLER, **over), json_path=args.json,
+                   plot_path=args.plot, soak_minutes=args.soak)
+        return 0
+    if args.ros:
+        from rcac_ros.tools.bench.ros import run_ros_bench
+        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode,
+                               controller_overrides=over)
+        return 0 if result else 1
+    try:
+        import pinocchio  # noqa: F401
+    except ImportError:
+        print("pinocchio (pip package 'pin') is not installed: the pin.rnea column is skipped")
+    print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
+          f"{'SlotineLi us':>12s} {'sim step us':>12s}"
+          + "".join(f" {k[:-3] + ' us':>16s}" for k in VARIANTS))
+    result = run_bench(budget_s=args.budget)
+    print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
+          "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
+    for k, v in result["ratios"].items():
+        print(f"  {k:40s} {v:8.2f}")
+    print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2 "
+          "at n = 7; all/SlotineLi <= 0.1 at n = 56):")
+    for k, v in result["goals"].items():
+        print(f"  {k:40s} {v:8.3f}")
+    ops = result.get("operations")
+    if ops:
+        print(f"\noperations per step (counted): n=7 {ops['rcac_n7']}; per link "
+              f"{ops['rcac_per_link_mul']:.0f} mul + {ops['rcac_per_link_add']:.0f} add "
+              f"(paper: 606 mul + 501 add); Slotine-Li n=7 {ops['slotine_li_n7']}")
+        fit = ops["rcac_all_mul_fit"]
+        print(f"channels='all': {fit['n2']:.0f} n^2 + {fit['n']:.0f} n + {fit['1']:.0f} "
+              f"multiplications (Wang's O(n^2) law, as the paper cites: 7730 n^2); "
+              f"n=7 {ops['rcac_all']['7']}")
+        for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
+            print(f"{kind} n=7: {ops[kind + '_n7']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(result, f, indent=2)
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,313 @@
+"""The ROS 2 loop benchmark behind ``rcac bench --ros``.
+
+The simulator (``mode: realtime``, stepping every dt on absolute deadlines of the steady
+clock) and the controller (``mode: timer`` at ``rate``, the same kind of loop) run free as
+two processes over DDS, as they would on a real arm. With ``controller_mode="on_state"``
+the controller instead answers each joint state as it arrives (its ``lockstep`` mode; the
+realtime simulator ignores the tags). An in-process probe subscribes (raw) to the joint
+states, the effort commands and ``/diagnostics`` and measures, after a warm-up:
+
+* the achieved controller and simulator rates;
+* the period between efforts (source stamps: the controller's own timing) p50/p99/max;
+* the state -> effort latency: for each effort, the age of the newest joint state the
+  probe had received when the effort arrived (receive stamps; it includes the phase
+  between the two timers, 0 to one period) and the one-way DDS transport latency
+  (receive minus source stamp);
+* deadline misses: effort periods longer than 1.5 periods, and ticks missing against
+  the nominal rate; the controller's and the simulator's own counters from their
+  diagnostics (ticks more than half a period late, ticks skipped when more than 25
+  periods behind; cumulative since start, warm-up included).
+"""
+
+import json
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from rcac_ros import topics
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
+    shut_down, StopFlag
+from rcac_ros.tools.metrics import percentiles
+
+#: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
+#: delay); free-running, the effort lands up to one period late and that loop diverges within
+#: a second on the CSS arm. The benchmark measures timing, so it uses a gain that stays
+#: stable. The monitor topics (estimates, errors, desired state) go out at 50 Hz, not with
+#: every effort: the control loop does not need them.
+BENCH_CONTROLLER = {"K_D": 1000.0, "monitor_decimation": 10}
+
+#: the bench's names of the controller's timing: its own timer, or one answer per state
+CONTROLLER_MODES = {"timer": "timer", "on_state": "lockstep", "lockstep": "lockstep"}
+
+#: goals on the 2-core machine (issue 3, section 7)
+GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0}
+
+
+class Probe:
+    """Raw subscriptions that keep (source, receive) stamps of states and efforts."""
+
+    def __init__(self, context, depth=1000):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.node import Node
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
+        qos = topics.qos(depth)
+        self.node = Node("rcac_bench_probe", context=context)
+        self.recording = False
+        self.states = []     # (source, receive) ns
+        self.efforts = []    # (source, receive, watchdog)
+        self.latest_state_recv = None
+        self.state_age = []  # ns, per effort: receive(effort) - receive(newest state)
+        self.diagnostics = {}
+        self._subs = [
+            self.node.create_subscription(JointState, "/" + topics.JOINT_STATES,
+                                          self._on_state, qos, raw=True),
+            self.node.create_subscription(Float64MultiArray, "/" + topics.EFFORT_COMMANDS,
+                                          self._on_effort, qos, raw=True),
+            self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
+                                          self._on_diag, qos),
+        ]
+
+    def _on_state(self, data, info):
+        recv = info["received_timestamp"]
+        self.latest_state_recv = recv
+        if self.recording:
+            self.states.append((info["source_timestamp"], recv))
+
+    def _on_effort(self, data, info):
+        if not self.recording:
+            return
+        watchdog = b"watchdog" in bytes(data[:96])
+        recv = info["received_timestamp"]
+        self.efforts.append((info["source_timestamp"], recv, watchdog))
+        if not watchdog and self.latest_state_recv is not None:
+            self.state_age.append(recv - self.latest_state_recv)
+
+    def _on_diag(self, msg):
+        for status in msg.status:
+            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def matched(self):
+        return all(s.get_publisher_count() > 0 for s in self._subs[:2])
+
+
+def analyse(probe, window_s, rate):
+    """The benchmark figures from the probe's stamps (see the module docstring)."""
+    h_ms = 1e3 / rate
+    eff = np.array([(s, r) for s, r, w in probe.efforts if not w], dtype=np.int64).reshape(-1, 2)
+    st = np.array(probe.states, dtype=np.int64).reshape(-1, 2)
+    out = {"window_s": window_s, "nominal_rate_hz": rate,
+           "efforts": int(len(eff)),
+           "watchdog_efforts": int(sum(1 for e in probe.efforts if e[2])),
+           "states": int(len(st))}
+    out["controller_rate_hz"] = len(eff) / window_s
+    out["simulator_rate_hz"] = len(st) / window_s
+    period = 1e-6 * np.diff(eff[:, 0]).astype(float) if len(eff) > 1 else np.empty(0)
+    out.update(percentiles(period, "period"))
+    state_period = 1e-6 * np.diff(st[:, 0]).astype(float) if len(st) > 1 else np.empty(0)
+    out.update(percentiles(state_period, "state_period"))
+    out.update(percentiles(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
+    out.update(percentiles(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
+    out.update(percentiles(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
+    out["late_periods"] = int(np.count_nonzero(period > 1.5 * h_ms))
+    out["missing_ticks"] = max(0, int(round(window_s * rate)) - len(eff))
+    for node, name, keys in (
+            ("controller", f"{topics.CONTROLLER_NODE}: control loop",
+             ("deadline_misses", "late_ticks", "skipped_ticks", "compute_overruns",
+              "compute_time_p50_us", "compute_time_p99_us", "watchdog_trips",
+              "gc_pause_max_ms", "gc_full_collections", "phase_error_us")),
+            ("simulator", f"{topics.SIMULATOR_NODE}: simulation",
+             ("late_ticks", "skipped_ticks"))):
+        status = probe.diagnostics.get(name, {})
+        for key in keys:
+            if key in status:
+                try:
+                    out[f"{node}_{key}"] = float(status[key])
+                except ValueError:
+                    pass
+    out["meets_goal"] = bool(
+        out["controller_rate_hz"] >= GOALS["rate_hz"]
+        and out["period_p99_ms"] is not None and out["period_p99_ms"] <= GOALS["period_p99_ms"]
+        and out["state_to_effort_latency_p50_ms"] is not None
+        and out["state_to_effort_latency_p50_ms"] <= GOALS["latency_p50_ms"])
+    return out
+
+
+def format_table(r):
+    """The benchmark as a table, with the goals."""
+    def ms(key):
+        v = r.get(key)
+        return "-" if v is None else f"{v:.3f}"
+
+    rows = [
+        ("controller rate (Hz)", f"{r['controller_rate_hz']:.1f}", f">= {GOALS['rate_hz']:g}"),
+        ("simulator rate (Hz)", f"{r['simulator_rate_hz']:.1f}", ""),
+        ("effort period p50 (ms)", ms("period_p50_ms"), ""),
+        ("effort period p99 (ms)", ms("period_p99_ms"), f"<= {GOALS['period_p99_ms']:g}"),
+        ("effort period max (ms)", ms("period_max_ms"), ""),
+        ("state period p99 / max (ms)", f"{ms('state_period_p99_ms')} / "
+         f"{ms('state_period_max_ms')}", ""),
+        ("state -> effort latency p50 (ms)", ms("state_to_effort_latency_p50_ms"),
+         f"<= {GOALS['latency_p50_ms']:g}"),
+        ("state -> effort latency p99 (ms)", ms("state_to_effort_latency_p99_ms"), ""),
+        ("one-way DDS latency p50, state / effort (ms)",
+         f"{ms('state_transport_p50_ms')} / {ms('effort_transport_p50_ms')}", ""),
+        ("periods > 1.5 h", str(r["late_periods"]), ""),
+        ("missing ticks (vs nominal)", str(r["missing_ticks"]), ""),
+    ]
+    paced = ("controller", "simulator") if r.get("controller_mode", "timer") == "timer" \
+        else ("simulator",)
+    for node in paced:
+        if f"{node}_late_ticks" in r and f"{node}_skipped_ticks" in r:
+            rows.append((f"{node} ticks late > h/2 / skipped (its diagnostics)",
+                         f"{r[f'{node}_late_ticks']:.0f} / {r[f'{node}_skipped_ticks']:.0f}",
+                         ""))
+    if "controller_compute_overruns" in r:
+        rows.append(("controller compute > h (its diagnostics)",
+                     f"{r['controller_compute_overruns']:.0f}", ""))
+    if "controller_compute_time_p99_us" in r:
+        rows.append(("controller compute p50 / p99 (us)",
+                     f"{r['controller_compute_time_p50_us']:.0f} / "
+                     f"{r['controller_compute_time_p99_us']:.0f}", ""))
+    if "controller_gc_pause_max_ms" in r:
+        rows.append(("controller garbage collections: full / longest pause (ms)",
+                     f"{r['controller_gc_full_collections']:.0f} / "
+                     f"{r['controller_gc_pause_max_ms']:.3f}", ""))
+    w = max(len(a) for a, _, _ in rows)
+    mode = r.get("controller_mode", "timer")
+    mode = f"timer, {r['nominal_rate_hz']:g} Hz" if mode == "timer" else "on each state"
+    lines = [f"ROS 2 loop: controller ({mode}) + simulator "
+             f"(realtime), {r['window_s']:.0f} s measured",
+             f"  {'':<{w}}  {'measured':>15}  goal"]
+    lines += [f"  {a:<{w}}  {b:>15}  {c}" for a, b, c in rows]
+    lines.append(f"  goal met: {'yes' if r['meets_goal'] else 'no'}")
+    return "\n".join(lines)
+
+
+def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_timeout=60.0,
+                  log_dir=None, verbose=True, controller_overrides=None, controller_mode="timer"):
+    """Run the two nodes free-running and measure the loop; print a table.
+
+    Parameters
+    ----------
+    duration : float
+        Seconds measured (after ``warmup``).
+    json_path : str, optional
+        Write the figures there as JSON.
+    rate : float
+        Controller rate and simulator step rate, Hz.
+    warmup : float
+        Seconds discarded after the first effort.
+    start_timeout : float
+        Seconds allowed for the nodes to start and connect.
+    log_dir : str, optional
+        Where the nodes' logs go (default: a temporary directory).
+    controller_overrides : dict, optional
+        Controller parameters on top of :data:`BENCH_CONTROLLER`.
+    controller_mode : {"timer", "on_state"}
+        ``timer``: the controller's own ``rate`` Hz loop (the issue's configuration);
+        ``on_state`` (alias ``lockstep``, the controller mode it uses): it answers every
+        joint state as it arrives (event-driven), which removes the phase between the two
+        loops from the latency.
+
+    Returns
+    -------
+    dict
+        The figures (see :func:`analyse`).
+    """
+    import domain_coordinator
+    from rclpy.executors import SingleThreadedExecutor
+
+    if not duration > 0.0:
+        raise ConfigError(f"duration: must be > 0 s, got {duration}")
+    if not rate > 0.0:
+        raise ConfigError(f"rate: must be > 0 Hz, got {rate}")
+    log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_ros_bench_")
+    os.makedirs(log_dir, exist_ok=True)
+    stop = StopFlag()
+    children, ctx, executor = [], None, None
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    with domain_coordinator.domain_id() as domain:
+        env = child_env(domain)
+        try:
+            ctx = init_context(domain)
+            executor = SingleThreadedExecutor(context=ctx)
+            probe = Probe(ctx)
+            executor.add_node(probe.node)
+            if controller_mode not in CONTROLLER_MODES:
+                raise ConfigError(f"controller_mode: 'timer' or 'on_state', got "
+                                  f"{controller_mode!r}")
+            over = dict(BENCH_CONTROLLER, mode=CONTROLLER_MODES[controller_mode],
+                        rate=float(rate))
+            over.update(controller_overrides or {})
+            ctrl = node_command("controller", overrides=over)
+            sim = node_command("simulator", overrides={"mode": "realtime",
+                                                       "dt": 1.0 / rate, "duration": 0.0})
+            children.append(Child("controller", ctrl, env,
+                                  os.path.join(log_dir, "controller.log")))
+            children.append(Child("simulator", sim, env, os.path.join(log_dir, "simulator.log")))
+
+            def spin_until(cond, timeout, what):
+                end = time.monotonic() + timeout
+                while not cond():
+                    if stop:
+                        raise KeyboardInterrupt
+                    for c in children:
+                        if not c.alive():
+                            raise NodeFailed(f"the {c.name} exited with code {c.returncode} "
+                                             f"{what}; last lines of {c.log_path}:\n{c.tail()}")
+                    if time.monotonic() > end:
+                        raise NodeFailed(f"timed out {what} (logs in {log_dir})")
+                    executor.spin_once(timeout_sec=0.01)
+
+            if verbose:
+                print(f"rcac bench --ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
+                      f"logs {log_dir})", flush=True)
+            spin_until(lambda: probe.matched() and probe.latest_state_recv is not None,
+                       start_timeout, "while starting")
+            t_warm = time.monotonic() + warmup
+            spin_until(lambda: time.monotonic() >= t_warm, warmup + 10.0, "during warm-up")
+            if verbose:
+                print(f"rcac bench --ros: measuring for {duration:g} s", flush=True)
+            probe.recording = True
+            t0 = time.monotonic()
+            spin_until(lambda: time.monotonic() - t0 >= duration, duration + 10.0,
+                       "while measuring")
+            probe.recording = False
+            window = time.monotonic() - t0
+            # one more diagnostics message (1 Hz) with the final counters
+            t_diag = time.monotonic()
+            spin_until(lambda: time.monotonic() - t_diag > 1.2, 5.0, "at the end")
+        finally:
+            shut_down(children, executor, ctx)
+            stop.restore()
+    result = analyse(probe, window, rate)
+    result["controller_mode"] = "timer" if controller_mode == "timer" else "on_state"
+    if verbose:
+        print(format_table(result), flush=True)
+    if json_path:
+        os.makedirs(os.path.dirname(os.path.abspath(json_path)), exist_ok=True)
+        with open(json_path, "w") as f:
+            json.dump(result, f, indent=2)
+    return result
+
+
+def _main(argv):
+    """``python -m rcac_ros.tools.bench.ros [SECONDS [JSON [timer|on_state [NAME=VALUE]...]]]``."""
+    secs = float(argv[0]) if argv else 60.0
+    json_path = argv[1] if len(argv) > 1 and argv[1] else None
+    mode = argv[2] if len(argv) > 2 else "timer"
+    extra = {}
+    for item in argv[3:]:
+        key, _, value = item.partition("=")
+        extra[key] = int(value) if value.lstrip("-").isdigit() else float(value)
+    run_ros_bench(secs, json_path, controller_mode=mode, controller_overrides=extra)
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])

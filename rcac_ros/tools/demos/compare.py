@@ -1,0 +1,296 @@
+"""``rcac compare``: every adaptive law on the paper's experiment and on the panda payload.
+
+Laws (:data:`LAWS`): the direct law (``gamma = 0``), the paper's composite law (joint-1
+channel), ``channels="all"`` with the implicit and the explicit update, the power
+channel, fixed-m channel sets, least-squares variants, and the non-recursive
+Slotine-Li law. Scenarios (:data:`SCENARIOS`):
+
+- ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
+  velocity reading of the desired motion (``rcac experiment``'s run);
+- ``payload``: the panda with gravity, a 2 kg payload attached to link 7 at t = 5 s,
+  the demo's gains, ``theta_hat(0)`` = the URDF's (``rcac payload-demo``'s run).
+
+Every law gets the scenario's gains; a law only changes the channels, the update or the
+adaptation gain. Writes ``compare.json``, ``compare.md`` (the table), one figure per
+scenario (``compare_<scenario>.png``: tracking error, parameter error, last link's mass
+estimate, max |E_c| on log scales) and the identifiability report of each run (the
+accumulated excitation ``sum h W_i^T W_i`` per link, and the physical consistency of the
+final estimates, :mod:`rcac_ros.core.identifiability`).
+"""
+
+import argparse
+import json
+import os
+
+import numpy as np
+
+from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
+                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core.channels import parse_channels
+from rcac_ros.core.identifiability import Excitation, summary
+from rcac_ros.errors import RcacError
+from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.closed_loop import closed_loop
+
+#: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
+LS_FORGETTING = 1.0
+
+#: law -> (controller class, keyword arguments on top of the scenario's gains).
+#: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
+#: (in-sample: [2], [1,2], [2,3], [1,2,3], [2,3,4], [1,2,3,4], [4], [3,4], [4,7], [5,6,7],
+#: [2,4,6], [2,3,5,6], [3..7], [2..7], with and without "power").
+LAWS = {
+    "direct": ("rcac", dict(gamma=0.0)),
+    "paper": ("rcac", {}),
+    "all": ("rcac", dict(channels="all")),
+    "all_explicit": ("rcac", dict(channels="all", update="explicit")),
+    "power": ("rcac", dict(channels="power")),
+    "1+power": ("rcac", dict(channels=[1, "power"])),
+    "4,6": ("rcac", dict(channels=[4, 6])),
+    "4..7": ("rcac", dict(channels=[4, 5, 6, 7])),
+    "ls_paper": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING)),
+    "ls_all": ("rcac", dict(channels="all", adaptation="least_squares",
+                            forgetting=LS_FORGETTING)),
+    "ls_pred_all": ("rcac", dict(channels="all", adaptation="least_squares_prediction",
+                                 forgetting=LS_FORGETTING)),
+    "ls_pred_4,6": ("rcac", dict(channels=[4, 6], adaptation="least_squares_prediction",
+                                 forgetting=LS_FORGETTING)),
+    "slotine_li": ("slotine_li", {}),
+}
+
+COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
+           ("theta_error_end", "‖θ̃‖ end"), ("max_abs_E", "max |E|"),
+           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."))
+
+
+class Scenario:
+    """One closed-loop setting: plant(s), desired motion, gains and the true parameters."""
+
+    def __init__(self, name, model, gains, trajectory, q0, qd0, loaded=None, jump=None):
+        self.name, self.model, self.gains, self.trajectory = name, model, gains, trajectory
+        self.q0, self.qd0, self.loaded, self.jump = q0, qd0, loaded, jump
+        self.theta_end = (loaded or model).theta()
+
+
+def paper_scenario():
+    model = css_arm()
+    q0 = np.array(PAPER_Q0)
+    return Scenario("paper", model, dict(PAPER_GAINS), PaperTrajectory(q0), q0,
+                    np.zeros(model.n))
+
+
+def payload_scenario():
+    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                              load_panda, with_payload)
+    model = load_panda()
+    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    q0, qd0, _ = traj(0.0)
+    return Scenario("payload", model, gains_for(model, law="composite", **GAINS), traj, q0,
+                    qd0, loaded=with_payload(model), jump=5.0)
+
+
+SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
+
+
+def make_controller(scenario, law, laws=None):
+    kind, extra = (laws or LAWS)[law]
+    kwargs = dict(scenario.gains, **extra)
+    if kind == "slotine_li":
+        return SlotineLiCompositeController(scenario.model, **kwargs)
+    return RecursiveCompositeController(scenario.model, **kwargs)
+
+
+def run_law(scenario, controller, duration, progress=None):
+    """Close the loop (:func:`~rcac_ros.tools.closed_loop.closed_loop`) on the scenario.
+
+    The run stops at the first period whose estimates or prediction errors are not finite
+    (``check_estimates``). Returns the time series of the table and the figure, one row
+    a period and each taken after that period's update: ``t``, ``e`` (``q - q_d``),
+    ``theta_error`` (``||theta_hat - theta||``, the true ``theta`` of the plant then in
+    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``); a
+    diverged run's last row has no estimates (NaN) and ``diverged_at`` is its time.
+    With them ``us_per_step`` (the controller's step alone), ``excitation`` (the
+    accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
+    """
+    exc = Excitation(scenario.model.n, controller.h) if hasattr(controller, "channels") else None
+    events = () if scenario.loaded is None else ((scenario.jump, scenario.loaded),)
+    run = closed_loop(controller, scenario.trajectory, duration, q0=scenario.q0,
+                      qd0=scenario.qd0, events=events, check_estimates=True,
+                      observer=None if exc is None else lambda k, ctrl, sim: exc.add(ctrl.W),
+                      progress=progress, progress_every=250)
+    t = run["t"]
+    theta_end = controller.theta_hat
+    # the estimates after period k are those before period k + 1, or the final ones
+    theta = np.concatenate([run["theta_hat"][1:], theta_end[None]])
+    E = np.max(np.abs(run["E"].reshape(len(t), -1)), axis=1)
+    diverged = run["status"] != "ok"
+    if diverged:                          # the last period's estimates are not finite
+        theta[-1], E[-1] = np.nan, np.nan
+    truth = np.broadcast_to(scenario.model.theta(), theta.shape).copy()
+    if scenario.loaded is not None:                  # closed_loop's event rule
+        truth[t >= scenario.jump - 1e-12] = scenario.theta_end
+    with np.errstate(all="ignore"):                  # a diverged law's huge estimates
+        theta_error = np.array([np.linalg.norm(d) for d in theta - truth])
+    return dict(t=t, e=run["q"] - run["q_d"], theta_error=theta_error,
+                mass_last=theta[:, -1, 0], E=E,
+                diverged_at=float(t[-1]) if diverged else None,
+                us_per_step=run["step_time"] / len(t) * 1e6, excitation=exc,
+                theta_end=theta_end)
+
+
+def metrics(run, scenario, last_seconds=5.0):
+    """The table's figures for one run (NaN where a diverged run has no value)."""
+    t, e = run["t"], run["e"]
+    ok = np.all(np.isfinite(e), axis=1)
+    fig = measure.tracking(t[ok], e[ok], last_seconds) if ok.any() else {}
+    out = {
+        "rms": fig.get("rms_tracking_error", float("nan")),
+        "rms_last_5s": fig.get("rms_tracking_error_last_5s", float("nan")),
+        "max_error": fig.get("max_tracking_error", float("nan")),
+        "theta_error_start": float(run["theta_error"][0]),
+        "theta_error_end": float(np.linalg.norm(run["theta_end"] - scenario.theta_end)),
+        "max_abs_E": float(np.nanmax(run["E"])),
+        "us_per_step": float(run["us_per_step"]),
+        "diverged_at": run["diverged_at"],
+    }
+    if run["diverged_at"] is not None:
+        out["rms_last_5s"] = out["theta_error_end"] = float("nan")
+    if scenario.jump is not None:
+        after = ok & (t >= scenario.jump)
+        out["rms_after_payload"] = measure.rms(e[after]) if after.any() else float("nan")
+    out["mass_last_end"] = float(run["mass_last"][ok][-1])
+    out["mass_last_true"] = float(scenario.theta_end[-1, 0])
+    if run["excitation"] is not None and run["diverged_at"] is None:
+        ident = summary(run["excitation"], run["theta_end"])
+        out["identifiable"] = ident["identifiable_combinations_total"]
+        out["consistent"] = ident["consistent_links"]
+        out["identifiability"] = ident
+    return out
+
+
+def compare(scenarios=("paper", "payload"), laws=tuple(LAWS), duration=20.0, progress=True,
+            extra_channels=None):
+    """Run every law on every scenario: ``{scenario: {law: metrics}}`` and the time series."""
+    report, series = {}, {}
+    table = {law: LAWS[law] for law in laws}
+    if extra_channels is not None:
+        key = "channels=" + ",".join(str(c) for c in extra_channels)
+        table[key] = ("rcac", dict(channels=list(extra_channels)))
+    for name in scenarios:
+        scenario = SCENARIOS[name]()
+        report[name], series[name] = {}, {}
+        for law in table:
+            ctrl = make_controller(scenario, law, table)
+            label = f"{name}: {law:>20s}" if progress else None
+            run = run_law(scenario, ctrl, duration, progress=label)
+            report[name][law] = metrics(run, scenario)
+            series[name][law] = run
+    return report, series
+
+
+def _cell(v, key):
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "—"
+    if key in ("identifiable", "consistent"):
+        return str(v)
+    if key == "us_per_step":
+        return f"{v:.1f}"
+    return f"{v:.3g}"
+
+
+def markdown(report, n_links=None):
+    """The table, one section per scenario."""
+    lines = []
+    for name, rows in report.items():
+        lines.append(f"### {name}\n")
+        lines.append("| law | " + " | ".join(h for _, h in COLUMNS) + " |")
+        lines.append("|---|" + "---:|" * len(COLUMNS))
+        for law, m in rows.items():
+            cells = [_cell(m.get(k), k) for k, _ in COLUMNS]
+            if m["diverged_at"] is not None:
+                cells[0] = f"diverged at {m['diverged_at']:.3f} s"
+            lines.append(f"| {law} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def plot(series, report, out_dir):
+    """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
+    from rcac_ros.tools.plots import plt
+    paths = []
+    for name, runs in series.items():
+        fig, axes = plt.subplots(1, 4, figsize=(24, 5))
+        colors = plt.cm.tab20(np.linspace(0.0, 1.0, 20))      # up to 20 laws, all distinct
+        for ax in axes:
+            ax.set_prop_cycle(color=list(colors))
+        for law, r in runs.items():
+            t = r["t"]
+            err = np.minimum(np.linalg.norm(r["e"], axis=1), 1e3)
+            if r["diverged_at"] is not None:      # its estimates would swamp the axes
+                law = f"{law} (diverged at {r['diverged_at']:.2f} s)"
+            else:
+                axes[1].semilogy(t, r["theta_error"], lw=0.9, label=law)
+                axes[2].plot(t, r["mass_last"], lw=0.9, label=law)
+            axes[0].semilogy(t, err + 1e-12, lw=0.7, label=law)
+            axes[3].semilogy(t, np.minimum(r["E"], 1e12) + 1e-16, lw=0.6, label=law)
+        truth = next(iter(report[name].values())).get("mass_last_true")
+        for ax, title in zip(axes, ("|q - q_d| (rad)", "||theta_hat - theta|| (all links)",
+                                    "last link's mass estimate (kg)", "max_c |E_c| (N m, W)")):
+            ax.set_title(title)
+            ax.set_xlabel("time (s)")
+            ax.grid(alpha=0.3)
+        if truth is not None:
+            axes[2].axhline(truth, color="k", ls="--", lw=0.9, label="true (end)")
+        axes[0].set_ylim(1e-7, 1.0)
+        axes[3].set_ylim(bottom=1e-12)
+        axes[0].legend(fontsize=7, ncol=2)
+        fig.suptitle(f"rcac compare: {name} scenario")
+        fig.tight_layout()
+        path = os.path.join(out_dir, f"compare_{name}.png")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def channel_list(text):
+    """argparse type: ``1,power`` (joint numbers, ``power``, ``all``); ranges checked later."""
+    try:
+        return parse_channels(text, None)
+    except RcacError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def add_arguments(parser):
+    parser.add_argument("--duration", type=positive_float, default=20.0,
+                        help="seconds per run (default 20)")
+    parser.add_argument("--scenarios", nargs="+", choices=tuple(SCENARIOS),
+                        default=list(SCENARIOS), metavar="SCENARIO",
+                        help=f"any of {' '.join(SCENARIOS)} (default both)")
+    parser.add_argument("--laws", nargs="+", choices=tuple(LAWS), default=list(LAWS),
+                        metavar="LAW", help=f"any of {' '.join(LAWS)} (default all)")
+    parser.add_argument("--channels", type=channel_list, default=None,
+                        help="add a law with these channels, e.g. 1,power")
+    parser.add_argument("--out", default="results/compare", help="output directory")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def run(args):
+    report, series = compare(args.scenarios, args.laws, args.duration, not args.quiet,
+                             args.channels)
+    os.makedirs(args.out, exist_ok=True)
+    settings = dict(duration=args.duration, ls_forgetting=LS_FORGETTING,
+                    laws={k: {"controller": LAWS[k][0],
+                              "options": {o: str(v) for o, v in LAWS[k][1].items()}}
+                          for k in next(iter(report.values())) if k in LAWS})
+    with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as f:
+        json.dump(dict(report, settings=settings), f, indent=2)
+    table = markdown(report)
+    with open(os.path.join(args.out, "compare.md"), "w", encoding="utf-8") as f:
+        f.write(f"`rcac compare --duration {args.duration:g}`\n\n{table}")
+    plots = plot(series, report, args.out)
+    print(table)
+    print(f"wrote {args.out}/compare.json, compare.md, "
+          + ", ".join(os.path.basename(p) for p in plots))
+    return 0

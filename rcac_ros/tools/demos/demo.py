@@ -1,0 +1,226 @@
+"""``rcac demo``: the paper's experiment over ROS 2, two processes, one bag.
+
+The simulator and the controller run as two processes talking over real DDS, in
+lockstep (the simulator steps once per effort command, so the run is
+deterministic and not paced by the wall clock). An in-process recorder writes
+every topic into a rosbag2 bag; at the end the bag is summarised, the metrics of
+``rcac experiment`` are computed from it and the figures are written.
+
+The children get an isolated ``ROS_DOMAIN_ID`` (domain_coordinator) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; they are always stopped, even on
+Ctrl-C or when one of them fails.
+"""
+
+import os
+import re
+import shutil
+import signal
+import sys
+import time
+
+from rcac_ros import topics
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
+    StopFlag
+from rcac_ros.tools.bags.record import BagRecorder, format_counts
+
+
+def _prepare_out(out):
+    """Create ``out``; remove a bag a previous demo left in ``out/bag``."""
+    os.makedirs(out, exist_ok=True)
+    bag = os.path.join(out, "bag")
+    if os.path.exists(bag):
+        leftovers = set(os.listdir(bag)) - {"metadata.yaml"}
+        kinds = (".mcap", ".db3", ".db3-wal", ".db3-shm", ".db3-journal", "metadata.yaml.tmp")
+        if not all(f.endswith(kinds) for f in leftovers):
+            raise ConfigError(f"out: {bag} exists and does not look like a bag; move it away")
+        shutil.rmtree(bag)
+    os.makedirs(os.path.join(out, "logs"), exist_ok=True)
+    return bag
+
+
+def demo_overrides(duration, dt):
+    """Parameter overrides of the two nodes for the lockstep experiment."""
+    # state_timeout: the controller's watchdog is for a real arm; in lockstep a 20 ms one
+    # floods the effort topic while a descheduled simulator is not reading, and its
+    # keep-last queue can then lose the real answer (a lockstep miss).
+    controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 1.0}
+    # min_subscribers 2: the simulator starts once the controller and our recorder both
+    # subscribe to joint_states, so the bag holds the run from state 0; at most real time,
+    # so that the recorder (nine topics at 1/dt each) keeps up and the bag holds every step
+    simulator = {"mode": "lockstep", "dt": float(dt), "duration": float(duration),
+                 "min_subscribers": 2, "lockstep_max_speed": 1.0}
+    return controller, simulator
+
+
+def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=2.0,
+             start_timeout=60.0, stall_timeout=30.0, log=None):
+    """Run the two nodes in lockstep, record, stop everything; return the bag path.
+
+    Raises
+    ------
+    NodeFailed
+        If a node exits early, discovery times out, or the simulated time stalls.
+    """
+    import domain_coordinator
+    from rclpy.executors import SingleThreadedExecutor
+
+    log = log or (lambda text: print(text, flush=True))
+
+    if not duration > 0.0:
+        raise ConfigError(f"duration: must be > 0 s, got {duration}")
+    bag = _prepare_out(out)
+    logs = os.path.join(out, "logs")
+    ctrl_over, sim_over = demo_overrides(duration, dt)
+    stop = StopFlag()
+    children = []
+    recorder = None
+    ctx = None
+    executor = None
+    saved_range = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"   # for our own context
+    with domain_coordinator.domain_id() as domain:
+        env = child_env(domain)
+        try:
+            ctx = init_context(domain)
+            executor = SingleThreadedExecutor(context=ctx)
+            recorder = BagRecorder(bag, ctx, storage=storage, log=log)
+            executor.add_node(recorder.node)
+            log(f"rcac demo: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
+                f"lockstep (dt {dt * 1e3:g} ms); bag {bag}")
+
+            def all_alive():
+                return not stop and all(c.alive() for c in children)
+
+            def check(what):
+                for c in children:
+                    if not c.alive() and not (c.name == "simulator" and c.returncode == 0):
+                        raise NodeFailed(f"the {c.name} exited with code {c.returncode} "
+                                         f"{what}; last lines of {c.log_path}:\n{c.tail()}")
+                if stop:
+                    raise KeyboardInterrupt
+
+            ctrl_topics = [n for n, _ in recorder.topics
+                           if n.startswith(f"/{topics.CONTROLLER_NODE}/")]
+            ctrl_topics.append("/" + topics.EFFORT_COMMANDS)
+            ctrl_cmd = node_command("controller", overrides=ctrl_over)
+            children.append(Child("controller", ctrl_cmd, env,
+                                  os.path.join(logs, "controller.log")))
+            if not recorder.wait_for_publishers(executor, ctrl_topics, start_timeout, all_alive):
+                check("while starting")
+                raise NodeFailed(f"the controller's topics were not discovered within "
+                                 f"{start_timeout:g} s (see {children[0].log_path})")
+            children.append(Child("simulator", node_command("simulator", overrides=sim_over),
+                                  env, os.path.join(logs, "simulator.log")))
+            sim_topics = ["/" + topics.JOINT_STATES, topics.CLOCK]
+            if not recorder.wait_for_publishers(executor, sim_topics, start_timeout, all_alive):
+                check("while starting")
+                raise NodeFailed(f"the simulator's topics were not discovered within "
+                                 f"{start_timeout:g} s (see {children[1].log_path})")
+            t_start = time.monotonic()
+            last_total, last_change = None, t_start
+            next_report = t_start + progress
+            sim_child = children[1]
+            while sim_child.alive():   # the simulator exits 0 after `duration` of sim time
+                executor.spin_once(timeout_sec=0.02)
+                now = time.monotonic()
+                if stop:
+                    raise KeyboardInterrupt
+                check("before the end of the run")
+                if recorder.total != last_total:
+                    last_total, last_change = recorder.total, now
+                elif now - last_change > stall_timeout:
+                    raise NodeFailed(f"nothing published for {stall_timeout:g} s (sim time "
+                                     f"{recorder.sim_time} s); see the logs in {logs}")
+                if now >= next_report:
+                    sim = 0.0 if recorder.sim_time is None else recorder.sim_time
+                    log(f"  sim {sim:6.2f} / {duration:g} s   wall {now - t_start:6.1f} s   "
+                        f"{recorder.total} messages")
+                    next_report = now + progress
+            check("before the end of the run")
+            wall = time.monotonic() - t_start
+            # drain what is still in flight: the last states (the simulator publishes states
+            # 0..steps) and the controller's answers to them
+            states = "/" + topics.JOINT_STATES
+            answers = f"/{topics.CONTROLLER_NODE}/{topics.DESIRED_STATE[2:]}"
+            last_state = int(round(duration / dt)) * int(round(dt * 1e9))
+            drain_end = time.monotonic() + 2.0
+            while time.monotonic() < drain_end and not stop \
+                    and (recorder.last_state_stamp != last_state
+                         or recorder.counts[answers] < recorder.counts[states]):
+                executor.spin_once(timeout_sec=0.02)
+            sim = recorder.sim_time or 0.0
+            log(f"rcac demo: {sim:.3f} s simulated in {wall:.1f} s wall "
+                f"({sim / max(wall, 1e-9):.2f}x real time)")
+        finally:
+            codes = {}
+            for c in reversed(children):  # the simulator first: no new states
+                codes[c.name] = c.stop()
+            if recorder is not None:
+                recorder.close()
+            if executor is not None:
+                executor.shutdown()
+            if ctx is not None:
+                ctx.try_shutdown()
+            stop.restore()
+            if saved_range is None:
+                os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+            else:
+                os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved_range
+    misses = re.search(r"lockstep misses (\d+)", children[1].tail(5)) if len(children) > 1 \
+        else None
+    if misses and int(misses.group(1)):
+        log(f"rcac demo: warning: the simulator held an effort {misses.group(1)} times (no "
+            "answer within lockstep_timeout: the machine is overloaded); the run is no longer "
+            "the exact discrete loop of rcac experiment")
+    log(f"rcac demo: recorded {recorder.total} messages")
+    log(format_counts(recorder))
+    for name, code in codes.items():
+        if code not in (0, -signal.SIGINT, 130):
+            log(f"rcac demo: warning: the {name} exited with code {code} when stopped "
+                f"(log {os.path.join(logs, name + '.log')})")
+    return bag
+
+
+def add_arguments(parser):
+    parser.add_argument("--duration", type=positive_float, default=20.0,
+                        help="simulated seconds (default: 20, the paper's experiment)")
+    parser.add_argument("--out", "-o", default="rcac_demo",
+                        help="output directory: bag/, logs/, figures, metrics.json "
+                             "(default: ./rcac_demo)")
+    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
+                        help="rosbag2 storage plugin (default: mcap)")
+
+
+def run(args):
+    from rcac_ros.tools.bags.inspect import format_metrics, format_summary, inspect
+
+    out = os.path.abspath(args.out)
+    try:
+        bag = run_demo(args.duration, out, args.storage)
+    except KeyboardInterrupt:
+        print(f"rcac demo: interrupted; both nodes stopped; the bag is closed in "
+              f"{os.path.join(out, 'bag')} (rcac inspect reads it)", file=sys.stderr)
+        return 130
+    except NodeFailed as err:
+        print(f"rcac demo: error: {err}", file=sys.stderr)
+        return 1
+    result = inspect(bag, plots_dir=out)
+    print(format_summary(bag, result["summary"]))
+    start = result["metrics"].get("sim_time_start_s")
+    if start:
+        print(f"rcac demo: note: the recorder matched the simulator's topics late (DDS "
+              f"discovery on a loaded machine): joint_states and /clock start at t = "
+              f"{start:.3f} s; the controller's topics, and the metrics, cover the whole run")
+    print("Metrics (as rcac experiment):")
+    print(format_metrics(result["metrics"]))
+    for line in result["notes"]:
+        print(f"rcac demo: note: {line}")
+    print("Wrote:")
+    print(f"  bag      {bag}")
+    print(f"  metrics  {result['metrics_path']}")
+    for path in result["plots"]:
+        print(f"  figure   {path}")
+    print(f"  logs     {os.path.join(out, 'logs')}")
+    return 0
