@@ -65,6 +65,9 @@ SECOND_MOMENT_FLOOR = 0.01
 #: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
 #: above the rounding of a 4x4 factorisation and far below any real body's ratio.
 FLOOR = 1e-12
+#: Numerical guard on nu: |nu_k| <= NU_RATIO tr(J), so that the 13 stored parameters keep
+#: J's digits (a body has 0 <= nu_k = h_k^2 / m <= Sigma_kk <= tr(J)).
+NU_RATIO = 100.0
 #: Most halvings of a step that would cross the floor (2^-30: the step is then kept out).
 HALVINGS = 30
 
@@ -177,7 +180,8 @@ def retract(old, oo, new, on, J, D, L, K):
     Floating point: ``a`` is halved (at most :data:`HALVINGS` times) until ``J+ - FLOOR
     tr(J+) 1`` passes a Cholesky factorisation, so every stored J stays clear of rounding
     (:data:`FLOOR`); if none passes, or ``J_hat`` itself is not positive definite, J is kept
-    (``a = 0``) and only nu moves.
+    (``a = 0``) and only nu moves; a step that is not finite is not taken at all. ``nu`` is
+    clipped to ``|nu_k| <= NU_RATIO tr(J+)`` (:data:`NU_RATIO`).
     """
     pseudo_inertia_into(old, oo, J)
     pseudo_inertia_into(new, on, D)
@@ -203,6 +207,10 @@ def retract(old, oo, new, on, J, D, L, K):
     for i in range(4):
         for j in range(4):
             z2 += K[i, j] * K[j, i]
+    if not (math.isfinite(z2) and math.isfinite(new[on + 4] + new[on + 5] + new[on + 6])):
+        for k in range(13):                         # a step that is not finite: no step
+            new[on + k] = old[oo + k]
+        return 0.0
     a = 1.0 if z2 <= 1.0 else 1.0 / math.sqrt(z2)
     for _ in range(HALVINGS):
         half = 0.5 * a * a
@@ -221,14 +229,17 @@ def retract(old, oo, new, on, J, D, L, K):
         a *= 0.5
     else:
         a = 0.0                                     # keep J_hat (it passed before)
-        half = 0.0
-    for i in range(4):
-        for j in range(i, 4):
-            v = J[i, j] + a * D[i, j] + half * (D[i, 0] * K[0, j] + D[i, 1] * K[1, j]
-                                                + D[i, 2] * K[2, j] + D[i, 3] * K[3, j])
-            J[i, j] = v
-            J[j, i] = v
-    theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
+    if a > 0.0:
+        for i in range(4):
+            for j in range(i, 4):
+                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * K[0, j] + D[i, 1] * K[1, j]
+                                                    + D[i, 2] * K[2, j] + D[i, 3] * K[3, j])
+                J[i, j] = v
+                J[j, i] = v
+    bound = NU_RATIO * (J[0, 0] + J[1, 1] + J[2, 2] + J[3, 3])
+    theta_from_pseudo(J, min(max(new[on + 4], -bound), bound),
+                      min(max(new[on + 5], -bound), bound),
+                      min(max(new[on + 6], -bound), bound), new, on)
     return a
 
 
@@ -360,12 +371,12 @@ def log_det_hessian(theta):
 
 
 def matched_gain(P, theta_hat0):
-    """Default natural gain ``k_i`` per link: the natural law's gain at the start has the
-    determinant of ``P_i`` on the pseudo-inertia (doc/design.md §7).
+    """Default natural gain ``k_i`` per link: the largest k for which the natural law's gain
+    at the start nowhere exceeds ``P_i`` on the pseudo-inertia (doc/design.md §7).
 
     With ``A`` the map theta -> J's 10 entries and ``H`` the Hessian of ``-log det J`` in
-    those entries, ``k = (det(A P A^T) det H)^(1/10)``: the geometric mean of the ratios of
-    the two gains over the 10 directions (unit-free).
+    those entries, ``k`` is the smallest eigenvalue of ``H^1/2 A P A^T H^1/2``: then
+    ``k H^-1 <= A P A^T`` (the Euclidean law's gain on J), with equality along one direction.
     """
     A = np.array([_entries(pseudo_inertia(e)) for e in np.eye(13)]).T       # 10 x 13
     E = [_unpack(e) for e in np.eye(10)]
@@ -373,8 +384,9 @@ def matched_gain(P, theta_hat0):
     for i, (Pi, th) in enumerate(zip(P, theta_hat0)):
         Ji = np.linalg.inv(pseudo_inertia(th))
         H = np.array([[np.trace(Ji @ a @ Ji @ b) for b in E] for a in E])
-        PA = A @ Pi @ A.T
-        k[i] = math.exp((np.linalg.slogdet(PA)[1] + np.linalg.slogdet(H)[1]) / 10.0)
+        w, V = np.linalg.eigh(0.5 * (H + H.T))
+        Hh = (V * np.sqrt(w)) @ V.T
+        k[i] = np.linalg.eigvalsh(Hh @ A @ Pi @ A.T @ Hh)[0]
     return k
 
 
