@@ -243,6 +243,33 @@ def retract(old, oo, new, on, J, D, L, K):
     return a
 
 
+@njit(cache=True)
+def natural_gains_into(theta, k, Pnu, out):
+    """``out[i]`` (169, row-major) = ``P_eff(theta_i)`` for every link (the non-recursive
+    law's explicit gains, doc/design.md §7); ``theta`` (n, 13), ``k`` (n,), ``Pnu`` (n, 9)."""
+    M = np.empty((3, 4, 4))
+    e = np.zeros(13)
+    col = np.empty(13)
+    for i in range(theta.shape[0]):
+        for c in range(13):
+            e[c] = 1.0
+            natural_gain_apply(theta[i], 0, e, 0, col, 0, k[i], Pnu[i], 0, M[0], M[1], M[2])
+            e[c] = 0.0
+            for r in range(13):
+                out[i, 13 * r + c] = col[r]
+
+
+@njit(cache=True)
+def retract_rows(prev, theta):
+    """:func:`retract` of every link's step ``prev[i] -> theta[i]``, in place; the smallest
+    step length."""
+    M = np.empty((4, 4, 4))
+    a_min = 1.0
+    for i in range(theta.shape[0]):
+        a_min = min(a_min, retract(prev[i], 0, theta[i], 0, M[0], M[1], M[2], M[3]))
+    return a_min
+
+
 # ---- Python side: conversions, checks, defaults --------------------------------------------
 
 def pseudo_inertia(theta):

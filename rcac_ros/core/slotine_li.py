@@ -32,8 +32,10 @@ from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_erro
     reference_motion
 from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
-from ._validate import as_array
+from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError
+from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
+                             natural_gains_into, nu_gain, retract_rows)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
@@ -217,10 +219,14 @@ class SlotineLiCompositeController:
     :class:`~rcac_ros.core.composite.RecursiveCompositeController`; ``K_D`` are the link
     gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
     filtered joint torques (``E`` has n entries).
+
+    ``geometry="natural"`` (doc/design.md §7): before each step the gains ``P_i`` are
+    replaced by ``P_eff(theta_hat_i)``, after it each link's step is retracted into the cone
+    ``J > 0``, as in the recursive law (same ``natural_gain``, same default start).
     """
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
-                 theta_hat0=None, update="implicit"):
+                 theta_hat0=None, update="implicit", geometry="euclidean", natural_gain=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -235,6 +241,20 @@ class SlotineLiCompositeController:
         self._scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
         self._theta = np.zeros(13 * n)
         self._filt = np.zeros((4, n, 13 * n + 1))
+        if geometry not in ("euclidean", "natural"):
+            raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
+        self.geometry = geometry
+        self.natural_gain = None
+        if geometry == "natural":
+            k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
+                joint_values(natural_gain, n, "natural_gain", GainError)
+            if np.any(k <= 0.0):
+                raise GainError("natural_gain: must be > 0")
+            self.natural_gain = k
+            self._nu_gain = np.ascontiguousarray(nu_gain(self.P).reshape(n, 9))
+            self._prev = np.zeros((n, 13))
+        elif natural_gain is not None:
+            raise GainError("natural_gain: only with geometry='natural'")
         self.reset(theta_hat0)
 
     @property
@@ -242,15 +262,27 @@ class SlotineLiCompositeController:
         """Number of joints."""
         return self.model.n
 
+    def _start(self, theta_hat0):
+        if self.geometry == "natural":
+            return default_start(self.model.theta()) if theta_hat0 is None else \
+                as_start(theta_hat0, self.n)
+        return np.zeros((self.n, 13)) if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0")
+
     def reset(self, theta_hat0=None):
-        """Restart: estimates to ``theta_hat0`` (default zero), filters and step count to zero."""
-        self._theta[:] = 0.0 if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0").ravel()
+        """Restart: estimates to ``theta_hat0`` (default zero; natural geometry: its default
+        start), filters and step count to zero."""
+        self._theta[:] = self._start(theta_hat0).ravel()
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
+        if self.geometry == "natural":                      # doc/design.md §7
+            th = self._theta.reshape(self.n, 13)
+            self._prev[:] = th
+            natural_gains_into(th, self.natural_gain, self._nu_gain,
+                               self._data[:self.n, GAIN_P:GAIN_P + 169])
         try:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, q, qd, q_d,
                                          qd_d, qdd_d)
@@ -260,7 +292,19 @@ class SlotineLiCompositeController:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        if self.geometry == "natural":
+            self.retraction_length = retract_rows(self._prev, self._theta.reshape(self.n, 13))
         return tau
+
+    @property
+    def lambda_min(self):
+        """``lambda_min(J(theta_hat_i))`` per link (doc/design.md §7)."""
+        return lambda_min(self.theta_hat)
+
+    @property
+    def consistent(self):
+        """Per link, whether ``theta_hat_i`` is a physical body."""
+        return is_body(self.theta_hat)
 
     def set_applied_torque(self, tau):
         """The torques really applied after the last step (see the recursive controller's)."""

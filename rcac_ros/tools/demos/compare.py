@@ -2,8 +2,9 @@
 
 Laws (:data:`LAWS`): the direct law (``gamma = 0``), the paper's composite law (joint-1
 channel), ``channels="all"`` with the implicit and the explicit update, the power
-channel, fixed-m channel sets, least-squares variants, and the non-recursive
-Slotine-Li law. Scenarios (:data:`SCENARIOS`):
+channel, fixed-m channel sets, least-squares variants, the non-recursive
+Slotine-Li law, and the natural geometry (doc/design.md §7: estimates that stay physical
+bodies) with the Euclidean paper law from the same start. Scenarios (:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
   velocity reading of the desired motion (``rcac experiment``'s run);
@@ -13,9 +14,11 @@ Slotine-Li law. Scenarios (:data:`SCENARIOS`):
 Every law gets the scenario's gains; a law only changes the channels, the update or the
 adaptation gain. Writes ``compare.json``, ``compare.md`` (the table), one figure per
 scenario (``compare_<scenario>.png``: tracking error, parameter error, last link's mass
-estimate, max |E_c| on log scales) and the identifiability report of each run (the
-accumulated excitation ``sum h W_i^T W_i`` per link, and the physical consistency of the
-final estimates, :mod:`rcac_ros.core.identifiability`).
+estimate, max |E_c| on log scales, the smallest ``lambda_min(J_hat_i)`` over time) and the
+identifiability report of each run (the accumulated excitation ``sum h W_i^T W_i`` per
+link, and the physical consistency of the final estimates,
+:mod:`rcac_ros.core.identifiability`). Per law the table says which share of the
+link-steps were consistent (``J(theta_hat_i) > 0``) and the smallest ``lambda_min``.
 """
 
 import argparse
@@ -28,6 +31,7 @@ from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveComp
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
+from rcac_ros.core.pseudo_inertia import default_start, lambda_min
 from rcac_ros.errors import RcacError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_float
@@ -35,6 +39,10 @@ from rcac_ros.tools.closed_loop import closed_loop
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
+
+#: A law's ``theta_hat0`` that means: the natural geometry's default start (doc/design.md §7)
+#: where the scenario gives none.
+NATURAL_START = "natural_default"
 
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
 #: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
@@ -57,11 +65,21 @@ LAWS = {
     "ls_pred_4,6": ("rcac", dict(channels=[4, 6], adaptation="least_squares_prediction",
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
+    "slotine_li_natural": ("slotine_li", dict(geometry="natural")),
+    # doc/design.md §7: estimates kept physically consistent; "paper_nat_start" is the
+    # Euclidean paper law from the natural geometry's default start (the same start)
+    "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
+    "paper_natural": ("rcac", dict(geometry="natural")),
+    "all_natural": ("rcac", dict(channels="all", geometry="natural")),
+    "ls_paper_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
+                                      geometry="natural")),
 }
 
 COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
            ("theta_error_end", "‖θ̃‖ end"), ("max_abs_E", "max |E|"),
-           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."))
+           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."),
+           ("consistent_steps", "consist. all steps"), ("lambda_min", "min λ_min(Ĵ)"),
+           ("payload_mass_error", "payload |m̃|"), ("payload_first_moment_error", "payload ‖h̃‖"))
 
 
 class Scenario:
@@ -96,6 +114,9 @@ SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
 def make_controller(scenario, law, laws=None):
     kind, extra = (laws or LAWS)[law]
     kwargs = dict(scenario.gains, **extra)
+    if isinstance(kwargs.get("theta_hat0"), str):
+        start = scenario.gains.get("theta_hat0")
+        kwargs["theta_hat0"] = default_start(scenario.model.theta()) if start is None else start
     if kind == "slotine_li":
         return SlotineLiCompositeController(scenario.model, **kwargs)
     return RecursiveCompositeController(scenario.model, **kwargs)
@@ -108,7 +129,8 @@ def run_law(scenario, controller, duration, progress=None):
     (``check_estimates``). Returns the time series of the table and the figure, one row
     a period and each taken after that period's update: ``t``, ``e`` (``q - q_d``),
     ``theta_error`` (``||theta_hat - theta||``, the true ``theta`` of the plant then in
-    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``); a
+    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``),
+    ``lambda_min`` (per link, ``lambda_min(J(theta_hat_i))``, doc/design.md §7); a
     diverged run's last row has no estimates (NaN) and ``diverged_at`` is its time.
     With them ``us_per_step`` (the controller's step alone), ``excitation`` (the
     accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
@@ -132,8 +154,12 @@ def run_law(scenario, controller, duration, progress=None):
         truth[t >= scenario.jump - 1e-12] = scenario.theta_end
     with np.errstate(all="ignore"):                  # a diverged law's huge estimates
         theta_error = np.array([np.linalg.norm(d) for d in theta - truth])
+    with np.errstate(all="ignore"):
+        lam = np.full(theta.shape[:2], np.nan)
+        ok = np.all(np.isfinite(theta), axis=(1, 2))
+        lam[ok] = lambda_min(theta[ok])
     return dict(t=t, e=run["q"] - run["q_d"], theta_error=theta_error,
-                mass_last=theta[:, -1, 0], E=E,
+                mass_last=theta[:, -1, 0], E=E, lambda_min=lam,
                 diverged_at=float(t[-1]) if diverged else None,
                 us_per_step=run["step_time"] / len(t) * 1e6, excitation=exc,
                 theta_end=theta_end)
@@ -159,7 +185,16 @@ def metrics(run, scenario, last_seconds=5.0):
     if scenario.jump is not None:
         after = ok & (t >= scenario.jump)
         out["rms_after_payload"] = measure.rms(e[after]) if after.any() else float("nan")
+    lam = run["lambda_min"]
+    finite = np.all(np.isfinite(lam), axis=1)
+    out["consistent_steps"] = float(np.mean(lam[finite] > 0.0)) if finite.any() else 0.0
+    out["consistent_every_step"] = bool(finite.all() and (lam > 0.0).all())
+    out["lambda_min"] = float(np.min(lam[finite])) if finite.any() else float("nan")
     out["mass_last_end"] = float(run["mass_last"][ok][-1])
+    if scenario.jump is not None:
+        est, true = run["theta_end"][-1], scenario.theta_end[-1]
+        out["payload_mass_error"] = float(abs(est[0] - true[0]))
+        out["payload_first_moment_error"] = float(np.linalg.norm(est[1:4] - true[1:4]))
     out["mass_last_true"] = float(scenario.theta_end[-1, 0])
     if run["excitation"] is not None and run["diverged_at"] is None:
         ident = summary(run["excitation"], run["theta_end"])
@@ -196,6 +231,8 @@ def _cell(v, key):
         return str(v)
     if key == "us_per_step":
         return f"{v:.1f}"
+    if key == "consistent_steps":
+        return f"{100 * v:.4g} %"
     return f"{v:.3g}"
 
 
@@ -216,11 +253,12 @@ def markdown(report, n_links=None):
 
 
 def plot(series, report, out_dir):
-    """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
+    """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|, and
+    the smallest lambda_min(J_hat_i) over the links (doc/design.md §7)."""
     from rcac_ros.tools.plots import plt
     paths = []
     for name, runs in series.items():
-        fig, axes = plt.subplots(1, 4, figsize=(24, 5))
+        fig, axes = plt.subplots(1, 5, figsize=(30, 5))
         colors = plt.cm.tab20(np.linspace(0.0, 1.0, 20))      # up to 20 laws, all distinct
         for ax in axes:
             ax.set_prop_cycle(color=list(colors))
@@ -234,9 +272,11 @@ def plot(series, report, out_dir):
                 axes[2].plot(t, r["mass_last"], lw=0.9, label=law)
             axes[0].semilogy(t, err + 1e-12, lw=0.7, label=law)
             axes[3].semilogy(t, np.minimum(r["E"], 1e12) + 1e-16, lw=0.6, label=law)
+            axes[4].plot(t, np.min(r["lambda_min"], axis=1), lw=0.8, label=law)
         truth = next(iter(report[name].values())).get("mass_last_true")
         for ax, title in zip(axes, ("|q - q_d| (rad)", "||theta_hat - theta|| (all links)",
-                                    "last link's mass estimate (kg)", "max_c |E_c| (N m, W)")):
+                                    "last link's mass estimate (kg)", "max_c |E_c| (N m, W)",
+                                    "min_i lambda_min(J_hat_i) (< 0: not a body)")):
             ax.set_title(title)
             ax.set_xlabel("time (s)")
             ax.grid(alpha=0.3)
@@ -244,6 +284,8 @@ def plot(series, report, out_dir):
             axes[2].axhline(truth, color="k", ls="--", lw=0.9, label="true (end)")
         axes[0].set_ylim(1e-7, 1.0)
         axes[3].set_ylim(bottom=1e-12)
+        axes[4].set_yscale("symlog", linthresh=1e-6)
+        axes[4].axhline(0.0, color="k", lw=0.8)
         axes[0].legend(fontsize=7, ncol=2)
         fig.suptitle(f"rcac compare: {name} scenario")
         fig.tight_layout()
