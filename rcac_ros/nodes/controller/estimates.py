@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from rcac_ros.core.model import PARAMETER_NAMES
+from rcac_ros.core.pseudo_inertia import default_start
 from rcac_ros.errors import ConfigError
 
 #: the ``format`` key of an estimates file
@@ -184,7 +185,8 @@ def load(path, joint_names, field="initial_estimates"):
 
 
 def initial_estimates(spec, model, joint_names=None):
-    """The ``initial_estimates`` parameter: ``zero``, ``model`` or a saved file's path.
+    """The ``initial_estimates`` parameter: ``zero``, ``model``, ``nominal`` (the natural
+    geometry's default start, doc/design.md §7) or a saved file's path.
 
     Returns
     -------
@@ -196,8 +198,11 @@ def initial_estimates(spec, model, joint_names=None):
         return np.zeros((model.n, 13))
     if spec == "model":
         return model.theta()
+    if spec == "nominal":                        # doc/design.md §7
+        return default_start(model.theta())
     if not spec:
-        raise ConfigError("initial_estimates: must be 'zero', 'model' or a file path")
+        raise ConfigError("initial_estimates: must be 'zero', 'model', 'nominal' or a file "
+                          "path")
     return load(spec, names)
 
 
