@@ -98,7 +98,7 @@ class RecursiveCompositeController:
         stay a physical body at every step (doc/design.md §7): the gain ``P_i`` becomes
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. With least squares the least-squares gain is kept and only retracted.
+        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §7).
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
@@ -164,6 +164,9 @@ class RecursiveCompositeController:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
+        if geometry == "natural" and self.adaptation != "gradient":
+            raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
+                            f"{self.adaptation!r} (doc/design.md §7)")
         if geometry == "euclidean":
             if natural_gain is not None:
                 raise GainError("natural_gain: only with geometry='natural'")

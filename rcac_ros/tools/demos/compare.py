@@ -71,8 +71,6 @@ LAWS = {
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
-    "ls_paper_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
-                                      geometry="natural")),
 }
 
 COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
