@@ -191,40 +191,55 @@ def retract(old, oo, new, on, J, D, L, K):
     if not cholesky4(J, L):                        # never, from a checked start
         theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
         return 0.0
-    # K = J^-1 D by two triangular solves, column by column
-    for c in range(4):
-        for i in range(4):
-            s = D[i, c]
-            for m in range(i):
-                s -= L[i, m] * K[m, c]
-            K[i, c] = s / L[i, i]
-        for i in range(3, -1, -1):
-            s = K[i, c]
-            for m in range(i + 1, 4):
-                s -= L[m, i] * K[m, c]
-            K[i, c] = s / L[i, i]
-    z2 = 0.0                                       # ||Z||_F^2 = tr(J^-1 D J^-1 D) = tr(K K)
+    d0, d1, d2, d3 = 1.0 / L[0, 0], 1.0 / L[1, 1], 1.0 / L[2, 2], 1.0 / L[3, 3]
+    for j in range(4):                              # L <- L^-1 in place (lower triangular)
+        dj = d0 if j == 0 else d1 if j == 1 else d2 if j == 2 else d3
+        for i in range(j + 1, 4):
+            acc = L[i, j] * dj
+            for m in range(j + 1, i):
+                acc += L[i, m] * L[m, j]
+            L[i, j] = -acc * (d1 if i == 1 else d2 if i == 2 else d3)
+        L[j, j] = dj
+    for i in range(4):                              # K <- J^-1 = L^-T L^-1
+        for j in range(i, 4):
+            acc = 0.0
+            for m in range(j, 4):
+                acc += L[m, i] * L[m, j]
+            K[i, j] = acc
+            K[j, i] = acc
+    tr_inv = K[0, 0] + K[1, 1] + K[2, 2] + K[3, 3]  # >= 1 / lambda_min(J)
+    for i in range(4):                              # L <- J^-1 D
+        for j in range(4):
+            L[i, j] = K[i, 0] * D[0, j] + K[i, 1] * D[1, j] + K[i, 2] * D[2, j] \
+                + K[i, 3] * D[3, j]
+    z2 = 0.0                                       # ||Z||_F^2 = tr(J^-1 D J^-1 D)
     for i in range(4):
         for j in range(4):
-            z2 += K[i, j] * K[j, i]
+            z2 += L[i, j] * L[j, i]
     if not (math.isfinite(z2) and math.isfinite(new[on + 4] + new[on + 5] + new[on + 6])):
         for k in range(13):                         # a step that is not finite: no step
             new[on + k] = old[oo + k]
         return 0.0
     a = 1.0 if z2 <= 1.0 else 1.0 / math.sqrt(z2)
-    for _ in range(HALVINGS):
+    for h in range(HALVINGS):
         half = 0.5 * a * a
         tr = 0.0
-        for i in range(4):                          # J+ = J + a D + a^2/2 D K (symmetric)
+        for i in range(4):                          # K <- J + a D + a^2/2 D J^-1 D
             for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * K[0, j] + D[i, 1] * K[1, j]
-                                                    + D[i, 2] * K[2, j] + D[i, 3] * K[3, j])
-                L[i, j] = v
-                L[j, i] = v
-            tr += L[i, i]
-        for i in range(4):                          # the numerical floor (module docstring)
-            L[i, i] -= FLOOR * tr
-        if cholesky4(L, L):
+                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
+                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
+                K[i, j] = v
+                K[j, i] = v
+            tr += K[i, i]
+        # the numerical floor (module docstring). Shortcut: lambda_min(J+) >= (1 - r + r^2/2)
+        # lambda_min(J) >= lambda_min(J) / 2 (r = a ||Z||_F <= 1) and lambda_min(J) >= 1 /
+        # tr(J^-1), so a J of condition tr(J) tr(J^-1) <= 1e6 keeps J+ far above the floor and
+        # far above the rounding of this step; otherwise a factorisation decides.
+        if h == 0 and tr * tr_inv <= 1e6:
+            break
+        for i in range(4):
+            K[i, i] -= FLOOR * tr
+        if cholesky4(K, K):
             break
         a *= 0.5
     else:
@@ -232,8 +247,8 @@ def retract(old, oo, new, on, J, D, L, K):
     if a > 0.0:
         for i in range(4):
             for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * K[0, j] + D[i, 1] * K[1, j]
-                                                    + D[i, 2] * K[2, j] + D[i, 3] * K[3, j])
+                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
+                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
                 J[i, j] = v
                 J[j, i] = v
     bound = NU_RATIO * (J[0, 0] + J[1, 1] + J[2, 2] + J[3, 3])
