@@ -8,7 +8,8 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros readme-timings clean
+.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros readme-timings \
+	readme-bench clean
 
 demo: $(VENV)/.runtime
 	$(BIN)/rcac demo --out $(OUT)/demo
@@ -34,6 +35,10 @@ bench-ros: $(VENV)/.runtime
 # time `make demo` and `make test` in a fresh clone of HEAD and write them into README.md
 readme-timings:
 	$(PYTHON) rcac_ros/tools/readme_timings.py --clean
+
+# run rcac bench --ros in each controller mode and write the timing table into README.md
+readme-bench: $(VENV)/.runtime
+	$(BIN)/python -m rcac_ros.tools.readme_bench
 
 $(VENV)/.runtime: requirements.txt setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)

@@ -59,3 +59,7 @@ def read_yaml(path, label=None):
         where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""
         problem = getattr(err, "problem", None) or str(err).splitlines()[0]
         raise ConfigError(f"{label}: not valid YAML{where} ({problem})") from None
+
+
+class DependencyError(RcacError, ImportError):
+    """An optional dependency a command needs is not installed (the message names it)."""

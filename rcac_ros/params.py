@@ -24,6 +24,7 @@ import numpy as np
 
 from rcac_ros.core.model import PAPER_GAINS, PRESETS
 from rcac_ros.errors import ConfigError
+from rcac_ros.plants import ENGINES
 
 #: the ROS parameter types a row may have
 TYPES = ("bool", "integer", "double", "string", "double_array", "string_array",
@@ -205,10 +206,15 @@ CONTROLLER = _robot("controller") + (
     Param("geometry", "string", "euclidean",
           "adaptation geometry: 'euclidean' (eq 24 as written) or 'natural' (every link's "
           "estimates stay a physical body at every step, pseudo-inertia J > 0; "
-          "doc/design.md §7)", choices=("euclidean", "natural")),
+          "doc/design.md §8)", choices=("euclidean", "natural")),
     Param("natural_gain", "double", None,
           "geometry 'natural': gain k_i of every link (unset: matched to P at the start, "
-          "doc/design.md §7)", lo=0.0, hi=BIG, strict=True),
+          "doc/design.md §8)", lo=0.0, hi=BIG, strict=True),
+    Param("joint_friction", "bool", False,
+          "also estimate each joint's armature, viscous and Coulomb friction "
+          "(doc/design.md §7), published on ~/friction_estimates"),
+    Param("P_friction", "double_array", (1.0, 10.0, 10.0),
+          "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0"),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),
@@ -244,7 +250,7 @@ CONTROLLER = _robot("controller") + (
     _constraint("goal_time", 0.0, "default goal_time_tolerance, s (0: no time limit)"),
     Param("initial_estimates", "string", "zero",
           "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters), "
-          "'nominal' (the model made a body and halved, doc/design.md §7) or the path of a "
+          "'nominal' (the model made a body and halved, doc/design.md §8) or the path of a "
           "file written by ~/save_estimates; with geometry 'natural' 'zero' (not a body) "
           "means 'nominal'"),
     Param("estimates_file", "string", "",
@@ -310,7 +316,12 @@ SIMULATOR = _robot("simulator") + (
           "(steady-clock timer)", choices=("lockstep", "realtime")),
     Param("dt", "double", PAPER_GAINS["h"], "integration (and control) period, s",
           lo=0.0, hi=10.0, strict=True),
-    Param("substeps", "integer", 1, "RK4 steps per dt", lo=1, hi=1000),
+    Param("engine", "string", ENGINES[0],
+          "the plant: 'builtin' (the package's own dynamics, RK4) or 'mujoco' (the same arm "
+          "in MuJoCo, joint friction as MuJoCo's friction loss; needs the mujoco package); "
+          "doc/plants.md", choices=ENGINES),
+    Param("substeps", "integer", 1, "integrator steps per dt (RK4 on both engines)",
+          lo=1, hi=1000),
     Param("duration", "double", 0.0,
           "stop (exit 0) after this much sim time, s; 0 = run forever", lo=0.0, hi=1e9),
     Param("lockstep_timeout", "double", 0.5,

@@ -17,6 +17,9 @@ EFFORT_COMMANDS = "effort_controller/commands"
 JOINT_TRAJECTORY = "~/joint_trajectory"
 #: std_msgs/Float64MultiArray, theta_hat with layout dims ("link", n), ("parameter", 13)
 PARAMETER_ESTIMATES = "~/parameter_estimates"
+#: std_msgs/Float64MultiArray, the joint estimates (parameter joint_friction, doc/design.md §7)
+#: with layout dims ("joint", n), ("armature,damping,friction", 3), in the model's joint order
+FRICTION_ESTIMATES = "~/friction_estimates"
 #: std_msgs/Float64, the prediction error E of eq 24 of the first channel (joint 1 by default)
 PREDICTION_ERROR = "~/prediction_error"
 #: std_msgs/Float64MultiArray, every channel's prediction error E_c (m values), one layout

@@ -16,6 +16,7 @@ def to_pin(model):
                               np.array(model.inertia[i]))
         pm.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
     pm.gravity.linear = np.array(model.gravity)
+    pm.armature = np.array(model.armature)    # used by Pinocchio's RNEA, CRBA and ABA
     return pm
 
 

@@ -37,8 +37,8 @@ THETA_MAX = 231     #: upper bounds of theta_i (13)
 TRACE_MAX = 244     #: k_0 of link i: the bound on trace(P_i) (least squares)
 THETA_0 = 245       #: theta_0i (13), the nominal estimates the leakage pulls toward
 LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
-NAT_K = 259         #: k_i, the natural geometry's gain (doc/design.md §7)
-NAT_P_NU = 260      #: P_nu,i, 3x3 row-major, its gain on nu (doc/design.md §7)
+NAT_K = 259         #: k_i, the natural geometry's gain (doc/design.md §8)
+NAT_P_NU = 260      #: P_nu,i, 3x3 row-major, its gain on nu (doc/design.md §8)
 CONST_COLS = 269
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
@@ -74,7 +74,7 @@ I_E = 20            #: E of the first channel (the paper's scalar E)
 I_Y = 21            #: y of the first channel
 I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
 I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
-I_NATURAL = 24      #: 1: natural geometry, estimates kept consistent (doc/design.md §7)
+I_NATURAL = 24      #: 1: natural geometry, estimates kept consistent (doc/design.md §8)
 I_RETRACT_MIN = 25  #: the smallest step length a of the retraction at the last step
 SCAL_LEN = 26
 

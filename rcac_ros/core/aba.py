@@ -2,7 +2,8 @@
 
 Per link (``[v; w]`` order, eq 14's ``M_i``):
     forward:   V_i = T V_{i-1} + z6 qd_i,   c_i = Tdot V_{i-1},   p_i = C_i V_i + G_i
-    backward:  U_i = IA_i z6,  D_i = z6^T U_i,  u_i = tau_i - z6^T pA_i
+    backward:  U_i = IA_i z6,  D_i = z6^T U_i + armature_i,
+               u_i = tau_i - tau_f,i - z6^T pA_i     (tau_f: joint friction, doc/design.md §7)
                Ia = IA_i - U_i U_i^T / D_i,  pa = pA_i + Ia c_i + U_i u_i / D_i
                IA_{i-1} += T_i^T Ia T_i,      pA_{i-1} += T_i^T pa
     forward:   a' = T a_{i-1} + c_i,  qdd_i = (u_i - U_i^T a') / D_i,  a_i = a' + z6 qdd_i
@@ -14,8 +15,8 @@ from numba import njit
 from ._validate import joint_vectors
 from .crba import congruence_to_parent, spatial_inertia
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T, \
-    transform_motion, z_cross_rate
+from .spatial import JA, P0, RF0, TH0, joint_friction_torque, joint_rotation, \
+    transform_force_T, transform_motion, z_cross_rate
 
 
 @njit(cache=True)
@@ -28,6 +29,7 @@ def aba_kernel(kin, g, q, qd, tau):
     c = np.empty((n, 6), q.dtype)
     U = np.empty((n, 6), q.dtype)
     u = np.empty(n, q.dtype)
+    Dv = np.empty(n, q.dtype)
     qdd = np.empty(n, q.dtype)
     Ia = np.empty((1, 6, 6), q.dtype)
     vx = vy = vz = wx = wy = wz = 0.0
@@ -54,9 +56,16 @@ def aba_kernel(kin, g, q, qd, tau):
         for k in range(6):
             U[i, k] = IA[i, k, 5]
         D = U[i, 5]
-        u[i] = tau[i] - pA[i, 5]
+        r = kin[i]
+        if r[JA] != 0.0:
+            D += r[JA]
+        Dv[i] = D
+        tf = joint_friction_torque(r, qd[i])
+        if tf != 0.0:
+            u[i] = (tau[i] - tf) - pA[i, 5]
+        else:
+            u[i] = tau[i] - pA[i, 5]
         if i > 0:
-            r = kin[i]
             pa = np.empty(6, q.dtype)
             for a in range(6):
                 for b in range(6):
@@ -81,13 +90,15 @@ def aba_kernel(kin, g, q, qd, tau):
         bx += c[i, 3]
         by += c[i, 4]
         qdd[i] = (u[i] - (U[i, 0] * ax + U[i, 1] * ay + U[i, 2] * az + U[i, 3] * bx
-                          + U[i, 4] * by + U[i, 5] * bz)) / U[i, 5]
+                          + U[i, 4] * by + U[i, 5] * bz)) / Dv[i]
         bz += qdd[i]
     return qdd
 
 
 def forward_dynamics(model, q, qd, tau):
-    """Joint accelerations ``qdd = M^-1 (tau - C qd - G)`` in O(n) (articulated-body algorithm).
+    """Joint accelerations ``qdd = M^-1 (tau - C qd - G - tau_f)`` in O(n) (articulated bodies).
+
+    ``M`` includes the armature and ``tau_f`` the joint friction (doc/design.md §7).
 
     Raises
     ------

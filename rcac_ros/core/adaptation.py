@@ -129,7 +129,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     part)``, and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares).
     With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``.
 
-    Natural geometry (doc/design.md §7): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
+    Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
     (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction.
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
@@ -196,7 +196,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
 def retract_links(state, scal, M4):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
     consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`
-    (doc/design.md §7); the smallest step length goes to ``scal[I_RETRACT_MIN]``."""
+    (doc/design.md §8); the smallest step length goes to ``scal[I_RETRACT_MIN]``."""
     a_min = 1.0
     for i in range(state.shape[0]):
         st = state[i]

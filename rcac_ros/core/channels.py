@@ -16,6 +16,10 @@ Each channel is filtered by ``lambda / (p + lambda)`` (eq 22-23): ``W_cj = lambd
 phi_cj^f) + psi_cj^f``, ``y_c`` = the applied ``c^T tau`` filtered, ``E_c = sum_j W_cj
 theta_hat_j - y_c``.
 
+Per step the kernels (:mod:`rcac_ros.core.composite_kernels`) call, for every channel,
+:func:`start_channels` (``y_c``), :func:`predict_link` link by link in the forward pass
+(``W_cj``, ``E_c``) and :func:`close_channels` (``E_c -= y_c``, the dead zone on E).
+
 Discretisation and its error (with the true parameters, E_c measures only this):
 
 - ``y``: a joint channel's torque is held over the period, so its zero-order hold is

@@ -41,6 +41,8 @@ from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
 from rcac_ros.errors import GainError
+from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, friction_step_kernel, paper_friction_step)
 from .least_squares import initial_factor
 from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
@@ -79,7 +81,7 @@ class RecursiveCompositeController:
         The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
         ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
     update : {"implicit", "explicit"}
-        Discretisation of the prediction-error term (module docstring).
+        Discretisation of the prediction-error term (:mod:`rcac_ros.core.adaptation`).
     adaptation : {"gradient", "least_squares", "least_squares_prediction"}
         ``P_i`` fixed (default), least squares with bounded-gain forgetting on both terms,
         or least squares on the prediction term only (the tracking term keeps ``P``).
@@ -95,13 +97,24 @@ class RecursiveCompositeController:
         scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
     geometry : {"euclidean", "natural"}
         ``"euclidean"`` (default): eq 24 as written. ``"natural"``: every link's estimates
-        stay a physical body at every step (doc/design.md §7): the gain ``P_i`` becomes
+        stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §7).
+        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8).
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
+        joint terms >= 0 with ``joint_friction``).
+    joint_friction : bool
+        Also estimate each joint's armature, viscous and Coulomb friction
+        (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).
+        False (default): the paper's law, to the last bit.
+    friction_hat0 : array_like (n, 3), optional
+        Initial joint estimates (armature, damping, friction); default the model's.
+    P_friction : float, (3,) or (n, 3)
+        Diagonal adaptation gains of the joint terms, positive (default
+        :data:`~rcac_ros.core.joint_friction.P_FRICTION`).
 
     Raises
     ------
@@ -115,6 +128,7 @@ class RecursiveCompositeController:
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
+                 joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
                  geometry="euclidean", natural_gain=None):
         self.model = model
         n = model.n
@@ -135,6 +149,9 @@ class RecursiveCompositeController:
         self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
+        self.joint_friction = bool(joint_friction)
+        if self.joint_friction:
+            self._joint_terms(friction_hat0, P_friction, m)
         self._geometry(geometry, natural_gain, theta_hat0)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
@@ -159,14 +176,17 @@ class RecursiveCompositeController:
         self._const[:, LEAK_M0] = self.leakage_bound
 
     def _geometry(self, geometry, natural_gain, theta_hat0):
-        """Pack the natural geometry's gains (doc/design.md §7), matched at the start."""
+        """Pack the natural geometry's gains (doc/design.md §8), matched at the start."""
         if geometry not in GEOMETRIES:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
+        if geometry == "natural" and self.joint_friction:
+            raise GainError("geometry: 'natural' with joint_friction is not built yet "
+                            "(doc/design.md §8)")
         if geometry == "natural" and self.adaptation != "gradient":
             raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
-                            f"{self.adaptation!r} (doc/design.md §7)")
+                            f"{self.adaptation!r} (doc/design.md §8)")
         if geometry == "euclidean":
             if natural_gain is not None:
                 raise GainError("natural_gain: only with geometry='natural'")
@@ -192,9 +212,28 @@ class RecursiveCompositeController:
         return np.zeros((self.n, 13)) if theta_hat0 is None else \
             as_array(theta_hat0, (self.n, 13), "theta_hat0")
 
+    def _joint_terms(self, friction_hat0, P_friction, m):
+        """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
+        n = self.n
+        self.P_friction = friction_gain(P_friction, n)
+        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+            as_array(friction_hat0, (n, 3), "friction_hat0")
+        self._jdata = np.zeros((n, JOINT_COLS))
+        self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
+        self._jdata[:, F_VC] = self.model.friction_velocity
+        self._jfilt = np.zeros((m, n, JFILT_COLS))
+
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
-        through :func:`rcac_step_kernel`), else the general kernel."""
+        through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
+        :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
+        :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
+        if self.joint_friction:
+            kernel = paper_friction_step if is_paper_law(self._chan, self._scal) else \
+                friction_step_kernel
+            jdata, jfilt = self._jdata, self._jfilt
+            self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
+            return
         self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
             rcac_step_kernel
 
@@ -264,9 +303,12 @@ class RecursiveCompositeController:
         """Number of prediction channels."""
         return len(self.channels)
 
-    def reset(self, theta_hat0=None):
+    def reset(self, theta_hat0=None, friction_hat0=None):
         """Restart: estimates to ``theta_hat0`` (default: 0, or the natural geometry's
         default start), filters, gains and step count.
+
+        With ``joint_friction``, the joint estimates go to ``friction_hat0`` (default: the
+        constructor's).
 
         Raises
         ------
@@ -274,6 +316,11 @@ class RecursiveCompositeController:
             On a ``theta_hat0`` of wrong shape, not finite, or (natural geometry) not a body.
         """
         th = self._start(theta_hat0)
+        if self.joint_friction:
+            fh = self.friction_hat0 if friction_hat0 is None else \
+                as_array(friction_hat0, (self.n, 3), "friction_hat0")
+            self._jdata[:, F_HAT:F_HAT + 3] = fh
+            self._jfilt[:] = 0.0
         self._state[:] = 0.0
         self._state[:, THETA_HAT:THETA_HAT + 13] = th
         self._state[:, P_FACTOR:P_FACTOR + 169] = initial_factor(self.P)
@@ -351,7 +398,7 @@ class RecursiveCompositeController:
     @property
     def lambda_min(self):
         """``lambda_min(J(theta_hat_i))`` per link, (n,): > 0 for a physical body
-        (doc/design.md §7)."""
+        (doc/design.md §8)."""
         return lambda_min(self._state[:, THETA_HAT:THETA_HAT + 13])
 
     @property
@@ -362,8 +409,23 @@ class RecursiveCompositeController:
     @property
     def retraction_length(self):
         """The natural geometry's smallest step length ``a`` at the last step (1: no link's
-        step was shortened; doc/design.md §7)."""
+        step was shortened; doc/design.md §8)."""
         return float(self._scal[I_RETRACT_MIN])
+
+    @property
+    def friction_hat(self):
+        """Joint estimates (armature, damping, friction), shape (n, 3) (a copy); None without
+        ``joint_friction`` (doc/design.md §7)."""
+        if not self.joint_friction:
+            return None
+        return self._jdata[:, F_HAT:F_HAT + 3].copy()
+
+    def set_friction_hat(self, friction_hat):
+        """Set the joint estimates (n, 3), e.g. restored from a file; filters keep running."""
+        if not self.joint_friction:
+            raise GainError("friction_hat: the controller has no joint terms "
+                            "(joint_friction=False)")
+        self._jdata[:, F_HAT:F_HAT + 3] = as_array(friction_hat, (self.n, 3), "friction_hat")
 
     @property
     def E(self):

@@ -271,7 +271,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     if not frozen and scal[I_PROJECT] != 0.0:
         project(const, state)
     if not frozen and scal[I_NATURAL] != 0.0:
-        retract_links(state, scal, M4)                # doc/design.md §7
+        retract_links(state, scal, M4)                # doc/design.md §8
     for i in range(n):
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]

@@ -4,7 +4,7 @@ import numpy as np
 from numba import njit
 
 from ._validate import joint_vectors
-from .spatial import P0, RF0, TH0, joint_rotation, transform_force_T
+from .spatial import JA, P0, RF0, TH0, joint_rotation, transform_force_T
 
 
 @njit(cache=True)
@@ -62,7 +62,8 @@ def congruence_to_parent(C, i, px, py, pz, A, k, B, j):
 def crba_kernel(kin, q):
     """``M(q)``: composite inertias ``Ic_{i-1} += T_i^T Ic_i T_i``, then column i by ``jT_i^T``.
 
-    ``M_ij = z6^T (jT_i)^T Ic_i z6`` for j <= i.
+    ``M_ij = z6^T (jT_i)^T Ic_i z6`` for j <= i, plus the armature on the diagonal
+    (doc/design.md §7).
     """
     n = q.shape[0]
     C = np.empty((n, 9), q.dtype)
@@ -77,6 +78,8 @@ def crba_kernel(kin, q):
     for i in range(n):
         f = (Ic[i, 0, 5], Ic[i, 1, 5], Ic[i, 2, 5], Ic[i, 3, 5], Ic[i, 4, 5], Ic[i, 5, 5])
         H[i, i] = f[5]
+        if kin[i, JA] != 0.0:
+            H[i, i] += kin[i, JA]
         for j in range(i, 0, -1):
             r = kin[j]
             f = transform_force_T(C, j, r[P0], r[P0 + 1], r[P0 + 2], f[0], f[1], f[2], f[3],
@@ -88,6 +91,8 @@ def crba_kernel(kin, q):
 
 def mass_matrix(model, q):
     """The joint-space inertia matrix ``M(q)``, shape (n, n), symmetric positive definite.
+
+    The armature of each joint is on the diagonal (doc/design.md §7).
 
     Raises
     ------

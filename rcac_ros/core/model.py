@@ -5,7 +5,9 @@ Conventions (doc/design.md §1): frame ``i`` is frame ``i-1`` translated by
 ``R_fix[i]`` and then by ``Rz(q_i)``; so ``iC_{i-1} = (R_fix_i Rz(q_i))^T``.
 Each link carries its mass, its centre of mass ``com`` (frame ``i``) and its
 inertia ``inertia`` about the centre of mass (link axes, tensor entries as in
-URDF).
+URDF). Each joint carries its reflected rotor inertia ``armature``, its viscous
+``damping`` and its Coulomb ``friction``, smoothed by ``tanh(qd / friction_velocity)``
+(doc/design.md §7).
 
 :class:`RobotModel` is immutable, like Pinocchio's ``Model``; per-step work
 lives in the controllers' and the simulator's own state.
@@ -17,7 +19,7 @@ import os
 import numpy as np
 
 from rcac_ros.errors import ConfigError, ModelError, read_yaml
-from ._validate import as_array, joint_values
+from ._validate import as_array, joint_values, scalar
 from .spatial import pack_kinematics
 
 #: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, doc/design.md §2).
@@ -25,6 +27,17 @@ PARAMETER_NAMES = (
     "m", "m*px", "m*py", "m*pz", "m*px^2", "m*py^2", "m*pz^2",
     "m*px*py-Ixy", "m*px*pz-Ixz", "m*py*pz-Iyz", "Ixx", "Iyy", "Izz",
 )
+
+
+#: v_c of the smooth Coulomb law ``sigma(v) = tanh(v / v_c)``, rad/s (doc/design.md §7).
+#: 0.1 rad/s: the Panda's identified friction (Gaz et al., RA-L 2019) saturates at 0.2-0.7 N m
+#: with a slope of 0.7-2 N m s/rad at rest, a ratio of 0.1-1 rad/s; and the slope it adds,
+#: friction / v_c, keeps the simulator's RK4 at 2 ms stable on the Panda's lightest joint
+#: (joint 7, about 0.0055 kg m^2: h * 0.5 / (0.1 * 0.0055) = 1.8 < 2.78) without armature.
+FRICTION_VELOCITY = 0.1
+
+#: Names of the three joint parameters, in the order of ``friction_hat`` (doc/design.md §7).
+JOINT_PARAMETER_NAMES = ("armature", "damping", "friction")
 
 
 def rot_x(a):
@@ -86,6 +99,14 @@ class RobotModel:
     effort_limit, position_lower, position_upper, velocity_limit : array_like, shape (n,), optional
         Joint limits (default unbounded). ``effort_limit`` is the default torque limit.
     name : str, optional
+    armature : array_like, shape (n,), optional
+        Reflected rotor inertia of each joint, kg m^2, added to ``M_ii`` (default 0).
+    damping : array_like, shape (n,), optional
+        Viscous friction of each joint, N m s/rad: torque ``damping_i qd_i`` (default 0).
+    friction : array_like, shape (n,), optional
+        Coulomb friction of each joint, N m: torque ``friction_i tanh(qd_i / v_c)`` (default 0).
+    friction_velocity : float, optional
+        ``v_c`` of the smooth Coulomb law, rad/s, > 0 (default :data:`FRICTION_VELOCITY`).
     check_triangle : bool, optional
         Also require the principal moments to satisfy ``I1 + I2 >= I3`` (default True).
         The paper's own Table 1 violates it (``diag[2 2 200]``), so :func:`css_arm`
@@ -95,12 +116,14 @@ class RobotModel:
     ------
     ModelError
         On a wrong shape, a NaN/Inf, a mass <= 0, a non-physical inertia, a
-        rotation that is not proper orthonormal, or duplicate joint names.
+        rotation that is not proper orthonormal, duplicate joint names, a negative
+        joint term or ``friction_velocity <= 0``.
     """
 
     def __init__(self, p, R_fix, mass, com, inertia, gravity=(0.0, 0.0, 0.0), joint_names=None,
                  effort_limit=None, position_lower=None, position_upper=None,
-                 velocity_limit=None, name="robot", check_triangle=True):
+                 velocity_limit=None, name="robot", check_triangle=True, armature=None,
+                 damping=None, friction=None, friction_velocity=FRICTION_VELOCITY):
         mass = as_array(mass, (None,), "mass", ModelError)
         n = mass.shape[0]
         if n < 1:
@@ -142,13 +165,23 @@ class RobotModel:
         bad = np.flatnonzero(self.position_lower > self.position_upper)
         if bad.size:
             raise ModelError(f"position_lower[{bad[0]}]: above position_upper[{bad[0]}]")
+        for label, value in (("armature", armature), ("damping", damping),
+                             ("friction", friction)):
+            arr = limits(value, 0.0, label)
+            if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+                raise ModelError(f"{label}: every entry must be finite and >= 0")
+            setattr(self, label, arr)
+        self.friction_velocity = scalar(friction_velocity, "friction_velocity", ModelError,
+                                        minimum=0.0, strict=True)
         self._theta = np.array([theta_from_inertia(self.mass[i], self.com[i], self.inertia[i])
                                 for i in range(n)])
-        #: (n, 25) the rows the compiled kernels read: p, R_fix, theta (:mod:`.spatial`)
+        #: (n, 29) the rows the compiled kernels read: p, R_fix, theta, the joint terms
+        #: (:mod:`.spatial`)
         self.packed = pack_kinematics(self)
         for arr in (self.p, self.R_fix, self.mass, self.com, self.inertia, self.gravity,
                     self.effort_limit, self.velocity_limit, self.position_lower,
-                    self.position_upper, self._theta, self.packed):
+                    self.position_upper, self._theta, self.packed, self.armature,
+                    self.damping, self.friction):
             arr.setflags(write=False)
 
     @property
@@ -160,13 +193,24 @@ class RobotModel:
         """The true parameters, shape (n, 13), in the paper's order (:data:`PARAMETER_NAMES`)."""
         return self._theta.copy()
 
+    def joint_terms(self):
+        """The joint parameters, shape (n, 3): armature, damping, friction (doc/design.md §7)."""
+        return np.column_stack([self.armature, self.damping, self.friction])
+
+    @property
+    def has_joint_terms(self):
+        """Whether any joint has armature, damping or friction (doc/design.md §7)."""
+        return bool(np.any(self.armature) or np.any(self.damping) or np.any(self.friction))
+
     def replace(self, **changes):
         """A copy of the model with some constructor arguments changed."""
         args = dict(p=self.p, R_fix=self.R_fix, mass=self.mass, com=self.com,
                     inertia=self.inertia, gravity=self.gravity, joint_names=self.joint_names,
                     effort_limit=self.effort_limit, position_lower=self.position_lower,
                     position_upper=self.position_upper, velocity_limit=self.velocity_limit,
-                    name=self.name, check_triangle=self.check_triangle)
+                    name=self.name, check_triangle=self.check_triangle,
+                    armature=self.armature, damping=self.damping, friction=self.friction,
+                    friction_velocity=self.friction_velocity)
         args.update(changes)
         return RobotModel(**args)
 
@@ -181,7 +225,9 @@ class RobotModel:
                           tile(self.inertia), self.gravity, names, tile(self.effort_limit),
                           tile(self.position_lower), tile(self.position_upper),
                           tile(self.velocity_limit), name=f"{self.name}x{k}",
-                          check_triangle=self.check_triangle)
+                          check_triangle=self.check_triangle, armature=tile(self.armature),
+                          damping=tile(self.damping), friction=tile(self.friction),
+                          friction_velocity=self.friction_velocity)
 
     def __repr__(self):
         return f"RobotModel(name={self.name!r}, n={self.n}, gravity={self.gravity.tolist()})"
@@ -212,14 +258,15 @@ class RobotModel:
             raise ConfigError(f"{source}: 'links' must be a non-empty list")
         fields = {k: [] for k in ("p", "R_fix", "mass", "com", "inertia", "joint_names",
                                   "effort_limit", "position_lower", "position_upper",
-                                  "velocity_limit")}
+                                  "velocity_limit", "armature", "damping", "friction")}
         for i, link in enumerate(links):
             where = f"{source}: links[{i}]"
             if not isinstance(link, dict):
                 raise ConfigError(f"{where}: must be a mapping")
             unknown = set(link) - {"joint", "p", "rpy", "rpy_deg", "R_fix", "mass", "com",
                                    "inertia", "effort_limit", "position_lower",
-                                   "position_upper", "velocity_limit"}
+                                   "position_upper", "velocity_limit", "armature", "damping",
+                                   "friction"}
             if unknown:
                 raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}")
             for key in ("p", "mass", "com", "inertia"):
@@ -245,13 +292,17 @@ class RobotModel:
                                  ("position_upper", np.inf), ("velocity_limit", np.inf)):
                 fields[key].append(_scalar(link[key], f"{where}.{key}") if key in link
                                    else default)
+            for key in JOINT_PARAMETER_NAMES:
+                fields[key].append(_scalar(link[key], f"{where}.{key}") if key in link else 0.0)
         gravity = _vector(doc.get("gravity", [0.0, 0.0, 0.0]), 3, f"{source}: gravity")
         triangle = doc.get("check_triangle_inequality", True)
         if not isinstance(triangle, bool):
             raise ConfigError(f"{source}: check_triangle_inequality must be true or false")
+        v_c = _scalar(doc.get("friction_velocity", FRICTION_VELOCITY),
+                      f"{source}: friction_velocity")
         try:
             return cls(gravity=gravity, name=str(doc.get("name", "robot")),
-                       check_triangle=triangle, **fields)
+                       check_triangle=triangle, friction_velocity=v_c, **fields)
         except ModelError as err:
             raise ModelError(f"{source}: {err}") from None
 
@@ -266,9 +317,16 @@ class RobotModel:
                 value = float(getattr(self, key)[i])
                 if np.isfinite(value):
                     link[key] = value
+            for key in JOINT_PARAMETER_NAMES:
+                value = float(getattr(self, key)[i])
+                if value != 0.0:
+                    link[key] = value
             links.append(link)
-        return {"name": self.name, "gravity": self.gravity.tolist(),
-                "check_triangle_inequality": self.check_triangle, "links": links}
+        doc = {"name": self.name, "gravity": self.gravity.tolist(),
+               "check_triangle_inequality": self.check_triangle, "links": links}
+        if self.friction_velocity != FRICTION_VELOCITY:
+            doc["friction_velocity"] = self.friction_velocity
+        return doc
 
 
 def check_inertia(I, name, check_triangle=True):

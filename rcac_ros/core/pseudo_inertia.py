@@ -1,4 +1,4 @@
-"""Physical consistency of the 13 parameters, the natural adaptation geometry (doc/design.md §7).
+"""Physical consistency of the 13 parameters, the natural adaptation geometry (doc/design.md §8).
 
 A body's standard parameters ``pi`` (mass m, first moment h = m c, inertia I_o about the
 frame origin; Pinocchio's order ``[m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``) are
@@ -18,7 +18,7 @@ and ``theta -> (J, nu)`` with ``nu = (t5, t6, t7)`` is a linear bijection of R^1
 (symmetric 4x4) x R^3. ``nu`` is what the 13 add to a body: for a body ``nu = h_k^2 / m``,
 and the regressor sees it only through ``t5 + t6 + t7`` (the rank-11 direction).
 
-The natural geometry (doc/design.md §7) replaces the gain ``P`` of eq 24 by
+The natural geometry (doc/design.md §8) replaces the gain ``P`` of eq 24 by
 
     P_eff(theta_hat): J(dtheta) = k J_hat G(g) J_hat,   dnu = P_nu u_nu(g)
 
@@ -47,7 +47,7 @@ from rcac_ros.errors import GainError, InputError
 STANDARD_NAMES = ("m", "hx", "hy", "hz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 #: d theta / d nu at fixed J (13 x 3): nu_k moves t5+k and takes it off the two other
-#: diagonal inertia entries (doc/design.md §7).
+#: diagonal inertia entries (doc/design.md §8).
 NU_BASIS = np.zeros((13, 3))
 for _k in range(3):
     NU_BASIS[4 + _k, _k] = 1.0
@@ -55,10 +55,10 @@ for _k in range(3):
         if _j != _k:
             NU_BASIS[10 + _j, _k] = -1.0
 
-#: Default scale of the nominal model when no ``theta_hat0`` is given (doc/design.md §7).
+#: Default scale of the nominal model when no ``theta_hat0`` is given (doc/design.md §8).
 NOMINAL_SCALE = 0.5
 #: Smallest eigenvalue of the centre-of-mass second moment of a default start, as a
-#: fraction of its trace (a nominal that is not a body is made one, doc/design.md §7).
+#: fraction of its trace (a nominal that is not a body is made one, doc/design.md §8).
 SECOND_MOMENT_FLOOR = 0.01
 
 
@@ -144,7 +144,7 @@ def cholesky4(J, L):
 
 @njit(cache=True, inline="always")
 def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
-    """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §7).
+    """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §8).
 
     ``th[o:o+13]`` is theta_hat, ``k`` the natural gain, ``Pnu[po:po+9]`` the 3x3 gain on nu
     (row-major); ``J``, ``G``, ``T`` are 4x4 scratch. ``g . out = k tr(G J G J) + u_nu^T P_nu
@@ -261,7 +261,7 @@ def retract(old, oo, new, on, J, D, L, K):
 @njit(cache=True)
 def natural_gains_into(theta, k, Pnu, out):
     """``out[i]`` (169, row-major) = ``P_eff(theta_i)`` for every link (the non-recursive
-    law's explicit gains, doc/design.md §7); ``theta`` (n, 13), ``k`` (n,), ``Pnu`` (n, 9)."""
+    law's explicit gains, doc/design.md §8); ``theta`` (n, 13), ``k`` (n,), ``Pnu`` (n, 9)."""
     M = np.empty((3, 4, 4))
     e = np.zeros(13)
     col = np.empty(13)
@@ -360,7 +360,7 @@ def check_body(theta, name="theta_hat0", exc=InputError):
         lam = float(np.atleast_1d(lambda_min(theta))[i])
         raise exc(f"{name}: link {i + 1} is not a physical body (lambda_min of its "
                   f"pseudo-inertia J = {lam:.3g} <= 0); the natural geometry needs one "
-                  f"(doc/design.md §7)")
+                  f"(doc/design.md §8)")
 
 
 def nearest_body(theta, floor=SECOND_MOMENT_FLOOR):
@@ -414,7 +414,7 @@ def log_det_hessian(theta):
 
 def matched_gain(P, theta_hat0):
     """Default natural gain ``k_i`` per link: the largest k for which the natural law's gain
-    at the start nowhere exceeds ``P_i`` on the pseudo-inertia (doc/design.md §7).
+    at the start nowhere exceeds ``P_i`` on the pseudo-inertia (doc/design.md §8).
 
     With ``A`` the map theta -> J's 10 entries and ``H`` the Hessian of ``-log det J`` in
     those entries, ``k`` is the smallest eigenvalue of ``H^1/2 A P A^T H^1/2``: then

@@ -5,8 +5,8 @@ from numba import njit
 
 from ._validate import joint_vectors
 from .regressor import link_wrench
-from .spatial import P0, RF0, TH0, joint_rotation, propagate, rotate, \
-    transform_force_T
+from .spatial import JA, P0, RF0, TH0, joint_friction_torque, joint_rotation, propagate, \
+    rotate, transform_force_T
 
 
 @njit(cache=True)
@@ -17,6 +17,8 @@ def rnea_kernel(kin, g, q, qd, qdd):
                          Vdot_i = T Vdot_{i-1} + Tdot V_{i-1} + z6 qdd_i   (eq 11)
                          F*_i = M_i Vdot_i + C_i V_i + G_i                 (eq 13)
     Backward (i = n..1): F_i = (i+1 T_i)^T F_{i+1} + F*_i,  tau_i = z6^T F_i   (eqs 15, 16)
+    Joint terms (doc/design.md §7): tau_i += armature_i qdd_i + damping_i qd_i
+                                             + friction_i tanh(qd_i / v_c)
     """
     n = q.shape[0]
     C = np.empty((n, 9), q.dtype)
@@ -43,11 +45,20 @@ def rnea_kernel(kin, g, q, qd, qdd):
         fx, fy, fz = fx + Fs[i, 0], fy + Fs[i, 1], fz + Fs[i, 2]
         nx, ny, nz = nx + Fs[i, 3], ny + Fs[i, 4], nz + Fs[i, 5]
         tau[i] = nz
+        r = kin[i]
+        if r[JA] != 0.0:
+            tau[i] += r[JA] * qdd[i]
+        tf = joint_friction_torque(r, qd[i])
+        if tf != 0.0:
+            tau[i] += tf
     return tau
 
 
 def inverse_dynamics(model, q, qd, qdd):
-    """Joint torques ``tau = M(q) qdd + C(q, qd) qd + G(q)`` by the paper's recursion.
+    """Joint torques ``tau = M(q) qdd + C(q, qd) qd + G(q) + tau_f`` by the paper's recursion.
+
+    ``M`` includes the armature on its diagonal and ``tau_f`` is the joint friction,
+    ``damping qd + friction tanh(qd / v_c)`` (doc/design.md §7).
 
     Parameters
     ----------

@@ -1,4 +1,8 @@
-"""The plant: forward dynamics (articulated-body algorithm) integrated by RK4, torque held."""
+"""The plant: forward dynamics (articulated-body algorithm) integrated by RK4, torque held.
+
+The model's joint terms (armature, damping, smooth Coulomb friction, doc/design.md §7) are in
+the articulated-body algorithm, so the plant has them whenever its model does.
+"""
 
 import numpy as np
 from numba import njit

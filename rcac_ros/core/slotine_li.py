@@ -25,6 +25,8 @@ this law, step by step.
 Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
 """
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -36,6 +38,7 @@ from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError
 from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
                              natural_gains_into, nu_gain, retract_rows)
+from .joint_friction import P_FRICTION, friction_gain
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
@@ -53,14 +56,17 @@ def finish(filt, scal, tau, y, e, m):
     return tau
 
 
-@njit(f"{VEC}(float64[:, ::1], {VEC}, float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})",
-      cache=True)
-def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
+@njit(f"{VEC}(float64[:, ::1], {VEC}, float64[:, :, ::1], float64[:, ::1], {VEC}, {VEC}, "
+      f"{VEC}, {VEC}, {VEC})", cache=True)
+def slotine_li_step_kernel(data, theta_hat, filt, joint, q, qd, q_d, qd_d, qdd_d):
     """One period of eqs 2 and 7 with explicit joint-space matrices.
 
     ``data`` holds the gains in the layout of :mod:`rcac_ros.core._packing`; ``filt`` is
-    (4, n, 13n + 1): Phi^f, Psi^f, previous Phi, previous Psi, with the filtered applied
-    torque y in column 13n of filt[0], the applied torque in filt[1] and e in filt[2].
+    (4, n, p + 1): Phi^f, Psi^f, previous Phi, previous Psi, with the filtered applied
+    torque y in column p of filt[0], the applied torque in filt[1] and e in filt[2].
+    ``joint`` is (0, 4) without joint terms (p = 13n), else (n, 4): the diagonal gain of
+    joint j's terms (armature, damping, friction) and v_c; their columns are 13n + 3j + c
+    (p = 16n, doc/design.md §7).
     """
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
@@ -69,7 +75,8 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    m = 13 * n
+    nj = 13 * n                               # first column of the joint terms
+    m = nj + 3 * joint.shape[0]
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
@@ -138,6 +145,30 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
                 filt[2, k, col] = phi
                 filt[3, k, col] = psi
                 W[k, col] = lam * (phi - filt[0, k, col]) + filt[1, k, col]
+        if m > nj:
+            # joint i's terms, row i only: Y_f = [qdd_ri, qd_ri, sigma(qd_i)],
+            # Phi_f = [qd_i, 0, 0], Psi_f = [0, qd_i, sigma(qd_i)]  (doc/design.md §7)
+            sig = math.tanh(qdi / joint[i, 3])
+            Yj[i, nj + 3 * i] = qdd_d[i] - row[LAMBDA] * (qdi - qd_d[i])
+            Yj[i, nj + 3 * i + 1] = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
+            Yj[i, nj + 3 * i + 2] = sig
+            for c in range(3):
+                col = nj + 3 * i + c
+                phi = qdi if c == 0 else 0.0
+                psi = 0.0 if c == 0 else (qdi if c == 1 else sig)
+                if first:
+                    filt[0, i, col] = phi
+                    filt[1, i, col] = 0.0
+                else:
+                    filt[0, i, col] = (fe * filt[0, i, col] + fb0 * filt[2, i, col]
+                                       + fb1 * (phi - filt[2, i, col]))
+                    filt[1, i, col] = (fe * filt[1, i, col] + fb0 * filt[3, i, col]
+                                       + fb1 * (psi - filt[3, i, col]))
+                filt[2, i, col] = phi
+                filt[3, i, col] = psi
+                for k in range(n):
+                    W[k, col] = 0.0
+                W[i, col] = lam * (phi - filt[0, i, col]) + filt[1, i, col]
     # joint-space feedback gain K = sum_i J_i^T K_Di J_i, then tau = Y theta_hat - K s (eq 2)
     K = np.zeros((n, n), q.dtype)
     for i in range(n):
@@ -186,6 +217,11 @@ def slotine_li_step_kernel(data, theta_hat, filt, q, qd, q_d, qd_d, qdd_d):
                 for c in range(13):
                     acc += const[i, GAIN_P + 13 * a + c] * W[k, 13 * i + c]
                 PWt[13 * i + a, k] = acc
+    for col in range(nj, m):                  # the joint terms: diagonal gains
+        pf = joint[(col - nj) // 3, (col - nj) % 3]
+        r[col] = theta_hat[col] - h * pf * g[col]
+        for k in range(n if implicit else 0):
+            PWt[col, k] = pf * W[k, col]
     if not implicit:
         theta_hat[:] = r
         return finish(filt, scal, tau, y, e, m)
@@ -220,13 +256,17 @@ class SlotineLiCompositeController:
     gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
     filtered joint torques (``E`` has n entries).
 
-    ``geometry="natural"`` (doc/design.md §7): before each step the gains ``P_i`` are
+    ``geometry="natural"`` (doc/design.md §8): before each step the gains ``P_i`` are
     replaced by ``P_eff(theta_hat_i)``, after it each link's step is retracted into the cone
     ``J > 0``, as in the recursive law (same ``natural_gain``, same default start).
+    ``joint_friction``, ``friction_hat0`` and ``P_friction`` add each joint's armature,
+    viscous and Coulomb friction as three more columns of its row of ``Y``, ``Phi``, ``Psi``
+    (doc/design.md §8).
     """
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
-                 theta_hat0=None, update="implicit", geometry="euclidean", natural_gain=None):
+                 theta_hat0=None, update="implicit", joint_friction=False, friction_hat0=None,
+                 P_friction=P_FRICTION, geometry="euclidean", natural_gain=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -239,12 +279,14 @@ class SlotineLiCompositeController:
             raise GainError(f"update: expected 'implicit' or 'explicit', got {update!r}")
         self.update = update
         self._scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
-        self._theta = np.zeros(13 * n)
-        self._filt = np.zeros((4, n, 13 * n + 1))
+        self.joint_friction = bool(joint_friction)
         if geometry not in ("euclidean", "natural"):
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
+        if geometry == "natural" and self.joint_friction:
+            raise GainError("geometry: 'natural' with joint_friction is not built yet "
+                            "(doc/design.md §8)")
         if geometry == "natural":
             k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
                 joint_values(natural_gain, n, "natural_gain", GainError)
@@ -255,6 +297,16 @@ class SlotineLiCompositeController:
             self._prev = np.zeros((n, 13))
         elif natural_gain is not None:
             raise GainError("natural_gain: only with geometry='natural'")
+        self._joint = np.zeros((n if self.joint_friction else 0, 4))
+        if self.joint_friction:
+            self.P_friction = friction_gain(P_friction, n)
+            self.friction_hat0 = model.joint_terms() if friction_hat0 is None else \
+                as_array(friction_hat0, (n, 3), "friction_hat0")
+            self._joint[:, :3] = self.P_friction
+            self._joint[:, 3] = model.friction_velocity
+        self._p = (16 if self.joint_friction else 13) * n     # number of parameters
+        self._theta = np.zeros(self._p)
+        self._filt = np.zeros((4, n, self._p + 1))
         self.reset(theta_hat0)
 
     @property
@@ -269,36 +321,43 @@ class SlotineLiCompositeController:
         return np.zeros((self.n, 13)) if theta_hat0 is None else \
             as_array(theta_hat0, (self.n, 13), "theta_hat0")
 
-    def reset(self, theta_hat0=None):
+    def reset(self, theta_hat0=None, friction_hat0=None):
         """Restart: estimates to ``theta_hat0`` (default zero; natural geometry: its default
-        start), filters and step count to zero."""
-        self._theta[:] = self._start(theta_hat0).ravel()
+        start) and, with the joint terms, to ``friction_hat0`` (default the constructor's);
+        filters and step count to zero."""
+        nl = 13 * self.n
+        self._theta[:nl] = self._start(theta_hat0).ravel()
+        if self.joint_friction:
+            self._theta[nl:] = (self.friction_hat0 if friction_hat0 is None else
+                                as_array(friction_hat0, (self.n, 3), "friction_hat0")).ravel()
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
-        if self.geometry == "natural":                      # doc/design.md §7
-            th = self._theta.reshape(self.n, 13)
+        if self.geometry == "natural":                      # doc/design.md §8
+            th = self._theta[:13 * self.n].reshape(self.n, 13)
             self._prev[:] = th
             natural_gains_into(th, self.natural_gain, self._nu_gain,
                                self._data[:self.n, GAIN_P:GAIN_P + 169])
         try:
-            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, q, qd, q_d,
-                                         qd_d, qdd_d)
+            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint, q, qd,
+                                         q_d, qd_d, qdd_d)
         except TypeError:
             values = (q, qd, q_d, qd_d, qdd_d)
             args = [as_array(v, (None,), k) for k, v in zip(INPUT_NAMES, values)]
-            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, *args)
+            tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint,
+                                         *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         if self.geometry == "natural":
-            self.retraction_length = retract_rows(self._prev, self._theta.reshape(self.n, 13))
+            self.retraction_length = retract_rows(self._prev,
+                                                  self._theta[:13 * self.n].reshape(self.n, 13))
         return tau
 
     @property
     def lambda_min(self):
-        """``lambda_min(J(theta_hat_i))`` per link (doc/design.md §7)."""
+        """``lambda_min(J(theta_hat_i))`` per link (doc/design.md §8)."""
         return lambda_min(self.theta_hat)
 
     @property
@@ -308,19 +367,26 @@ class SlotineLiCompositeController:
 
     def set_applied_torque(self, tau):
         """The torques really applied after the last step (see the recursive controller's)."""
-        self._filt[1, :, 13 * self.n] = as_array(tau, (self.n,), "tau")
+        self._filt[1, :, self._p] = as_array(tau, (self.n,), "tau")
 
     @property
     def theta_hat(self):
         """Current estimates, shape (n, 13) (a copy)."""
-        return self._theta.reshape(self.n, 13).copy()
+        return self._theta[:13 * self.n].reshape(self.n, 13).copy()
+
+    @property
+    def friction_hat(self):
+        """Joint estimates (armature, damping, friction), (n, 3); None without the joint terms."""
+        if not self.joint_friction:
+            return None
+        return self._theta[13 * self.n:].reshape(self.n, 3).copy()
 
     @property
     def E(self):
         """Prediction errors ``e`` of the n filtered joint torques at the last step (eq 6)."""
-        return self._filt[2, :, 13 * self.n].copy()
+        return self._filt[2, :, self._p].copy()
 
     @property
     def y(self):
         """Filtered applied joint torques ``y = tau^f`` at the last step, (n,)."""
-        return self._filt[0, :, 13 * self.n].copy()
+        return self._filt[0, :, self._p].copy()

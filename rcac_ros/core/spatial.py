@@ -5,7 +5,8 @@ first (doc/design.md §1). Frame ``i`` is reached from frame ``i-1`` by ``p_i``,
 ``R_fix_i``, then ``Rz(q_i)``; ``C = iC_{i-1} = (R_fix_i Rz(q_i))^T``.
 
 The packed per-link model row (``RobotModel`` is unpacked once into this layout, its
-field ``packed``, see :func:`pack_kinematics`) is ``[p (3), R_fix row-major (9), theta (13)]``.
+field ``packed``, see :func:`pack_kinematics`) is ``[p (3), R_fix row-major (9), theta (13),
+armature, damping, friction, v_c]`` (the joint terms of doc/design.md §7).
 
 All kernels are scalar code compiled by numba with ``cache=True``. They never
 allocate from another dtype than their inputs, so running them with
@@ -18,12 +19,13 @@ import math
 import numpy as np
 from numba import njit
 
-#: Column offsets of the packed model row.
-P0, RF0, TH0, KIN_COLS = 0, 3, 12, 25
+#: Column offsets of the packed model row: p, R_fix, theta, then armature, damping, friction
+#: and the friction velocity v_c at JA, JD, JF, JV (doc/design.md §7).
+P0, RF0, TH0, JA, JD, JF, JV, KIN_COLS = 0, 3, 12, 25, 26, 27, 28, 29
 
 
 def pack_kinematics(model):
-    """Pack ``model`` into the (n, 25) row layout the kernels read: p, R_fix, theta.
+    """Pack ``model`` into the (n, 29) row layout the kernels read: p, R_fix, theta, joint terms.
 
     :class:`~rcac_ros.core.model.RobotModel` calls it once and keeps the result in its
     ``packed`` field (read-only, as the model is immutable).
@@ -32,7 +34,25 @@ def pack_kinematics(model):
     buf[:, P0:P0 + 3] = model.p
     buf[:, RF0:RF0 + 9] = model.R_fix.reshape(model.n, 9)
     buf[:, TH0:TH0 + 13] = model.theta()
+    buf[:, JA] = model.armature
+    buf[:, JD] = model.damping
+    buf[:, JF] = model.friction
+    buf[:, JV] = model.friction_velocity
     return buf
+
+
+@njit(cache=True, inline="always")
+def joint_friction_torque(row, qd):
+    """``damping qd + friction tanh(qd / v_c)`` of one joint (doc/design.md §7).
+
+    Exactly 0.0 when both terms are zero (the rigid model's arithmetic is then unchanged).
+    """
+    t = 0.0
+    if row[JD] != 0.0:
+        t = row[JD] * qd
+    if row[JF] != 0.0:
+        t += row[JF] * math.tanh(qd / row[JV])
+    return t
 
 
 @njit(cache=True)

@@ -29,7 +29,7 @@ import os
 import numpy as np
 
 from rcac_ros.errors import ConfigError, ModelError
-from .model import check_inertia, RobotModel
+from .model import check_inertia, FRICTION_VELOCITY, RobotModel
 
 #: Joint types that become a degree of freedom of the chain.
 MOVING_TYPES = ("revolute", "continuous")
@@ -39,7 +39,8 @@ TRIANGLE_TOLERANCE = 1e-2
 
 
 def model_from_urdf(path_or_xml, base_link=None, tip_link=None, gravity=(0.0, 0.0, -9.81),
-                    name=None, triangle_tolerance=TRIANGLE_TOLERANCE):
+                    name=None, triangle_tolerance=TRIANGLE_TOLERANCE, armature=0.0,
+                    friction_velocity=FRICTION_VELOCITY):
     """The serial chain ``base_link`` -> ``tip_link`` of a URDF as a :class:`RobotModel`.
 
     Parameters
@@ -59,14 +60,20 @@ def model_from_urdf(path_or_xml, base_link=None, tip_link=None, gravity=(0.0, 0.
         Each merged link inertia must satisfy ``I1 + I2 >= (1 - tol) I3`` for its
         principal moments (real URDFs are sometimes a little off); ``None`` turns
         the check off. Positive definiteness is always required. Default 1e-2.
+    armature : float or array_like, shape (n,), optional
+        Reflected rotor inertia of each moving joint, kg m^2 (URDF has no tag for it;
+        default 0). Damping and Coulomb friction come from each joint's
+        ``<dynamics damping=".." friction=".."/>`` (doc/design.md §7).
+    friction_velocity : float, optional
+        ``v_c`` of the smooth Coulomb law (default :data:`~rcac_ros.core.model.FRICTION_VELOCITY`).
 
     Returns
     -------
     RobotModel
         With ``joint_names`` the URDF joint names base -> tip and the URDF
         effort, velocity and position limits (a missing or zero effort or
-        velocity limit means unbounded). The model's own triangle check is off;
-        this loader applied the tolerant one above.
+        velocity limit means unbounded), and each joint's damping and friction. The
+        model's own triangle check is off; this loader applied the tolerant one above.
 
     Raises
     ------
@@ -157,8 +164,11 @@ def model_from_urdf(path_or_xml, base_link=None, tip_link=None, gravity=(0.0, 0.
         inertia.append(inert)
         A_prev, T, k = A, np.eye(4), k + 1
 
-    effort, velocity, lower, upper = [], [], [], []
+    effort, velocity, lower, upper, damping, friction = [], [], [], [], [], []
     for joint in moving:
+        dyn = joint.dynamics
+        damping.append(float(getattr(dyn, "damping", None) or 0.0))
+        friction.append(float(getattr(dyn, "friction", None) or 0.0))
         lim = joint.limit
         e = getattr(lim, "effort", None)
         v = getattr(lim, "velocity", None)
@@ -175,7 +185,9 @@ def model_from_urdf(path_or_xml, base_link=None, tip_link=None, gravity=(0.0, 0.
                           np.array(inertia), gravity=gravity,
                           joint_names=[j.name for j in moving], effort_limit=effort,
                           position_lower=lower, position_upper=upper, velocity_limit=velocity,
-                          name=robot.name if name is None else name, check_triangle=False)
+                          name=robot.name if name is None else name, check_triangle=False,
+                          armature=armature, damping=damping, friction=friction,
+                          friction_velocity=friction_velocity)
     except ModelError as err:
         raise ModelError(f"{source}: {err}") from None
 

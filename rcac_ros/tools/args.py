@@ -62,6 +62,14 @@ def non_negative_int(text):
     return value
 
 
+def add_engine_argument(parser):
+    """``--engine builtin|mujoco``: the plant the closed loop drives (doc/plants.md)."""
+    from rcac_ros.plants import ENGINES
+    parser.add_argument("--engine", choices=ENGINES, default=None,
+                        help="the plant: builtin (the package's own dynamics) or mujoco (the "
+                             "same arm in MuJoCo; needs the mujoco package) (default builtin)")
+
+
 def add_gain_arguments(parser, gains, texts):
     """One ``--NAME`` option per controller gain, its default and its check.
 

@@ -23,6 +23,8 @@ SUBCOMMANDS = {
              "simulator + controller over ROS 2, bag, summary and plots"),
     "payload-demo": ("rcac_ros.tools.demos.payload",
                      "panda with an unknown 2 kg payload attached"),
+    "friction-demo": ("rcac_ros.tools.demos.friction",
+                      "panda learning its joints' armature, viscous and Coulomb friction"),
     "sweep": ("rcac_ros.tools.sweep.engine", "Monte Carlo campaigns of closed-loop runs on Dask"),
     "compare": ("rcac_ros.tools.demos.compare",
                 "every adaptive law on the paper's run and the payload demo"),

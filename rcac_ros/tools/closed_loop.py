@@ -1,9 +1,10 @@
 """The one closed-loop simulation: a controller driving a simulated arm along a trajectory.
 
 :func:`closed_loop` closes the loop between any controller of :mod:`rcac_ros.core`
-(``step``, ``set_applied_torque``, ``theta_hat``, ``E``, ``reset``) and a
+(``step``, ``set_applied_torque``, ``theta_hat``, ``E``, ``reset``) and a plant: the
 :class:`~rcac_ros.core.Simulator` (RK4, torque held over the period, clipped to the
-effort limit), with what a Monte Carlo campaign varies:
+effort limit) or, with ``engine="mujoco"``, the same arm in MuJoCo
+(:mod:`rcac_ros.plants`, doc/plants.md), with what a Monte Carlo campaign varies:
 
 - the true plant apart from the controller's model (a payload attached from the
   start: :func:`attach_payload`), and plant changes at given times (``events``: a
@@ -29,7 +30,8 @@ from collections import deque
 
 import numpy as np
 
-from rcac_ros.core import RcacError, Simulator, theta_from_inertia
+from rcac_ros.core import RcacError, theta_from_inertia
+from rcac_ros.plants import make_plant
 from rcac_ros.tools import metrics
 
 #: Divergence is checked every this many control periods.
@@ -94,7 +96,7 @@ def perturbed_estimates(base, scale, relative_error, rng):
 def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
                 noise_q=0.0, noise_qd=0.0, delay=0, rng=None, theta_hat0=None, events=(),
                 substeps=1, error_limit=math.inf, strict=False, check_estimates=False,
-                observer=None, progress=None, progress_every=200):
+                observer=None, progress=None, progress_every=200, engine="builtin"):
     """Close the loop for ``duration`` s at the controller's period ``h``.
 
     Per period ``k``: the desired motion at ``t = k h``, the (noisy, delayed) measured
@@ -125,6 +127,9 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
         Plant changes: at ``t >= time`` the plant becomes that model, state carried over.
     substeps : int
         RK4 steps of the plant per period.
+    engine : str
+        The plant: ``"builtin"`` (:class:`~rcac_ros.core.Simulator`) or ``"mujoco"``
+        (:func:`rcac_ros.plants.make_plant`); the events' plants too.
     error_limit : float
         A run whose ``max |q - q_d|`` exceeds it (rad) stops and is marked diverged.
     strict : bool
@@ -138,7 +143,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     observer : callable, optional
         ``observer(k, controller, sim)``, called after every period ``k`` that completed
         (controller and plant stepped, ``set_applied_torque`` done, estimates checked if
-        asked), with the :class:`~rcac_ros.core.Simulator` of the true arm then in use.
+        asked), with the plant of the true arm then in use.
     progress : str, optional
         Label of a progress line (none if None).
     progress_every : int
@@ -164,8 +169,8 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     if theta_hat0 is not None:
         controller.reset(theta_hat0)
     q_d0, qd_d0, _ = trajectory(0.0)
-    sim = Simulator(plant, dt=h, q0=q_d0 if q0 is None else q0,
-                    qd0=qd_d0 if qd0 is None else qd0, substeps=substeps)
+    sim = make_plant(plant, engine, dt=h, q0=q_d0 if q0 is None else q0,
+                     qd0=qd_d0 if qd0 is None else qd0, substeps=substeps)
     sigma = np.array([np.broadcast_to(np.asarray(noise_q, float), n),
                       np.broadcast_to(np.asarray(noise_qd, float), n)])
     noise = None
@@ -184,7 +189,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
         for k in range(steps):
             t = k * h
             while pending and t >= pending[0][0] - 1e-12:
-                loaded = Simulator(pending.pop(0)[1], dt=h, substeps=substeps)
+                loaded = make_plant(pending.pop(0)[1], engine, dt=h, substeps=substeps)
                 loaded.reset(sim.q, sim.qd, t=sim.t)
                 sim = loaded
             q_d, qd_d, qdd_d = trajectory(t)

@@ -105,3 +105,70 @@ def test_energy_rate_is_power():
     e_plus = sum(energy(model, q + eps * qd, qd + eps * qdd))
     e_minus = sum(energy(model, q - eps * qd, qd - eps * qdd))
     assert (e_plus - e_minus) / (2 * eps) == pytest.approx(qd @ tau, rel=1e-6)
+
+
+# ---------------------------------------------------------------- joint terms (doc/design.md §7)
+def with_joint_terms(model, seed):
+    """``model`` with random armature, damping and Coulomb friction on every joint."""
+    rng = np.random.default_rng(seed)
+    return model.replace(armature=rng.uniform(0.05, 0.6, model.n),
+                         damping=rng.uniform(0.1, 2.0, model.n),
+                         friction=rng.uniform(0.1, 1.0, model.n), friction_velocity=0.07)
+
+
+def friction_torque(model, qd):
+    return model.damping * qd + model.friction * np.tanh(qd / model.friction_velocity)
+
+
+@pytest.mark.parametrize("label,model", models(), ids=[m[0] for m in models()])
+def test_joint_terms_against_pinocchio(label, model):
+    """Pinocchio's armature in RNEA, CRBA and ABA; it has no friction, so the closed form
+    ``damping qd + friction tanh(qd / v_c)`` is added to its RNEA and taken off ABA's torque."""
+    model = with_joint_terms(model, model.n)
+    pm = to_pin(model)
+    data = pm.createData()
+    rng = np.random.default_rng(model.n + 1)
+    for _ in range(5):
+        q, qd, qdd, tau = rng.normal(size=(4, model.n)) * np.array([[3.0], [0.3], [5.0], [50.0]])
+        tf = friction_torque(model, qd)
+        assert rel(inverse_dynamics(model, q, qd, qdd), pin.rnea(pm, data, q, qd, qdd) + tf) \
+            < 1e-12
+        Mp = pin.crba(pm, data, q)
+        assert rel(mass_matrix(model, q), np.triu(Mp) + np.triu(Mp, 1).T) < 1e-12
+        assert rel(forward_dynamics(model, q, qd, tau), pin.aba(pm, data, q, qd, tau - tf)) \
+            < 1e-12
+
+
+def test_joint_terms_forward_inverts_inverse():
+    model = with_joint_terms(css_arm((0.0, 0.0, -9.81)), 11)
+    rng = np.random.default_rng(4)
+    q, qd, qdd = rng.normal(size=(3, 7)) * 0.2
+    tau = inverse_dynamics(model, q, qd, qdd)
+    assert rel(forward_dynamics(model, q, qd, tau), qdd) < 1e-10
+
+
+def test_zero_joint_terms_leave_every_function_unchanged():
+    """Explicit zeros give the same floats as the default model (the rigid arithmetic)."""
+    model = css_arm((0.0, 0.0, -9.81))
+    zero = model.replace(armature=0.0, damping=[0.0] * 7, friction=0.0, friction_velocity=0.3)
+    assert not zero.has_joint_terms and with_joint_terms(model, 1).has_joint_terms
+    rng = np.random.default_rng(8)
+    q, qd, a = rng.normal(size=(3, 7))
+    assert np.array_equal(inverse_dynamics(zero, q, qd, a), inverse_dynamics(model, q, qd, a))
+    assert np.array_equal(mass_matrix(zero, q), mass_matrix(model, q))
+    assert np.array_equal(forward_dynamics(zero, q, qd, a), forward_dynamics(model, q, qd, a))
+
+
+def test_joint_terms_are_dissipative():
+    """With no torque and g = 0, the energy (armature included) never grows: the friction
+    torque opposes the velocity."""
+    model = with_joint_terms(css_arm(), 3)
+    rng = np.random.default_rng(9)
+    q, qd = rng.normal(size=(2, 7))
+    qdd = forward_dynamics(model, q, qd, np.zeros(7))
+    # dE/dt with E = 1/2 qd^T M(q) qd (armature in M): qd^T M qdd + 1/2 qd^T Mdot qd
+    eps = 1e-6
+    states = ((q + eps * qd, qd + eps * qdd), (q - eps * qd, qd - eps * qdd))
+    e = [0.5 * v @ mass_matrix(model, x) @ v for x, v in states]
+    rate = (e[0] - e[1]) / (2 * eps)
+    assert rate == pytest.approx(-qd @ friction_torque(model, qd), rel=1e-6)

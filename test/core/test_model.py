@@ -109,3 +109,52 @@ def test_bad_yaml(tmp_path, text, exc, match):
 def test_missing_yaml_file():
     with pytest.raises(ConfigError, match="cannot read"):
         RobotModel.from_yaml("/nonexistent/model.yaml")
+
+
+def test_joint_terms_yaml_round_trip_replace_and_repeat(tmp_path):
+    """Per-link YAML keys armature, damping, friction and the model-level friction_velocity
+    (doc/design.md §7)."""
+    import yaml
+    m = css_arm().replace(armature=np.arange(7) * 0.1, damping=0.5, friction=[0.2] * 7,
+                          friction_velocity=0.05)
+    doc = m.to_dict()
+    assert doc["friction_velocity"] == 0.05 and "armature" not in doc["links"][0]
+    assert doc["links"][1]["armature"] == 0.1 and doc["links"][3]["damping"] == 0.5
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    back = RobotModel.from_yaml(path)
+    np.testing.assert_array_equal(back.joint_terms(), m.joint_terms())
+    np.testing.assert_array_equal(back.joint_terms()[:, 0], np.arange(7) * 0.1)
+    assert back.friction_velocity == 0.05
+    assert "friction_velocity" not in css_arm().to_dict()
+    rep = m.repeated(2)
+    np.testing.assert_array_equal(rep.damping, [0.5] * 14)
+    assert rep.friction_velocity == 0.05
+    kept = m.replace(mass=m.mass * 2.0)
+    np.testing.assert_array_equal(kept.joint_terms(), m.joint_terms())
+    with pytest.raises(ValueError):
+        m.damping[0] = 1.0
+
+
+@pytest.mark.parametrize("change,match", [
+    (dict(armature=[-0.1]), "armature: every entry must be finite and >= 0"),
+    (dict(damping=[np.inf]), "damping: every entry must be finite and >= 0"),
+    (dict(friction=[1.0, 2.0]), "friction: expected a scalar or 1 values"),
+    (dict(friction_velocity=0.0), "friction_velocity: must be > 0"),
+    (dict(friction_velocity="slow"), "friction_velocity: expected a number"),
+])
+def test_bad_joint_terms_raise_model_error(change, match):
+    with pytest.raises(ModelError, match=match):
+        RobotModel(**dict(good(), **change))
+
+
+def test_bad_joint_terms_in_yaml(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("links:\n  - {p: [0, 0, 0], mass: 1, com: [0, 0, 0], inertia: [1, 1, 1],"
+                    " damping: fast}\n")
+    with pytest.raises(ConfigError, match="links\\[0\\].damping: expected a number"):
+        RobotModel.from_yaml(path)
+    path.write_text("friction_velocity: -1\nlinks:\n  - {p: [0, 0, 0], mass: 1, com: [0, 0, 0],"
+                    " inertia: [1, 1, 1], friction: 0.3}\n")
+    with pytest.raises(ModelError, match="friction_velocity: must be > 0"):
+        RobotModel.from_yaml(path)

@@ -1,5 +1,5 @@
 """The recursive law with ``geometry="natural"``: consistent estimates at every step
-(doc/design.md §7).
+(doc/design.md §8).
 
 References: the Euclidean law with the frozen gain ``P_eff`` (the same step before the
 retraction, whose second-order term is then checked exactly), Pinocchio-free properties
@@ -69,7 +69,7 @@ def test_default_start_and_bad_starts():
 def test_natural_step_is_the_euclidean_step_with_p_eff_then_the_retraction(gamma):
     """One step: the Euclidean law with P = P_eff(theta_hat0) gives theta_lin; the natural
     law gives the parameters of J + Delta + 1/2 Delta J^-1 Delta, Delta = J(theta_lin -
-    theta_hat0), and nu(theta_lin) (doc/design.md §7)."""
+    theta_hat0), and nu(theta_lin) (doc/design.md §8)."""
     model = css_arm()
     nat = RecursiveCompositeController(model, geometry="natural", gamma=gamma)
     th0 = nat.theta_hat
@@ -126,7 +126,7 @@ def test_consistent_at_every_step_under_huge_gains_errors_and_noise():
 
 def test_every_adaptation_variant_keeps_bodies():
     """Explicit update, leakage and projection with the natural geometry: a body per link
-    at every step; least squares is refused (doc/design.md §7)."""
+    at every step; least squares is refused (doc/design.md §8)."""
     model = css_arm()
     variants = [dict(update="explicit"), dict(leakage=1e-3), dict(theta_bounds="mass"),
                 dict(channels=[2, "power"])]

@@ -1,4 +1,4 @@
-"""Pseudo-inertia, the natural gain and the consistent retraction (doc/design.md §7).
+"""Pseudo-inertia, the natural gain and the consistent retraction (doc/design.md §8).
 
 References: Pinocchio's ``Inertia``, ``PseudoInertia`` and ``LogCholeskyParameters``; the
 regressor identity of doc/design.md §2 against Pinocchio's spatial inertia; the Hessian of

@@ -102,3 +102,29 @@ def test_quintic_is_rest_to_rest_and_holds():
     assert traj(0.0)[0] == pytest.approx([0.0]) and traj(1.0)[0] == pytest.approx([2.0])
     assert traj(0.0)[1] == pytest.approx([0.0]) and traj(1.0)[1] == pytest.approx([0.0])
     assert traj(5.0)[0] == pytest.approx([2.0]) and traj(5.0)[1] == pytest.approx([0.0])
+
+
+def test_joint_friction_and_armature_in_the_simulator_closed_form():
+    """One joint about a vertical axis (g = 0): (I_zz + armature) qdd = tau - d qd
+    - f tanh(qd / v_c), integrated independently by scipy (doc/design.md §7)."""
+    from scipy.integrate import solve_ivp
+    from rcac_ros.core import RobotModel
+    izz, arm, d, f, vc = 0.05, 0.1, 0.4, 0.3, 0.1
+    model = RobotModel([[0.0, 0.0, 0.0]], [np.eye(3)], [1.0], [[0.0, 0.0, 0.0]],
+                       [np.diag([0.04, 0.04, izz])], armature=arm, damping=d, friction=f,
+                       friction_velocity=vc)
+    tau = lambda t: 0.8 * np.sin(3.0 * t)    # noqa: E731 (the joint turns both ways)
+
+    def rhs(t, x, u):
+        return [x[1], (u - d * x[1] - f * np.tanh(x[1] / vc)) / (izz + arm)]
+    sim = Simulator(model, dt=0.002, substeps=4)
+    x = np.array([0.0, 0.0])
+    signs = set()
+    for k in range(1000):
+        t = k * 0.002
+        sim.step([tau(t)])
+        x = solve_ivp(rhs, (t, t + 0.002), x, args=(tau(t),), rtol=1e-12, atol=1e-14,
+                      method="DOP853").y[:, -1]
+        signs.add(np.sign(x[1]))
+    assert signs >= {-1.0, 1.0}
+    assert abs(sim.q[0] - x[0]) < 1e-8 and abs(sim.qd[0] - x[1]) < 1e-8

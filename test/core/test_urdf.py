@@ -54,7 +54,12 @@ def rel(a, b):
 
 
 def compare(model, pm, rng, states=20, gravity=True):
-    """Max relative errors of inverse dynamics, mass matrix and forward dynamics."""
+    """Max relative errors of inverse dynamics, mass matrix and forward dynamics.
+
+    Pinocchio reads each joint's ``<dynamics damping friction>`` into its model but no
+    algorithm of it uses them: the joint friction of doc/design.md §7 is added to its RNEA
+    and taken off ABA's torque from Pinocchio's own reading of the URDF.
+    """
     if gravity:
         pm.gravity.linear = np.array(model.gravity)
     data = pm.createData()
@@ -67,13 +72,14 @@ def compare(model, pm, rng, states=20, gravity=True):
         qdd = rng.uniform(-5.0, 5.0, model.n)
         tau = rng.uniform(-10.0, 10.0, model.n)
         pq = pin_q(pm, q)
+        tf = pm.damping * qd + pm.friction * np.tanh(qd / model.friction_velocity)
         err["inverse_dynamics"] = max(err["inverse_dynamics"], rel(
-            inverse_dynamics(model, q, qd, qdd), pin.rnea(pm, data, pq, qd, qdd)))
+            inverse_dynamics(model, q, qd, qdd), pin.rnea(pm, data, pq, qd, qdd) + tf))
         M = pin.crba(pm, data, pq)
         M = np.triu(M) + np.triu(M, 1).T
         err["mass_matrix"] = max(err["mass_matrix"], rel(mass_matrix(model, q), M))
         err["forward_dynamics"] = max(err["forward_dynamics"], rel(
-            forward_dynamics(model, q, qd, tau), pin.aba(pm, data, pq, qd, tau)))
+            forward_dynamics(model, q, qd, tau), pin.aba(pm, data, pq, qd, tau - tf)))
     return err
 
 
@@ -359,3 +365,38 @@ def test_from_urdf_reads_a_file(tmp_path):
     np.testing.assert_array_equal(a.R_fix, b.R_fix)
     # the frame of joint 1 puts its x axis on z: p_1 is the folded base offset
     assert not np.allclose(a.R_fix[0], np.eye(3))
+
+
+# ---------------------------------------------------------------- joint terms (doc/design.md §7)
+FRICTIONAL = robot(
+    link("base"),
+    link("l1", inertial(2.0, "0.1 0 0")),
+    joint("j1", "base", "l1", extra='<dynamics damping="0.7" friction="0.25"/>'),
+    link("l2", inertial(1.0, "0.1 0 0")),
+    joint("j2", "l1", "l2", xyz="0.3 0 0", axis="0 1 0", extra='<dynamics damping="1.5"/>'),
+    link("l3", inertial(0.5, "0 0 0.1")),
+    joint("j3", "l2", "l3", xyz="0.3 0 0", axis="1 0 0"),
+)
+
+
+def test_joint_dynamics_and_armature_from_urdf():
+    model = model_from_urdf(FRICTIONAL, armature=[0.1, 0.2, 0.3], friction_velocity=0.05)
+    np.testing.assert_array_equal(model.damping, [0.7, 1.5, 0.0])
+    np.testing.assert_array_equal(model.friction, [0.25, 0.0, 0.0])
+    np.testing.assert_array_equal(model.armature, [0.1, 0.2, 0.3])
+    assert model.friction_velocity == 0.05
+    # Pinocchio reads the same <dynamics>; its armature is set by hand (URDF has no tag)
+    pm = pin.buildModelFromXML(FRICTIONAL)
+    pm.armature = model.armature.copy()
+    err = compare(model, pm, np.random.default_rng(5))
+    assert max(err.values()) < TOL, err
+    scalar = model_from_urdf(FRICTIONAL, armature=0.4)
+    np.testing.assert_array_equal(scalar.armature, [0.4] * 3)
+    assert model_from_urdf(FRICTIONAL).friction_velocity == 0.1
+
+
+def test_bad_armature_is_a_model_error():
+    with pytest.raises(ModelError, match="armature: every entry must be finite and >= 0"):
+        model_from_urdf(FRICTIONAL, armature=-0.1)
+    with pytest.raises(ModelError, match="armature: expected a scalar or 3 values"):
+        model_from_urdf(FRICTIONAL, armature=[0.1, 0.2])

@@ -98,13 +98,15 @@ def test_launch_file_is_installed(install):
 
 
 def ros_launch():
-    """``(launch, launch_ros)``, or skip: neither is a PyPI wheel."""
-    why = "ROS 2's launch is not installed: not a PyPI wheel (apt: ros-jazzy-launch-ros)"
+    """``(launch, launch_ros)``, or skip: neither is a PyPI wheel (test_launch_file.py checks
+    the launch file's source without them)."""
+    why = ("ROS 2's launch and launch_ros are not installed: an apt install has them "
+           "(ros-jazzy-launch-ros), PyPI has no wheel; test_launch_file.py checks the file's "
+           "source instead")
     launch = pytest.importorskip("launch", reason=why)
     if not hasattr(launch, "LaunchDescription"):    # the repository's launch/ folder, or
         pytest.skip(why)                            # PyPI's unrelated 'launch'
-    launch_ros = pytest.importorskip(
-        "launch_ros", reason="launch_ros is not a PyPI wheel (apt: ros-jazzy-launch-ros)")
+    launch_ros = pytest.importorskip("launch_ros", reason=why)
     return launch, launch_ros
 
 

@@ -99,7 +99,7 @@ def test_bad_estimate_files_name_the_parameter(tmp_path, content, text):
 
 
 def test_natural_geometry_exports_every_link_and_pinocchio_accepts_them(tmp_path):
-    """doc/design.md §7: after a payload run with geometry="natural", save() exports every
+    """doc/design.md §8: after a payload run with geometry="natural", save() exports every
     link, and the panda URDF with those inertials loads in Pinocchio with every pseudo-
     inertia positive definite (the Euclidean law's run, for contrast, leaves link 7 out)."""
     pin = pytest.importorskip("pinocchio")
@@ -129,3 +129,40 @@ def test_natural_geometry_exports_every_link_and_pinocchio_accepts_them(tmp_path
     for j in range(1, model.njoints):
         J = model.inertias[j].toPseudoInertia().toMatrix()
         assert np.linalg.eigvalsh(J)[0] > 0.0, model.names[j]
+
+
+def test_joint_terms_saved_restored_and_exported(tmp_path):
+    """The joint estimates (doc/design.md §7) round-trip through the YAML, and the URDF
+    fragment's <dynamics>, put into the URDF, are what model_from_urdf and Pinocchio read."""
+    from rcac_ros.nodes.controller.estimates import initial_joint_terms, load_joint_terms
+    pin = pytest.importorskip("pinocchio")
+    model = model_from_urdf(URDF)
+    friction = np.array([[0.1, 0.5, 0.3], [0.2, 0.7, 0.4], [0.05, 0.2, 0.1]])
+    path, fragment, problems = save(str(tmp_path / "est.yaml"), model.theta(),
+                                    model.joint_names, model.name,
+                                    urdf_child_links(URDF, model.joint_names), friction=friction)
+    assert problems == []
+    np.testing.assert_array_equal(load_joint_terms(path, model.joint_names), friction)
+    np.testing.assert_array_equal(initial_joint_terms(path, model), friction)
+    np.testing.assert_array_equal(load(path, model.joint_names), model.theta())
+    dynamics = {j.get("name"): j.find("dynamics") for j in ET.parse(fragment).getroot()
+                if j.tag == "joint"}
+    assert sorted(dynamics) == sorted(model.joint_names)
+    robot = ET.fromstring(URDF)
+    for joint in robot.findall("joint"):
+        if joint.get("name") in dynamics:
+            old = joint.find("dynamics")
+            if old is not None:
+                joint.remove(old)
+            joint.append(dynamics[joint.get("name")])
+    text = ET.tostring(robot, encoding="unicode")
+    back = model_from_urdf(text, armature=friction[:, 0])
+    np.testing.assert_allclose(back.joint_terms(), friction, rtol=1e-9)
+    pm = pin.buildModelFromXML(text)
+    np.testing.assert_allclose(pm.damping, friction[:, 1], rtol=1e-9)
+    np.testing.assert_allclose(pm.friction, friction[:, 2], rtol=1e-9)
+    # a file without joint terms: none (zero initial joint estimates)
+    plain, _, _ = save(str(tmp_path / "plain.yaml"), model.theta(), model.joint_names)
+    assert load_joint_terms(plain, model.joint_names) is None
+    np.testing.assert_array_equal(initial_joint_terms(plain, model), np.zeros((3, 3)))
+    np.testing.assert_array_equal(initial_joint_terms("model", model), model.joint_terms())

@@ -88,3 +88,54 @@ def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
     assert code == 0, out
     np.testing.assert_array_equal(load(again, JOINTS), saved)
     assert again.replace(".yaml", ".inertial.urdf") in res.message     # the URDF fragment
+
+
+def test_joint_terms_published_saved_and_restored(tmp_path):
+    """joint_friction: true (doc/design.md §7): ~/friction_estimates (labelled, 7 x 3) moves;
+    frozen and saved, the file holds them; a controller started from the file has them."""
+    from rcac_ros.nodes.controller.estimates import load_joint_terms
+    path = str(tmp_path / "est.yaml")
+    with ros_context() as (ctx, ex):
+        op = Operator(ctx, ex)
+        friction, labels = [], []
+
+        def on_friction(msg):
+            labels.append(tuple(d.label for d in msg.layout.dim))
+            friction.append(np.reshape(msg.data, (7, 3)))
+        op.create_subscription(Float64MultiArray, f"{NODE}/friction_estimates", on_friction,
+                               DEEP)
+        ctrl = start("controller_node", f"estimates_file:={path}", "joint_friction:=true",
+                     "P_friction:=[1.0, 50.0, 50.0]")
+        sim = start("simulator_node")
+        try:
+            ok = spin_until(ex, lambda: len(friction) > 200, timeout=120.0)
+            assert ok, (len(op.theta), len(friction), stop(ctrl)[1][-3000:])
+            assert labels[-1] == ("joint", "armature,damping,friction")
+            assert not np.allclose(friction[-1], 0.0)                  # they adapt from zero
+            assert op.call("set_adaptation", data=False).success
+            n = len(friction)
+            assert spin_until(ex, lambda: len(friction) > n + 50, timeout=60.0)
+            held = friction[-1]
+            assert np.array_equal(friction[-20], held)
+            res = op.call("save_estimates")
+            assert res.success, res.message
+            np.testing.assert_array_equal(load_joint_terms(path, JOINTS), held)
+            res = op.call("reset_estimates")
+            assert res.success
+            assert spin_until(ex, lambda: np.array_equal(friction[-1], np.zeros((7, 3))),
+                              timeout=30.0)
+        finally:
+            stop(sim)
+            code, out = stop(ctrl)
+        assert code == 0, out
+        again = str(tmp_path / "again.yaml")
+        ctrl = start("controller_node", f"initial_estimates:={path}", "joint_friction:=true",
+                     f"estimates_file:={again}")
+        try:
+            assert op.call("save_estimates").success
+        finally:
+            code, out = stop(ctrl)
+    assert code == 0, out
+    np.testing.assert_array_equal(load_joint_terms(again, JOINTS), held)
+    text = open(again.replace(".yaml", ".inertial.urdf"), encoding="utf-8").read()
+    assert text.count("<dynamics") == 7

@@ -7,14 +7,16 @@ test chooses. Each outcome is checked against a closed form: the linear interpol
 the goal's points, the time at which an exponentially decaying error enters the goal
 tolerance, the tick at which an offset appears.
 
-Needs control_msgs (on an apt install ``ros-jazzy-control-msgs``; here a local build put
-on PYTHONPATH and LD_LIBRARY_PATH, see doc/install.md); skipped with the reason otherwise,
-except the test of the fallback, which always runs.
+Needs control_msgs: an installed one (apt: ``ros-jazzy-control-msgs``) or, on the pip-only
+path, the subset built at test set-up from ``test/ros/interfaces`` (``conftest.py``). Only
+where neither imports (no C compiler for the build) do these tests skip, with the reason;
+the test of the fallback always runs.
 """
 
 import math
 import time
 
+import interface_build
 import numpy as np
 import pytest
 
@@ -32,8 +34,10 @@ from rcac_ros.nodes.msgs.trajectory import ActiveTrajectory  # noqa: E402
 
 needs_control_msgs = pytest.mark.skipif(
     fjt.FollowJointTrajectory is None,
-    reason=f"{fjt.UNAVAILABLE}: control_msgs is not a PyPI wheel (apt: ros-jazzy-control-msgs;"
-           " or a local colcon build on PYTHONPATH/LD_LIBRARY_PATH, doc/install.md)")
+    reason=f"{fjt.UNAVAILABLE}; {interface_build.BUILD_ERROR or 'the test build did not load'}:"
+           " an apt install has"
+           " ros-jazzy-control-msgs, this one has neither it nor a C compiler for the test"
+           " build (test/ros/interface_build.py)")
 
 JOINTS = ["a", "b", "c"]
 Q0 = np.array([0.1, -0.2, 0.3])
@@ -419,11 +423,26 @@ class Loop:
         return sent.result()
 
 
-def _closed_loop(via, steps, **tolerances):
+def _closed_loop(via, steps, attempts=3, **tolerances):
     """The trajectory, stamped to start at step START_STEP, goes through ``via`` ("topic"
     or "action") at step 5. Returns the simulated positions and the efforts per step, the
     goal's ``(status, result, feedback)`` for the action, and whether the controller holds.
+
+    ``state_timeout`` is at most 1 s, and a loaded machine (the CI run of the whole suite
+    beside other work) can hold the test's process for longer between two states: the
+    watchdog then trips and restarts the filters, and the run is not the deterministic one
+    compared. Such a run is done again, up to ``attempts`` times.
     """
+    for _ in range(attempts):
+        run = _closed_loop_once(via, steps, **tolerances)
+        if run is not None:
+            return run
+    raise AssertionError(f"the watchdog tripped in each of {attempts} runs: the loop is not "
+                         "deterministic")
+
+
+def _closed_loop_once(via, steps, **tolerances):
+    """One run of :func:`_closed_loop`, or ``None`` if the watchdog tripped."""
     from test_nodes_support import PAPER_Q0
     with ros_context() as (ctx, ex):
         loop = Loop(ctx, ex)
@@ -446,7 +465,8 @@ def _closed_loop(via, steps, **tolerances):
         assert node._motion.active is not None
         for k in range(5, steps):
             loop.step(k)
-        assert node.watchdog.trips == 0, "the watchdog tripped: the loop is not deterministic"
+        if node.watchdog.trips:
+            return None
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)

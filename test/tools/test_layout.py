@@ -1,4 +1,4 @@
-"""The package's layout: imports run one way (tools -> nodes -> core), with no cycle.
+"""The package's layout: imports run one way (tools -> nodes -> plants -> core), with no cycle.
 
 The graph is read from the source (every ``import``, module level or inside a function);
 the heavy-dependency checks import the modules in a fresh interpreter.
@@ -16,7 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 PACKAGE = os.path.join(ROOT, "rcac_ros")
 
 #: rank of each part of the package: a module may import its own rank or a lower one
-RANKS = {"errors": 0, "topics": 0, "core": 1, "params": 2, "nodes": 3, "tools": 4}
+RANKS = {"errors": 0, "topics": 0, "core": 1, "params": 2, "plants": 2, "nodes": 3, "tools": 4}
 
 
 def modules():
@@ -190,6 +190,18 @@ def test_core_never_imports_rclpy():
     bad = [f"{m} imports {t}" for m in mods if part(m) == "core"
            for t in imports(m, mods[m]) if t.split(".")[0] in ("rclpy", "rcl_interfaces")]
     assert not bad, "\n".join(bad)
+
+
+def test_only_the_plants_import_mujoco():
+    """MuJoCo is optional (doc/plants.md): the core never imports it, and outside
+    rcac_ros/plants nothing does; the plants import it inside a function only."""
+    mods = modules()
+    bad = [m for m in mods if part(m) != "plants"
+           and any(t.split(".")[0] == "mujoco" for t in imports(m, mods[m]))]
+    bad += [m for m in mods if part(m) == "plants"
+            and any(t.split(".")[0] == "mujoco" for t in module_level_imports(m))]
+    assert not bad, f"modules importing mujoco: {bad}"
+    assert "mujoco" not in loaded_after_import("rcac_ros.plants")
 
 
 def test_main_blocks_do_not_call_the_cli():

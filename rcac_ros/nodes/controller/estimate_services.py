@@ -5,7 +5,8 @@
 * ``~/set_adaptation`` (SetBool): ``false`` freezes the adaptation of eq 24 (the estimates
   are held and still used), ``true`` resumes it;
 * ``~/save_estimates`` (Trigger): writes the estimates to the parameter ``estimates_file``
-  (YAML) and the physically consistent links as URDF ``<inertial>`` blocks next to it
+  (YAML; with ``joint_friction`` the joint terms too) and the physically consistent links
+  as URDF ``<inertial>`` blocks next to it (the joint terms as ``<dynamics>``)
   (:mod:`rcac_ros.nodes.controller.estimates`); the response names both files and every
   link left out, with the reason.
 
@@ -43,7 +44,7 @@ class EstimateServices:
 
     def _reset(self, request, response):
         node = self.node
-        node.ctrl.reset(node.theta0)
+        node.ctrl.reset(node.theta0, node.friction0)
         response.success = True
         response.message = f"estimates reset to the initial estimates " \
                            f"({node.get_parameter('initial_estimates').value})"
@@ -69,7 +70,7 @@ class EstimateServices:
         try:
             yaml_path, urdf, problems = estimates.save(
                 path, node.ctrl.theta_hat, node.model.joint_names, node.model.name,
-                node.urdf_links)
+                node.urdf_links, friction=node.ctrl.friction_hat)
         except OSError as err:
             response.success = False
             response.message = f"estimates_file: cannot write {path!r} ({err.strerror})"

@@ -15,6 +15,10 @@ principal moments satisfy the triangle inequalities ``I1 + I2 >= I3``.
 
 With a URDF, the blocks are in its link frames (:func:`urdf_child_links`); otherwise in the
 model's link frames ``i`` (z along the joint axis).
+
+With the joint terms (``joint_friction``, doc/design.md §7) each joint's entry also holds
+``joint_terms: {armature, damping, friction}``, and the URDF fragment a ``<joint>`` with
+``<dynamics damping=".." friction=".."/>`` (URDF has no armature: it stays in the YAML).
 """
 
 import datetime
@@ -82,7 +86,7 @@ def urdf_path(path):
     return (root if ext in (".yaml", ".yml") else path) + ".inertial.urdf"
 
 
-def save(path, theta, joint_names, model_name="robot", links=None):
+def save(path, theta, joint_names, model_name="robot", links=None, friction=None):
     """Write the estimates as YAML at ``path`` and the consistent links as a URDF fragment.
 
     Parameters
@@ -99,6 +103,8 @@ def save(path, theta, joint_names, model_name="robot", links=None):
         ``A`` from the model's frame to that link's; the blocks are then in the URDF link
         frames (a link's fixed children, merged into it by the model, are included).
         Default: ``<joint>_link`` in the model's frames (z = joint axis).
+    friction : array_like (n, 3), optional
+        The joint estimates (armature, damping, friction), saved too when given.
 
     Returns
     -------
@@ -123,6 +129,15 @@ def save(path, theta, joint_names, model_name="robot", links=None):
         else:
             entry["inconsistent"] = reason
             problems.append(f"link {names[i]} (joint {joint}): {reason}")
+        if friction is not None:
+            a, d, f = (float(v) for v in friction[i])
+            entry["joint_terms"] = {"armature": a, "damping": d, "friction": f}
+            if d >= 0.0 and f >= 0.0:
+                blocks.append(f"  <joint name={quoteattr(str(joint))}>\n    <dynamics "
+                              f"damping=\"{d:.9g}\" friction=\"{f:.9g}\"/>\n  </joint>\n")
+            else:
+                problems.append(f"joint {joint}: damping or friction < 0, left out of the "
+                                "URDF <dynamics>")
         entries.append(entry)
     doc = {"format": FORMAT, "model": str(model_name),
            "saved": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -184,9 +199,49 @@ def load(path, joint_names, field="initial_estimates"):
     return theta
 
 
+def load_joint_terms(path, joint_names, field="initial_estimates"):
+    """The joint terms (n, 3) of a file written by :func:`save`, or None if it has none.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load` (it reads the file first), or joint terms that are not three finite
+        numbers per joint.
+    """
+    load(path, joint_names, field)
+    with open(path, encoding="utf-8") as f:
+        doc = yaml.safe_load(f)
+    by_joint = {str(e.get("joint")): e.get("joint_terms") for e in doc["links"]}
+    if all(v is None for v in by_joint.values()):
+        return None
+    out = np.zeros((len(joint_names), 3))
+    for i, joint in enumerate(joint_names):
+        terms = by_joint[joint]
+        try:
+            out[i] = [float(terms[k]) for k in ("armature", "damping", "friction")]
+        except (TypeError, KeyError, ValueError):
+            raise ConfigError(f"{field}: {path}: joint {joint}: joint_terms must hold armature, "
+                              "damping and friction") from None
+        if not np.all(np.isfinite(out[i])):
+            raise ConfigError(f"{field}: {path}: joint {joint}: joint_terms must be finite")
+    return out
+
+
+def initial_joint_terms(spec, model, joint_names=None):
+    """The joint estimates (n, 3) for ``initial_estimates``: zero, the model's, or a file's
+    (zero if the file has none)."""
+    names = list(model.joint_names if joint_names is None else joint_names)
+    if spec == "zero":
+        return np.zeros((model.n, 3))
+    if spec in ("model", "nominal"):
+        return model.joint_terms()
+    terms = load_joint_terms(spec, names)
+    return np.zeros((model.n, 3)) if terms is None else terms
+
+
 def initial_estimates(spec, model, joint_names=None):
     """The ``initial_estimates`` parameter: ``zero``, ``model``, ``nominal`` (the natural
-    geometry's default start, doc/design.md §7) or a saved file's path.
+    geometry's default start, doc/design.md §8) or a saved file's path.
 
     Returns
     -------
@@ -198,7 +253,7 @@ def initial_estimates(spec, model, joint_names=None):
         return np.zeros((model.n, 13))
     if spec == "model":
         return model.theta()
-    if spec == "nominal":                        # doc/design.md §7
+    if spec == "nominal":                        # doc/design.md §8
         return default_start(model.theta())
     if not spec:
         raise ConfigError("initial_estimates: must be 'zero', 'model', 'nominal' or a file "

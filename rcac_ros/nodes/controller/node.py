@@ -95,7 +95,7 @@ class ControllerNode(ManagedNode):
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, self._out, tagged=self.mode == "lockstep",
-            channels=self.channel_names))
+            channels=self.channel_names, joint_friction=self.ctrl.joint_friction))
         self._steps = self._deadline_misses = self._late_ticks = self._nonfinite = 0
         self.watchdog = Watchdog(self)
         self.states = self.keep(StateInput.close, StateInput(self))
@@ -208,6 +208,7 @@ class ControllerNode(ManagedNode):
         q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
+        friction_before = self.ctrl.friction_hat        # None without joint_friction
         try:
             tau = self.ctrl.step(q, qd, q_d, qd_d, qdd_d)
         except RcacError as err:
@@ -222,7 +223,7 @@ class ControllerNode(ManagedNode):
             self._nonfinite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
                                 "publishing the safe effort, estimates restored")
-            self.ctrl.reset(theta_before)       # not poisoned for good: the last finite ones
+            self.ctrl.reset(theta_before, friction_before)  # the last finite ones
             self._outputs.effort(self.safe_effort, stamp)
             return
         tau = np.clip(tau, -self.effort_limit, self.effort_limit)
@@ -232,7 +233,7 @@ class ControllerNode(ManagedNode):
         self._outputs.effort(tau[self._out], stamp)
         if self._steps % self.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
-                                   qd_d, qdd_d, tau, stamp)
+                                   qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
         if self._fjt is not None:
             self._fjt.update(t_ns, self.states.q, self.states.qd, q_d, qd_d, qdd_d)
 

@@ -41,7 +41,7 @@ class ControllerOutputs:
     :meth:`destroy` removes them (cleanup).
     """
 
-    def __init__(self, node, joints, out, tagged, channels=("joint1",)):
+    def __init__(self, node, joints, out, tagged, channels=("joint1",), joint_friction=False):
         n = len(joints)
         self.n = n
         self._node = node
@@ -55,6 +55,11 @@ class ControllerOutputs:
         self._track = create(Float64MultiArray, topics.TRACKING_ERROR, QOS_MONITOR)
         self._desired = create(JointState, topics.DESIRED_STATE, QOS_MONITOR)
         self._state = ControllerStatePublisher(node, joints, create)
+        self._friction = create(Float64MultiArray, topics.FRICTION_ESTIMATES, QOS_MONITOR) \
+            if joint_friction else None
+        self._friction_layout = MultiArrayLayout(dim=[
+            MultiArrayDimension(label="joint", size=n, stride=3 * n),
+            MultiArrayDimension(label="armature,damping,friction", size=3, stride=3)])
         self._theta_layout = MultiArrayLayout(dim=[
             MultiArrayDimension(label="link", size=n, stride=13 * n),
             MultiArrayDimension(label="parameter", size=13, stride=13)])
@@ -95,15 +100,20 @@ class ControllerOutputs:
     def destroy(self):
         """Destroy every publisher (the node's cleanup)."""
         for pub in [self._effort, self._theta, self._e, self._es, self._track, self._desired] \
-                + self._state.publishers:
+                + self._state.publishers + ([self._friction] if self._friction else []):
             self._node.destroy_lifecycle_publisher(pub)
 
-    def monitors(self, theta_hat, E, q, qd, q_d, qd_d, qdd_d, tau, stamp=None):
-        """Publish the estimates, E (channel 1's, and every channel's), the tracking error,
-        the desired state and ``~/controller_state`` (arrays in model order)."""
+    def monitors(self, theta_hat, E, q, qd, q_d, qd_d, qdd_d, tau, stamp=None,
+                 friction_hat=None):
+        """Publish the estimates (and the joint estimates, with ``joint_friction``), E
+        (channel 1's, and every channel's), the tracking error, the desired state and
+        ``~/controller_state`` (arrays in model order)."""
         out = self._out
         self._theta.publish(Float64MultiArray(layout=self._theta_layout,
                                               data=theta_hat.ravel().tolist()))
+        if self._friction is not None and friction_hat is not None:
+            self._friction.publish(Float64MultiArray(layout=self._friction_layout,
+                                                     data=friction_hat.ravel().tolist()))
         self._e.publish(Float64(data=float(E[0])))   # the first channel (joint 1 by default)
         self._es.publish(Float64MultiArray(layout=self._channel_layout, data=E.tolist()))
         self._track.publish(Float64MultiArray(layout=self._joint_layout,

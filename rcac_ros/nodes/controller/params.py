@@ -12,7 +12,8 @@ from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import declare
-from rcac_ros.nodes.controller.estimates import initial_estimates, urdf_child_links
+from rcac_ros.nodes.controller.estimates import (initial_estimates, initial_joint_terms,
+                                                 urdf_child_links)
 from rcac_ros.nodes.fjt.tolerances import Tolerances
 from rcac_ros.nodes.controller.gains import parse_overrides, per_joint_gains
 
@@ -51,9 +52,11 @@ def read_parameters(node, v):
     node.publish_every = v["monitor_decimation"]
     gains = per_joint_gains(v, _gain_overrides(node), node.model.joint_names)
     spec = v["initial_estimates"]
-    if v["geometry"] == "natural" and spec == "zero":   # not a body: doc/design.md §7
+    if v["geometry"] == "natural" and spec == "zero":   # not a body: doc/design.md §8
         spec = "nominal"
     node.theta0 = initial_estimates(spec, node.model)
+    node.friction0 = initial_joint_terms(v["initial_estimates"], node.model) \
+        if v["joint_friction"] else None
     node.urdf_links = urdf_child_links(node._description or v["robot_description"],
                                        node.model.joint_names)
     try:
@@ -64,13 +67,14 @@ def read_parameters(node, v):
         node.ctrl = RecursiveCompositeController(
             node.model, K_D=gains["K_D"], Lambda=gains["Lambda"], P=gains["P"],
             gamma=v["gamma"], lam=v["lambda"], h=node.h, theta_hat0=node.theta0,
-            **adaptation_options(v, channels))
+            joint_friction=v["joint_friction"], friction_hat0=node.friction0,
+            P_friction=list(v["P_friction"]), **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
     node.channel_names = channel_names(channels)
     z = np.zeros(n)             # warm up: one compiled step, so the first real one is not slow
     node.ctrl.step(z, z, z, z, z)
-    node.ctrl.reset(node.theta0)
+    node.ctrl.reset(node.theta0, node.friction0)
 
 
 def adaptation_options(v, channels):

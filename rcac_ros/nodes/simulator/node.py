@@ -1,6 +1,8 @@
 """The simulator node: efforts in, joint states and /clock out (``ros2 run rcac_ros simulator``).
 
-Thin: message -> arrays -> :class:`rcac_ros.core.simulator.Simulator` -> message.
+Thin: message -> arrays -> the plant -> message. The plant is the parameter ``engine``:
+``builtin`` (:class:`rcac_ros.core.simulator.Simulator`) or ``mujoco``
+(:class:`rcac_ros.plants.mujoco_plant.MujocoPlant`, the same interface; doc/plants.md).
 Two modes:
 
 * ``lockstep`` (default): state k is published (stamp = /clock = k dt); the node
@@ -28,7 +30,7 @@ from std_msgs.msg import Float64MultiArray
 
 from rcac_ros import params, topics
 from rcac_ros.core.model import PAPER_Q0
-from rcac_ros.core.simulator import Simulator
+from rcac_ros.plants import make_plant
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR, RcacNode, run
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
@@ -78,7 +80,8 @@ class SimulatorNode(RcacNode):
             self.create_timer(min(self.lockstep_timeout / 5.0, 0.005), self._check_timeout,
                               clock=steady)
         self.get_logger().info(
-            f"{self.mode} mode, model {self.model.name} (n={n}), dt={self.dt * 1e3:g} ms, "
+            f"{self.mode} mode, {self.engine} engine, model {self.model.name} (n={n}), "
+            f"dt={self.dt * 1e3:g} ms, "
             f"duration {'unlimited' if self.duration == 0 else f'{self.duration:g} s'}")
 
     # ------------------------------------------------------------------ parameters
@@ -101,11 +104,12 @@ class SimulatorNode(RcacNode):
         self.velocity_noise = v["velocity_noise"]
         self.noise_seed = v["noise_seed"]
         self.publish_velocity = v["publish_velocity"]
+        self.engine = v["engine"]
         limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
         try:
-            self.sim = Simulator(self.model, dt=self.dt, q0=self.q0, qd0=self.qd0,
-                                 substeps=v["substeps"],
-                                 effort_limit=None if limit is None else limit[self._order])
+            self.sim = make_plant(self.model, v["engine"], dt=self.dt, q0=self.q0,
+                                  qd0=self.qd0, substeps=v["substeps"],
+                                  effort_limit=None if limit is None else limit[self._order])
         except RcacError as err:
             raise ConfigError(f"simulator: {err}") from None
 

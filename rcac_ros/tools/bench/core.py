@@ -6,8 +6,9 @@ machine; the ratios are what the targets are about. The operation count is
 exact (:mod:`rcac_ros.tools.bench.opcount`).
 
 Besides the paper's law (channels ``[1]``) the table times the recursive law with the
-channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update) and with the
-least-squares gain (channels ``[1]``) and the natural geometry (doc/design.md §7), against n.
+channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update), with the
+least-squares gain (channels ``[1]``), with the joint terms (``joint_friction=True``,
+doc/design.md §7) and with the natural geometry (doc/design.md §8), against n.
 """
 
 import argparse
@@ -31,7 +32,8 @@ VARIANTS = {
     "all_us": dict(channels="all"),
     "all_explicit_us": dict(channels="all", update="explicit"),
     "least_squares_us": dict(adaptation="least_squares", forgetting=1.0),
-    "natural_us": dict(geometry="natural"),      # doc/design.md §7
+    "natural_us": dict(geometry="natural"),      # doc/design.md §8
+    "friction_us": dict(joint_friction=True),
 }
 
 
@@ -94,6 +96,10 @@ def goal_ratios(budget_s=1.0):
                     lambda: paper.step(*args), lambda: rnea(args[0], args[1], args[4]), budget_s)
             out["all_over_paper_n7"] = interleaved_ratio(lambda: every.step(*args),
                                                          lambda: paper.step(*args), budget_s)
+            fall = RecursiveCompositeController(model, theta_hat0=model.theta(), channels="all",
+                                                joint_friction=True)
+            out["friction_all_over_all_n7"] = interleaved_ratio(
+                lambda: fall.step(*args), lambda: every.step(*args), budget_s)
             for key, kwargs in VARIANTS.items():
                 if key != "all_us":
                     c = RecursiveCompositeController(model, theta_hat0=start_for(model, kwargs),
@@ -116,6 +122,10 @@ def goal_ratios(budget_s=1.0):
                                                 channels="all", update="explicit")
             out["all_explicit_over_slotine_li_n56"] = interleaved_ratio(
                 lambda: expl.step(*args), lambda: sl.step(*args), budget_s, blocks=7)
+            fric = RecursiveCompositeController(model, theta_hat0=model.theta(),
+                                                joint_friction=True)
+            out["friction_over_paper_n56"] = interleaved_ratio(
+                lambda: fric.step(*args), lambda: paper.step(*args), budget_s)
     return out
 
 
@@ -194,6 +204,7 @@ def run_bench(sizes=SIZES, budget_s=0.3, with_urdf=True, ops=True):
                                                     / by_n[7]["pin_rnea_us"])
     if 224 in by_n and 28 in by_n:
         ratios["controller_n224_over_n28"] = by_n[224]["controller_us"] / by_n[28]["controller_us"]
+        ratios["friction_n224_over_n28"] = by_n[224]["friction_us"] / by_n[28]["friction_us"]
     if 56 in by_n and by_n[56]["slotine_li_us"]:
         ratios["slotine_li_over_controller_n56"] = (by_n[56]["slotine_li_us"]
                                                     / by_n[56]["controller_us"])
@@ -245,9 +256,9 @@ def add_arguments(parser):
                         help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
     parser.add_argument("--duration", type=positive_float, default=60.0,
                         help="seconds of the --ros run (default 60)")
-    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="timer",
-                        help="--ros: the controller on its 500 Hz timer (default) or answering "
-                             "each joint state")
+    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="on_state",
+                        help="--ros: the controller answering each joint state (default, the "
+                             "node's default mode) or on its 500 Hz timer")
     parser.add_argument("--budget", type=positive_float, default=0.3,
                         help="seconds of timing per cell (default 0.3)")
     parser.add_argument("--rt", action="store_true",
@@ -358,11 +369,12 @@ def run(args):
           + "".join(f" {k[:-3] + ' us':>16s}" for k in VARIANTS))
     result = run_bench(budget_s=args.budget)
     print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
-          "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1):")
+          "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1, friction n224/n28 <= 10):")
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
-    print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2 "
-          "at n = 7; all/SlotineLi <= 0.1 at n = 56):")
+    print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2, "
+          "friction/paper <= 1.3 at n = 7; all/SlotineLi <= 0.1 at n = 56; friction linear "
+          "in n: n224/n28 <= 10):")
     for k, v in result["goals"].items():
         print(f"  {k:40s} {v:8.3f}")
     ops = result.get("operations")

@@ -16,7 +16,12 @@ states, the effort commands and ``/diagnostics`` and measures, after a warm-up:
 * deadline misses: effort periods longer than 1.5 periods, and ticks missing against
   the nominal rate; the controller's and the simulator's own counters from their
   diagnostics (ticks more than half a period late, ticks skipped when more than 25
-  periods behind; cumulative since start, warm-up included).
+  periods behind; cumulative since start, warm-up included);
+* what the controller adds, as ratios of two figures of the same run, which the load of the
+  machine moves together (doc/nodes.md, "Timing"): the effort period p99 over the state
+  period p99 (the simulator's own jitter as received), and the latency p50 over the one-way
+  latency of a plain DDS ping (:mod:`rcac_ros.tools.bench.echo`, a third process that echoes
+  a 7-joint JointState; half the round trip, every 20 ms).
 """
 
 import json
@@ -43,8 +48,12 @@ BENCH_CONTROLLER = {"K_D": 1000.0, "monitor_decimation": 10}
 #: the bench's names of the controller's timing: its own timer, or one answer per state
 CONTROLLER_MODES = {"timer": "timer", "on_state": "lockstep", "lockstep": "lockstep"}
 
-#: goals on the 2-core machine (issue 3, section 7)
-GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0}
+#: goals on the 2-core machine (issue 3, section 7); the ratio is what the controller adds
+#: to the jitter of its input (the simulator's states as received), whatever the load
+GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0, "period_ratio": 1.1}
+
+#: seconds between two pings of the plain DDS echo
+PING_PERIOD = 0.02
 
 
 class Probe:
@@ -56,14 +65,20 @@ class Probe:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
 
+        from rcac_ros.tools.bench.echo import PING, PONG
+
         qos = topics.qos(depth)
         self.node = Node("rcac_bench_probe", context=context)
         self.recording = False
         self.states = []     # (source, receive) ns
         self.efforts = []    # (source, receive, watchdog)
         self.latest_state_recv = None
-        self.state_age = []  # ns, per effort: receive(effort) - receive(newest state)
         self.diagnostics = {}
+        self.ping_rtt = []   # ns: receive(pong) - send(ping), through the plain DDS echo
+        self._ping_msg = JointState(name=[f"joint{i}" for i in range(1, 8)],
+                                    position=[0.0] * 7, velocity=[0.0] * 7)
+        self._ping = self.node.create_publisher(JointState, PING, topics.qos(10))
+        self.node.create_timer(PING_PERIOD, self._send_ping)
         self._subs = [
             self.node.create_subscription(JointState, "/" + topics.JOINT_STATES,
                                           self._on_state, qos, raw=True),
@@ -71,7 +86,18 @@ class Probe:
                                           self._on_effort, qos, raw=True),
             self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
                                           self._on_diag, qos),
+            self.node.create_subscription(JointState, PONG, self._on_pong, topics.qos(10)),
         ]
+
+    def _send_ping(self):
+        t = time.time_ns()          # the clock of the DDS receive stamps
+        self._ping_msg.header.stamp.sec, self._ping_msg.header.stamp.nanosec = divmod(t, 10**9)
+        self._ping.publish(self._ping_msg)
+
+    def _on_pong(self, msg, info):
+        if self.recording:
+            sent = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            self.ping_rtt.append(info["received_timestamp"] - sent)
 
     def _on_state(self, data, info):
         recv = info["received_timestamp"]
@@ -85,15 +111,29 @@ class Probe:
         watchdog = b"watchdog" in bytes(data[:96])
         recv = info["received_timestamp"]
         self.efforts.append((info["source_timestamp"], recv, watchdog))
-        if not watchdog and self.latest_state_recv is not None:
-            self.state_age.append(recv - self.latest_state_recv)
 
     def _on_diag(self, msg):
         for status in msg.status:
             self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
     def matched(self):
-        return all(s.get_publisher_count() > 0 for s in self._subs[:2])
+        return all(s.get_publisher_count() > 0 for s in self._subs[:2] + self._subs[3:]) \
+            and self._ping.get_subscription_count() > 0
+
+
+def state_age(state_recv, effort_recv):
+    """ns, per effort: its receive stamp minus that of the newest state received before it.
+
+    From the DDS receive stamps after the run, not in the callbacks: a loaded probe runs its
+    callbacks late and not in arrival order (a backlog of states first, then of efforts),
+    while the stamps are those of the samples' arrival. Efforts before the first state are
+    left out.
+    """
+    state_recv = np.sort(np.asarray(state_recv, np.int64))
+    effort_recv = np.asarray(effort_recv, np.int64)
+    i = np.searchsorted(state_recv, effort_recv, side="right") - 1
+    ok = i >= 0
+    return (effort_recv[ok] - state_recv[i[ok]]).astype(float)
 
 
 def analyse(probe, window_s, rate):
@@ -111,9 +151,14 @@ def analyse(probe, window_s, rate):
     out.update(percentiles(period, "period"))
     state_period = 1e-6 * np.diff(st[:, 0]).astype(float) if len(st) > 1 else np.empty(0)
     out.update(percentiles(state_period, "state_period"))
-    out.update(percentiles(1e-6 * np.asarray(probe.state_age, float), "state_to_effort_latency"))
+    out.update(percentiles(1e-6 * state_age(st[:, 1], eff[:, 1]), "state_to_effort_latency"))
     out.update(percentiles(1e-6 * (eff[:, 1] - eff[:, 0]).astype(float), "effort_transport"))
     out.update(percentiles(1e-6 * (st[:, 1] - st[:, 0]).astype(float), "state_transport"))
+    out.update(percentiles(0.5e-6 * np.asarray(probe.ping_rtt, float), "ping_one_way"))
+    out["pings"] = len(probe.ping_rtt)
+    out["period_ratio"] = _ratio(out["period_p99_ms"], out["state_period_p99_ms"])
+    out["latency_ratio"] = _ratio(out["state_to_effort_latency_p50_ms"],
+                                  out["ping_one_way_p50_ms"])
     out["late_periods"] = int(np.count_nonzero(period > 1.5 * h_ms))
     out["missing_ticks"] = max(0, int(round(window_s * rate)) - len(eff))
     for node, name, keys in (
@@ -135,7 +180,13 @@ def analyse(probe, window_s, rate):
         and out["period_p99_ms"] is not None and out["period_p99_ms"] <= GOALS["period_p99_ms"]
         and out["state_to_effort_latency_p50_ms"] is not None
         and out["state_to_effort_latency_p50_ms"] <= GOALS["latency_p50_ms"])
+    out["meets_ratio_goal"] = bool(out["period_ratio"] is not None
+                                   and out["period_ratio"] <= GOALS["period_ratio"])
     return out
+
+
+def _ratio(a, b):
+    return None if a is None or b is None or b <= 0.0 else a / b
 
 
 def format_table(r):
@@ -143,6 +194,10 @@ def format_table(r):
     def ms(key):
         v = r.get(key)
         return "-" if v is None else f"{v:.3f}"
+
+    def ratio(key):
+        v = r.get(key)
+        return "-" if v is None else f"{v:.2f}"
 
     rows = [
         ("controller rate (Hz)", f"{r['controller_rate_hz']:.1f}", f">= {GOALS['rate_hz']:g}"),
@@ -157,6 +212,11 @@ def format_table(r):
         ("state -> effort latency p99 (ms)", ms("state_to_effort_latency_p99_ms"), ""),
         ("one-way DDS latency p50, state / effort (ms)",
          f"{ms('state_transport_p50_ms')} / {ms('effort_transport_p50_ms')}", ""),
+        ("plain DDS ping, one way p50 / p99 (ms)",
+         f"{ms('ping_one_way_p50_ms')} / {ms('ping_one_way_p99_ms')}", ""),
+        ("effort period p99 / state period p99", ratio("period_ratio"),
+         f"<= {GOALS['period_ratio']:g}"),
+        ("latency p50 / ping one way p50", ratio("latency_ratio"), ""),
         ("periods > 1.5 h", str(r["late_periods"]), ""),
         ("missing ticks (vs nominal)", str(r["missing_ticks"]), ""),
     ]
@@ -185,7 +245,8 @@ def format_table(r):
              f"(realtime), {r['window_s']:.0f} s measured",
              f"  {'':<{w}}  {'measured':>15}  goal"]
     lines += [f"  {a:<{w}}  {b:>15}  {c}" for a, b, c in rows]
-    lines.append(f"  goal met: {'yes' if r['meets_goal'] else 'no'}")
+    lines.append(f"  goal met: {'yes' if r['meets_goal'] else 'no'}; ratio goal met: "
+                 f"{'yes' if r['meets_ratio_goal'] else 'no'}")
     return "\n".join(lines)
 
 
@@ -251,6 +312,8 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
             children.append(Child("controller", ctrl, env,
                                   os.path.join(log_dir, "controller.log")))
             children.append(Child("simulator", sim, env, os.path.join(log_dir, "simulator.log")))
+            children.append(Child("DDS echo", [sys.executable, "-m", "rcac_ros.tools.bench.echo"],
+                                  env, os.path.join(log_dir, "echo.log")))
 
             def spin_until(cond, timeout, what):
                 end = time.monotonic() + timeout

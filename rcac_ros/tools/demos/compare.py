@@ -1,18 +1,31 @@
-"""``rcac compare``: every adaptive law on the paper's experiment and on the panda payload.
+"""``rcac compare``: every adaptive law on the paper's experiment, the panda payload, and the
+panda with joint friction and rotor inertia on MuJoCo.
 
-Laws (:data:`LAWS`): the direct law (``gamma = 0``), the paper's composite law (joint-1
-channel), ``channels="all"`` with the implicit and the explicit update, the power
-channel, fixed-m channel sets, least-squares variants, the non-recursive
-Slotine-Li law, and the natural geometry (doc/design.md §7: estimates that stay physical
-bodies) with the Euclidean paper law from the same start. Scenarios (:data:`SCENARIOS`):
+Laws (:data:`LAWS`): computed torque at the nominal parameters (``fixed``), the direct
+law (``gamma = 0``), the paper's composite law (joint-1 channel), ``channels="all"`` with
+the implicit and the explicit update, the power channel, fixed-m channel sets,
+least-squares variants, the non-recursive Slotine-Li law, the direct, paper and
+``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7), and the natural
+geometry (``*_natural``, doc/design.md §8: estimates that stay physical bodies) with the
+Euclidean paper law from the same start (``paper_nat_start``). Scenarios
+(:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
   velocity reading of the desired motion (``rcac experiment``'s run);
 - ``payload``: the panda with gravity, a 2 kg payload attached to link 7 at t = 5 s,
-  the demo's gains, ``theta_hat(0)`` = the URDF's (``rcac payload-demo``'s run).
+  the demo's gains, ``theta_hat(0)`` = the URDF's (``rcac payload-demo``'s run);
+- ``panda_joints`` and its variants (:data:`JOINT_PLANTS`): the panda on MuJoCo
+  (doc/plants.md) whose joints have viscous damping 0.5 N m s/rad, dry friction 0.5 N m
+  (MuJoCo's friction loss) and rotor inertia 0.1 kg m^2 (``panda_joints``: all three;
+  ``panda_rigid``, ``panda_damping``, ``panda_friction``, ``panda_armature``,
+  ``panda_damping_armature``), the payload demo's motion and gains, every link adapting
+  from the URDF's nominal parameters (no payload): a plant outside the laws' rigid-body
+  model class. ``--scenarios joint_table`` runs the five rows of doc/tools.md's table.
 
 Every law gets the scenario's gains; a law only changes the channels, the update or the
-adaptation gain. Writes ``compare.json``, ``compare.md`` (the table), one figure per
+adaptation gain. Each scenario has its default laws (``--laws`` overrides them all) and
+its plant engine (``--engine`` overrides it). Writes ``compare.json``, ``compare.md`` (the
+table; with several scenarios, first their RMS side by side), one figure per
 scenario (``compare_<scenario>.png``: tracking error, parameter error, last link's mass
 estimate, max |E_c| on log scales, the smallest ``lambda_min(J_hat_i)`` over time) and the
 identifiability report of each run (the accumulated excitation ``sum h W_i^T W_i`` per
@@ -33,14 +46,17 @@ from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.core.pseudo_inertia import default_start, lambda_min
 from rcac_ros.errors import RcacError
+from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
+from rcac_ros.tools.demos.friction import P_FRICTION
+from rcac_ros.tools.demos.payload import FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
 
-#: A law's ``theta_hat0`` that means: the natural geometry's default start (doc/design.md §7)
+#: A law's ``theta_hat0`` that means: the natural geometry's default start (doc/design.md §8)
 #: where the scenario gives none.
 NATURAL_START = "natural_default"
 
@@ -49,6 +65,7 @@ NATURAL_START = "natural_default"
 #: (in-sample: [2], [1,2], [2,3], [1,2,3], [2,3,4], [1,2,3,4], [4], [3,4], [4,7], [5,6,7],
 #: [2,4,6], [2,3,5,6], [3..7], [2..7], with and without "power").
 LAWS = {
+    "fixed": ("rcac", dict(P=FIXED_P, gamma=0.0)),
     "direct": ("rcac", dict(gamma=0.0)),
     "paper": ("rcac", {}),
     "all": ("rcac", dict(channels="all")),
@@ -66,12 +83,40 @@ LAWS = {
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
     "slotine_li_natural": ("slotine_li", dict(geometry="natural")),
-    # doc/design.md §7: estimates kept physically consistent; "paper_nat_start" is the
+    # doc/design.md §8: estimates kept physically consistent; "paper_nat_start" is the
     # Euclidean paper law from the natural geometry's default start (the same start)
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
+    # the joint terms (doc/design.md §7), with the gains of rcac friction-demo
+    "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True, P_friction=P_FRICTION)),
+    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=P_FRICTION)),
+    "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
 }
+
+#: The laws the paper and payload scenarios run by default (every law but ``fixed`` and the
+#: ``*_friction`` ones).
+DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed" and not law.endswith("_friction"))
+
+#: The laws of the joint-friction scenarios (the rows of doc/tools.md's table); a law added
+#: to :data:`LAWS` and to this list joins the table.
+JOINT_LAWS = ["fixed", "direct", "paper", "all", "direct_friction", "paper_friction",
+              "all_friction"]
+
+#: scenario -> (damping N m s/rad, dry friction N m, armature kg m^2), the same on every joint
+#: of the panda on MuJoCo (the friction is MuJoCo's friction loss, doc/plants.md).
+JOINT_PLANTS = {
+    "panda_joints": (0.5, 0.5, 0.1),
+    "panda_rigid": (0.0, 0.0, 0.0),
+    "panda_damping": (0.5, 0.0, 0.0),
+    "panda_friction": (0.0, 0.5, 0.0),
+    "panda_armature": (0.0, 0.0, 0.1),
+    "panda_damping_armature": (0.5, 0.0, 0.1),
+}
+
+#: Names that stand for several scenarios: the rows of doc/tools.md's joint-friction table.
+GROUPS = {"joint_table": ("panda_rigid", "panda_damping", "panda_friction", "panda_armature",
+                          "panda_joints")}
 
 COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
            ("theta_error_end", "‖θ̃‖ end"), ("max_abs_E", "max |E|"),
@@ -81,11 +126,19 @@ COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", 
 
 
 class Scenario:
-    """One closed-loop setting: plant(s), desired motion, gains and the true parameters."""
+    """One closed-loop setting: plant(s), desired motion, gains and the true parameters.
 
-    def __init__(self, name, model, gains, trajectory, q0, qd0, loaded=None, jump=None):
+    ``model`` is the controllers' model; ``plant`` the true arm (default ``model``),
+    ``loaded`` the arm from ``jump`` on; ``engine`` the plant's engine and ``laws`` the laws
+    run by default.
+    """
+
+    def __init__(self, name, model, gains, trajectory, q0, qd0, loaded=None, jump=None,
+                 plant=None, engine="builtin", laws=DEFAULT_LAWS):
         self.name, self.model, self.gains, self.trajectory = name, model, gains, trajectory
         self.q0, self.qd0, self.loaded, self.jump = q0, qd0, loaded, jump
+        self.plant = model if plant is None else plant
+        self.engine, self.laws = engine, tuple(laws)
         self.theta_end = (loaded or model).theta()
 
 
@@ -106,7 +159,31 @@ def payload_scenario():
                     qd0, loaded=with_payload(model), jump=5.0)
 
 
-SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario}
+def joint_scenario(name):
+    """The panda on MuJoCo with the joint terms of :data:`JOINT_PLANTS` ``[name]``."""
+    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                              load_panda)
+    model = load_panda()
+    damping, friction, armature = JOINT_PLANTS[name]
+    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    q0, qd0, _ = traj(0.0)
+    return Scenario(name, model, gains_for(model, law="composite", adapt_all=True, **GAINS),
+                    traj, q0, qd0, plant=with_joint_terms(model, damping, friction, armature),
+                    engine="mujoco", laws=JOINT_LAWS)
+
+
+SCENARIOS = {"paper": paper_scenario, "payload": payload_scenario,
+             **{name: (lambda name=name: joint_scenario(name)) for name in JOINT_PLANTS}}
+
+
+def scenario_names(names):
+    """``names`` with every group (:data:`GROUPS`) expanded, each scenario once."""
+    out = []
+    for name in names:
+        for one in GROUPS.get(name, (name,)):
+            if one not in out:
+                out.append(one)
+    return out
 
 
 def make_controller(scenario, law, laws=None):
@@ -120,7 +197,7 @@ def make_controller(scenario, law, laws=None):
     return RecursiveCompositeController(scenario.model, **kwargs)
 
 
-def run_law(scenario, controller, duration, progress=None):
+def run_law(scenario, controller, duration, progress=None, engine=None):
     """Close the loop (:func:`~rcac_ros.tools.closed_loop.closed_loop`) on the scenario.
 
     The run stops at the first period whose estimates or prediction errors are not finite
@@ -128,15 +205,17 @@ def run_law(scenario, controller, duration, progress=None):
     a period and each taken after that period's update: ``t``, ``e`` (``q - q_d``),
     ``theta_error`` (``||theta_hat - theta||``, the true ``theta`` of the plant then in
     use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``),
-    ``lambda_min`` (per link, ``lambda_min(J(theta_hat_i))``, doc/design.md §7); a
+    ``lambda_min`` (per link, ``lambda_min(J(theta_hat_i))``, doc/design.md §8); a
     diverged run's last row has no estimates (NaN) and ``diverged_at`` is its time.
     With them ``us_per_step`` (the controller's step alone), ``excitation`` (the
     accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
+    ``engine`` overrides the scenario's plant engine.
     """
     exc = Excitation(scenario.model.n, controller.h) if hasattr(controller, "channels") else None
     events = () if scenario.loaded is None else ((scenario.jump, scenario.loaded),)
-    run = closed_loop(controller, scenario.trajectory, duration, q0=scenario.q0,
-                      qd0=scenario.qd0, events=events, check_estimates=True,
+    run = closed_loop(controller, scenario.trajectory, duration, plant=scenario.plant,
+                      q0=scenario.q0, qd0=scenario.qd0, events=events, check_estimates=True,
+                      engine=engine or scenario.engine,
                       observer=None if exc is None else lambda k, ctrl, sim: exc.add(ctrl.W),
                       progress=progress, progress_every=250)
     t = run["t"]
@@ -202,21 +281,26 @@ def metrics(run, scenario, last_seconds=5.0):
     return out
 
 
-def compare(scenarios=("paper", "payload"), laws=tuple(LAWS), duration=20.0, progress=True,
-            extra_channels=None):
-    """Run every law on every scenario: ``{scenario: {law: metrics}}`` and the time series."""
+def compare(scenarios=("paper", "payload"), laws=None, duration=20.0, progress=True,
+            extra_channels=None, engine=None):
+    """Run the laws on every scenario: ``{scenario: {law: metrics}}`` and the time series.
+
+    ``laws``: the same laws on every scenario (default: each scenario's own); ``engine``:
+    the plant of every scenario (default: each scenario's own); ``scenarios`` may name
+    groups (:data:`GROUPS`).
+    """
     report, series = {}, {}
-    table = {law: LAWS[law] for law in laws}
-    if extra_channels is not None:
-        key = "channels=" + ",".join(str(c) for c in extra_channels)
-        table[key] = ("rcac", dict(channels=list(extra_channels)))
-    for name in scenarios:
+    for name in scenario_names(scenarios):
         scenario = SCENARIOS[name]()
+        table = {law: LAWS[law] for law in (scenario.laws if laws is None else laws)}
+        if extra_channels is not None:
+            key = "channels=" + ",".join(str(c) for c in extra_channels)
+            table[key] = ("rcac", dict(channels=list(extra_channels)))
         report[name], series[name] = {}, {}
         for law in table:
             ctrl = make_controller(scenario, law, table)
             label = f"{name}: {law:>20s}" if progress else None
-            run = run_law(scenario, ctrl, duration, progress=label)
+            run = run_law(scenario, ctrl, duration, progress=label, engine=engine)
             report[name][law] = metrics(run, scenario)
             series[name][law] = run
     return report, series
@@ -234,9 +318,27 @@ def _cell(v, key):
     return f"{v:.3g}"
 
 
+def side_by_side(report):
+    """The RMS tracking error (rad) of every law (columns) on every scenario (rows)."""
+    laws = []
+    for rows in report.values():
+        laws += [law for law in rows if law not in laws]
+    lines = ["| scenario | " + " | ".join(laws) + " |", "|---|" + "---:|" * len(laws)]
+    for name, rows in report.items():
+        cells = []
+        for law in laws:
+            m = rows.get(law)
+            cells.append("" if m is None else "diverged" if m["diverged_at"] is not None
+                         else _cell(m["rms"], "rms"))
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def markdown(report, n_links=None):
-    """The table, one section per scenario."""
+    """The table, one section per scenario (with several, first their RMS side by side)."""
     lines = []
+    if len(report) > 1:
+        lines += ["### RMS tracking error (rad)\n", side_by_side(report)]
     for name, rows in report.items():
         lines.append(f"### {name}\n")
         lines.append("| law | " + " | ".join(h for _, h in COLUMNS) + " |")
@@ -252,7 +354,7 @@ def markdown(report, n_links=None):
 
 def plot(series, report, out_dir):
     """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|, and
-    the smallest lambda_min(J_hat_i) over the links (doc/design.md §7)."""
+    the smallest lambda_min(J_hat_i) over the links (doc/design.md §8)."""
     from rcac_ros.tools.plots import plt
     paths = []
     for name, runs in series.items():
@@ -305,30 +407,56 @@ def channel_list(text):
 def add_arguments(parser):
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="seconds per run (default 20)")
-    parser.add_argument("--scenarios", nargs="+", choices=tuple(SCENARIOS),
-                        default=list(SCENARIOS), metavar="SCENARIO",
-                        help=f"any of {' '.join(SCENARIOS)} (default both)")
-    parser.add_argument("--laws", nargs="+", choices=tuple(LAWS), default=list(LAWS),
-                        metavar="LAW", help=f"any of {' '.join(LAWS)} (default all)")
+    parser.add_argument("--scenarios", nargs="+", choices=tuple(SCENARIOS) + tuple(GROUPS),
+                        default=["paper", "payload"], metavar="SCENARIO",
+                        help=f"any of {' '.join(SCENARIOS)}, or {' '.join(GROUPS)} (the rows "
+                             "of the joint-friction table) (default paper payload)")
+    parser.add_argument("--laws", nargs="+", choices=tuple(LAWS), default=None,
+                        metavar="LAW", help=f"any of {' '.join(LAWS)} (default: each "
+                                            "scenario's own: every law but fixed on paper and "
+                                            f"payload, {' '.join(JOINT_LAWS)} on the panda_* "
+                                            "scenarios)")
+    add_engine_argument(parser)
     parser.add_argument("--channels", type=channel_list, default=None,
                         help="add a law with these channels, e.g. 1,power")
     parser.add_argument("--out", default="results/compare", help="output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
+def command_line(args):
+    """The ``rcac compare`` command that reproduces the run (the options that matter)."""
+    words = ["rcac compare", f"--duration {args.duration:g}"]
+    if list(args.scenarios) != ["paper", "payload"]:
+        words.append("--scenarios " + " ".join(args.scenarios))
+    if args.laws is not None:
+        words.append("--laws " + " ".join(args.laws))
+    if args.channels is not None:
+        words.append("--channels " + ",".join(str(c) for c in args.channels))
+    if args.engine is not None:
+        words.append(f"--engine {args.engine}")
+    return " ".join(words)
+
+
 def run(args):
     report, series = compare(args.scenarios, args.laws, args.duration, not args.quiet,
-                             args.channels)
+                             args.channels, args.engine)
     os.makedirs(args.out, exist_ok=True)
+    ran = {law for rows in report.values() for law in rows}
     settings = dict(duration=args.duration, ls_forgetting=LS_FORGETTING,
                     laws={k: {"controller": LAWS[k][0],
                               "options": {o: str(v) for o, v in LAWS[k][1].items()}}
-                          for k in next(iter(report.values())) if k in LAWS})
+                          for k in LAWS if k in ran})
+    if args.engine is not None:
+        settings["engine"] = args.engine
+    joints = {name: dict(zip(("damping", "friction", "armature"), JOINT_PLANTS[name]))
+              for name in report if name in JOINT_PLANTS}
+    if joints:
+        settings["joint_terms"] = joints
     with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=settings), f, indent=2)
     table = markdown(report)
     with open(os.path.join(args.out, "compare.md"), "w", encoding="utf-8") as f:
-        f.write(f"`rcac compare --duration {args.duration:g}`\n\n{table}")
+        f.write(f"`{command_line(args)}`\n\n{table}")
     plots = plot(series, report, args.out)
     print(table)
     print(f"wrote {args.out}/compare.json, compare.md, "

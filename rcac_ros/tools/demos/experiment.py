@@ -14,7 +14,8 @@ import numpy as np
 
 from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
                            css_arm)
-from rcac_ros.tools.args import add_gain_arguments, positive_float, positive_int
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, positive_float,
+                                 positive_int)
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 
@@ -27,10 +28,11 @@ def metrics(run, theta_true, last_seconds=LAST_WINDOW):
 
 
 def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, progress=True,
-                   channels=(1,)):
+                   channels=(1,), engine="builtin"):
     """Section 4 for both laws: ``{"direct": run, "composite": run}`` and their metrics.
 
-    ``channels``: the composite law's prediction channels (default the paper's, joint 1).
+    ``channels``: the composite law's prediction channels (default the paper's, joint 1);
+    ``engine``: the plant (``builtin`` or ``mujoco``, doc/plants.md).
     """
     model = css_arm()
     g = dict(PAPER_GAINS, **(gains or {}))
@@ -41,7 +43,7 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
         ctrl = RecursiveCompositeController(model, **dict(g, gamma=gamma), channels=channels)
         t0 = time.perf_counter()
         runs[law] = closed_loop(ctrl, trajectory, duration, q0=q0, qd0=np.zeros(model.n),
-                                substeps=substeps, strict=True,
+                                substeps=substeps, strict=True, engine=engine,
                                 progress=f"{law:>9s}" if progress else None)
         report[law] = metrics(runs[law], model.theta())
         report[law]["wall_time_s"] = time.perf_counter() - t0
@@ -79,6 +81,7 @@ def add_arguments(parser):
         ("h", "control period, s")))
     parser.add_argument("--substeps", type=positive_int, default=1,
                         help="RK4 steps of the plant per control period (default 1)")
+    add_engine_argument(parser)
     parser.add_argument("--channels", type=channel_list, default=(1,),
                         help="prediction channels of the composite law, e.g. 1,power or all "
                              "(default 1, the paper's)")
@@ -88,11 +91,13 @@ def add_arguments(parser):
 def run(args):
     gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
                  h=args.h)
+    engine = args.engine or "builtin"
     model, runs, report = run_experiment(args.duration, args.trajectory, gains, args.substeps,
-                                         progress=not args.quiet, channels=args.channels)
+                                         progress=not args.quiet, channels=args.channels,
+                                         engine=engine)
     settings = dict(gains, duration=args.duration, trajectory=args.trajectory,
                     channels=[str(c) for c in args.channels],
-                    substeps=args.substeps, model="css_arm", q0=list(PAPER_Q0))
+                    substeps=args.substeps, model="css_arm", q0=list(PAPER_Q0), engine=engine)
     write_outputs(model, runs, report, args.out, settings)
     keys = [k for k in report["direct"] if k != "wall_time_s"]
     print(f"{'metric':34s} {'direct':>14s} {'composite':>14s}")

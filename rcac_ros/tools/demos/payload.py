@@ -31,8 +31,8 @@ import numpy as np
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import (add_gain_arguments, finite_float, non_negative_float,
-                                 positive_float)
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, finite_float,
+                                 non_negative_float, positive_float)
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.robots import example_robot_urdf
 
@@ -56,12 +56,17 @@ def find_panda_urdf():
     return example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
 
 
-def load_panda(urdf=None):
-    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``."""
+def load_panda(urdf=None, joint_terms=False):
+    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``.
+
+    Rigid unless ``joint_terms``: the URDF's ``<dynamics damping="0.003">`` is dropped, so
+    the payload experiments isolate the payload (joint terms: doc/design.md §7).
+    """
     path = urdf or find_panda_urdf()
     if path is None:
         raise ConfigError("urdf: example-robot-data's panda.urdf not found; pass --urdf")
-    return model_from_urdf(path, tip_link="panda_link8")
+    model = model_from_urdf(path, tip_link="panda_link8")
+    return model if joint_terms else model.replace(damping=0.0, friction=0.0)
 
 
 def _skew(v):
@@ -156,10 +161,12 @@ def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None)
 
 
 def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02, 0.08),
-             gains=None, adapt_all=False, urdf=None, progress=True, laws=None):
+             gains=None, adapt_all=False, urdf=None, progress=True, laws=None,
+             engine="builtin"):
     """The three laws on the Panda with a payload attached at ``jump``.
 
-    Returns ``(model, loaded, runs, report)``.
+    ``engine``: the plant (``builtin`` or ``mujoco``, doc/plants.md). Returns ``(model,
+    loaded, runs, report)``.
     """
     g = dict(GAINS, **(gains or {}))
     model = load_panda(urdf)
@@ -171,7 +178,8 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
                                                                law=law, **g))
         t0 = time.perf_counter()
         runs[law] = closed_loop(ctrl, trajectory, duration, events=((jump, loaded),), strict=True,
-                                progress=f"{law:>9s}" if progress else None, progress_every=250)
+                                progress=f"{law:>9s}" if progress else None, progress_every=250,
+                                engine=engine)
         report[law] = metrics(runs[law], jump, model.theta()[-1], loaded.theta()[-1],
                               effort_limit=model.effort_limit)
         report[law]["wall_time_s"] = time.perf_counter() - t0
@@ -238,6 +246,7 @@ def add_arguments(parser):
         ("h", "control period, s")))
     parser.add_argument("--adapt-all", action="store_true",
                         help="adapt links 1-6 too (default: only link 7)")
+    add_engine_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -246,13 +255,15 @@ def run(args):
     if args.jump >= args.duration:
         raise ConfigError(f"--jump: the payload must attach before the end of the run "
                           f"(--duration {args.duration:g} s), got {args.jump:g} s")
+    engine = args.engine or "builtin"
     model, loaded, runs, report = run_demo(args.duration, args.jump, args.payload_mass,
                                            args.payload_com, gains, args.adapt_all, args.urdf,
-                                           progress=not args.quiet)
+                                           progress=not args.quiet, engine=engine)
     settings = dict(gains, duration=args.duration, jump=args.jump,
                     payload_mass=args.payload_mass, payload_com_flange=list(args.payload_com),
                     adapt_all=args.adapt_all, model=model.name, tip_link="panda_link8",
-                    q_center=list(READY), amplitude=list(AMPLITUDE), frequency=list(FREQUENCY))
+                    q_center=list(READY), amplitude=list(AMPLITUDE), frequency=list(FREQUENCY),
+                    engine=engine)
     write_outputs(model, loaded, runs, report, args.out, settings, args.jump)
     laws = list(report)
     keys = [k for k in report[laws[0]] if not isinstance(report[laws[0]][k], list)

@@ -11,6 +11,7 @@ A campaign (YAML, see ``doc/campaigns.md``) is a ``scenario`` (the fixed part) a
       law: composite        # direct | composite | slotine_li
       trajectory: {type: paper, reading: velocity}
       duration: 5.0
+      engine: builtin       # builtin | mujoco: the plant (doc/plants.md)
       gains: {K_D: 1.0e4, Lambda: 1.0, P: 100.0, gamma: 0.1, lam: 10.0, h: 0.002}
     vary:
       noise_q: {uniform: {low: 0.0, high: 1.0e-4}}
@@ -39,6 +40,7 @@ from rcac_ros.core.identifiability import inertia_about_com
 from rcac_ros.core.model import theta_from_inertia
 from rcac_ros.core.pseudo_inertia import lambda_min
 from rcac_ros.errors import ConfigError, read_yaml
+from rcac_ros.plants import check_engine, ENGINES
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
 from rcac_ros.tools.demos.payload import GAINS as PANDA_GAINS
@@ -86,7 +88,7 @@ MODEL_DEFAULTS = {
                   trajectory=dict(type="sinusoid")),
 }
 SCENARIO_KEYS = ("model", "law", "trajectory", "duration", "gains", "substeps", "error_limit",
-                 "initial_estimate", "payload_time", "adapt_all")
+                 "initial_estimate", "payload_time", "engine", "adapt_all")
 TOP_KEYS = ("name", "seed", "samples", "scenario", "vary")
 TRAJECTORY_KEYS = {"paper": ("type", "reading", "amplitude", "period"),
                    "sinusoid": ("type", "offset", "amplitude", "frequency")}
@@ -282,6 +284,9 @@ def validate(doc, source="campaign"):
     if not isinstance(out["scenario"]["adapt_all"], bool) or (
             out["scenario"]["adapt_all"] and model != "panda"):
         fail("scenario.adapt_all", "expected true or false (panda only: P on every link)")
+    engine = check_engine(sc.get("engine", ENGINES[0]), "scenario.engine")
+    if engine != ENGINES[0]:         # recorded only when not the default: older results resume
+        out["scenario"]["engine"] = engine
     vary = mapping(doc.get("vary") or {}, "vary", tuple(QUANTITIES))
     out["vary"] = {q: check_spec(q, vary[q], f"vary.{q}") for q in QUANTITIES if q in vary}
     return out
@@ -382,7 +387,7 @@ def nominal_model(name):
 
 def controller_for(campaign, inputs, model, theta_hat0=None):
     """The controller of one run (``channels`` passed only when given; ``theta_hat0`` at
-    construction, where the natural geometry matches its gain, doc/design.md §7)."""
+    construction, where the natural geometry matches its gain, doc/design.md §8)."""
     sc = campaign["scenario"]
     law = inputs["law"]
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
@@ -445,6 +450,7 @@ def setup(campaign, index):
     kwargs = dict(trajectory=trajectory, duration=sc["duration"], plant=plant, q0=q0, qd0=qd0,
                   noise_q=inputs["noise_q"], noise_qd=inputs["noise_qd"],
                   delay=inputs["delay"], rng=rng, events=events, substeps=sc["substeps"],
+                  engine=sc.get("engine", ENGINES[0]),
                   error_limit=sc["error_limit"], theta_hat0=start)
     return inputs, controller, kwargs
 
@@ -452,7 +458,7 @@ def setup(campaign, index):
 def shifted_start(theta, mass_scale, com_shift):
     """Initial estimates: every link's nominal body with its mass and inertia scaled by
     ``mass_scale`` and its centre of mass moved by ``com_shift`` (m, link frame); a body
-    stays a body (doc/design.md §7)."""
+    stays a body (doc/design.md §8)."""
     if mass_scale == 1.0 and not any(com_shift):
         return theta
     out = np.empty_like(theta)
@@ -480,7 +486,7 @@ def simulate(campaign, index, keep_run=False):
 def consistency_metrics(run):
     """Whether every link's estimates were a body at every period of the run, the share of
     link-periods that were, and the smallest ``lambda_min(J(theta_hat_i))`` (doc/design.md
-    §7), over the periods whose estimates are finite."""
+    §8), over the periods whose estimates are finite."""
     theta = run["theta_hat"]
     ok = np.all(np.isfinite(theta), axis=(1, 2))
     if not ok.any():

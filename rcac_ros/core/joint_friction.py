@@ -1,0 +1,529 @@
+"""Joint friction and rotor inertia in the recursive composite law (doc/design.md §7).
+
+Each joint i adds three parameters ``theta_f,i = (armature_i, damping_i, friction_i)`` and,
+in joint i's row of the joint-space regressor only, three columns. So the recursion stays
+O(n): the link terms are the paper's, and joint i's terms are local to joint i.
+
+    tau_i = z6^T F_ri + Y_f,i theta_f_hat_i,   Y_f,i = [qdd_ri, qd_ri, sigma(qd_i)]  (eq 20)
+    sigma(v) = tanh(v / v_c)
+
+(``qd_ri``, as the link terms use ``V_ri``: the viscous term then adds the dissipation
+``damping s_i^2`` to the closed loop; the Coulomb term uses the actual velocity, as
+``C(w)`` does.) The adaptation of eq 24 gains the joint terms:
+
+    theta_f_hat_dot_i = -P_f,i (Y_f,i^T s_qi + gamma sum_c W_f,ci^T E_c),  s_qi = qd_i - qd_ri
+
+The prediction channels (:mod:`rcac_ros.core.channels`) predict the joint torques with
+these terms: ``tau_f,k = d/dt(armature_k qd_k) + damping_k qd_k + friction_k sigma(qd_k)``,
+so for joint k's channel ``phi_f = [qd_k, 0, 0]``, ``psi_f = [0, qd_k, sigma(qd_k)]`` at
+link k and nothing elsewhere; for the power channel ``qd^T tau_f = d/dt(sum 1/2 armature_i
+qd_i^2) + sum (damping_i qd_i^2 + friction_i qd_i sigma(qd_i))``, so ``phi_f = [qd_i^2 / 2,
+0, 0]``, ``psi_f = [0, qd_i^2, qd_i sigma(qd_i)]`` at every joint. They are filtered exactly
+as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
+
+Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
+terms use least squares); the leakage acts on the link terms only; the projection keeps
+the joint terms >= 0. Discretisation as the link terms' (explicit Euler on the tracking
+term, implicit or explicit on the prediction term, one joint solve over all parameters).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._validate import numeric
+from rcac_ros.errors import GainError
+from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
+from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
+                       GAIN_P, I_ADAPT, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_PROJECT, I_P_DIAG, I_TRACKING,
+                       I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, S_LINK,
+                       TAU, THETA_HAT, U_ROW, W_ROW)
+from .adaptation import adapt_link, project, tracking_active, update_least_squares
+from .channels import (axis_terms, channel_start, close_channels, filtered_output, predict_link,
+                       start_channels)
+from .regressor import reference_wrench, regressor_row, regressor_terms
+from .spatial import P0, propagate, transform_force_T
+
+# ---- joint j: jdata[j, :] ------------------------------------------------------------------
+F_HAT = 0           #: theta_f_hat_j = (armature, damping, friction) estimates (3)
+F_GAIN = 3          #: P_f,j, the diagonal gain (3)
+F_R = 6             #: R_f,j = theta_f_hat_j - h P_f,j (...), eq 24 step 1 (3)
+F_Y = 9             #: Y_f,j = [qdd_rj, qd_rj, sigma(qd_j)] (3)
+F_SQ = 12           #: s_qj = qd_j - qd_rj
+F_VC = 13           #: v_c of sigma
+JOINT_COLS = 14
+
+# ---- channel c, joint j: jfilt[c, j, :] ----------------------------------------------------
+JPHI_F = 0          #: phi_f^f (3)
+JPSI_F = 3          #: psi_f^f (3)
+JPHI_PREV = 6       #: phi_f at the last step (3)
+JPSI_PREV = 9       #: psi_f at the last step (3)
+JW = 12             #: W_f,cj (3)
+JU = 15             #: U_f,cj = P_f,j W_f,cj^T (3)
+JFILT_COLS = 18
+
+#: Default diagonal gain of the joint terms (armature, damping, friction).
+P_FRICTION = (1.0, 10.0, 10.0)
+
+FRICTION_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
+                      f"float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+
+
+@njit(cache=True, inline="always")
+def joint_terms(code, qd, sig):
+    """``phi_f``, ``psi_f`` of one joint for a channel of ``CH_JOINT`` code ``code`` (3-tuples).
+
+    Called only where the channel sees the joint: its own joint, or any joint for power.
+    """
+    if code == POWER:
+        return (0.5 * qd * qd, 0.0, 0.0), (0.0, qd * qd, qd * sig)
+    return (qd, 0.0, 0.0), (0.0, qd, sig)
+
+
+@njit(cache=True, inline="always")
+def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
+    """Joint i's share of every channel that sees it: ``W_f,ci`` and ``E_c += W_f,ci theta_f_i``.
+
+    A joint channel k sees joint k only; the power channel sees every joint.
+    """
+    fe, fb0, fb1, lam = coef
+    for c in range(chan.shape[0]):
+        code = chan[c, CH_JOINT]
+        if code != POWER and code != i:
+            continue
+        phi, psi = joint_terms(code, qd, sig)
+        E = chan[c, CH_E]
+        for k in range(3):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                jfilt[c, i, JPHI_F + k] = ph
+                jfilt[c, i, JPSI_F + k] = 0.0
+            else:
+                php = jfilt[c, i, JPHI_PREV + k]
+                psp = jfilt[c, i, JPSI_PREV + k]
+                jfilt[c, i, JPHI_F + k] = (fe * jfilt[c, i, JPHI_F + k] + fb0 * php
+                                           + fb1 * (ph - php))
+                jfilt[c, i, JPSI_F + k] = (fe * jfilt[c, i, JPSI_F + k] + fb0 * psp
+                                           + fb1 * (ps - psp))
+            jfilt[c, i, JPHI_PREV + k] = ph
+            jfilt[c, i, JPSI_PREV + k] = ps
+            w = lam * (ph - jfilt[c, i, JPHI_F + k]) + jfilt[c, i, JPSI_F + k]
+            jfilt[c, i, JW + k] = w
+            E += w * jrow[F_HAT + k]
+        chan[c, CH_E] = E
+
+
+@njit(cache=True, inline="always")
+def sees(code, i):
+    """Whether a channel of code ``code`` has joint i's friction terms (W_f,ci != 0)."""
+    return code == POWER or code == i
+
+
+@njit(cache=True, inline="always")
+def adapt_joint(chan, jfilt, i, jrow, scal, tracking):
+    """Eq 24, step 1, joint i's terms: ``R_f,i = theta_f_hat_i - h P_f,i (Y_f,i^T s_qi
+    + prediction part)``, and ``U_f,ci = P_f,i W_f,ci^T`` for the implicit solve."""
+    h, gamma = scal[I_H], scal[I_GAMMA]
+    implicit = scal[I_IMPLICIT] != 0.0
+    for k in range(3):
+        g = jrow[F_Y + k] * jrow[F_SQ] if tracking else 0.0
+        for c in range(chan.shape[0]):
+            if chan[c, CH_ACTIVE] == 0.0 or not sees(chan[c, CH_JOINT], i):
+                continue
+            if implicit:
+                g -= gamma * jfilt[c, i, JW + k] * chan[c, CH_Y]
+            else:
+                g += gamma * jfilt[c, i, JW + k] * chan[c, CH_E]
+        jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * g
+        if implicit:
+            for c in range(chan.shape[0]):
+                jfilt[c, i, JU + k] = jrow[F_GAIN + k] * jfilt[c, i, JW + k]
+
+
+@njit(cache=True, inline="always")
+def implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal):
+    """Eq 24, step 2, over link and joint terms: ``(I + h gamma U W) theta+ = R`` by Woodbury.
+
+    ``theta+ = R - h gamma U (I + h gamma W U)^-1 W R`` with W, U the rows of every active
+    channel over all parameters (13 per link and 3 per joint); m x m, O(m^2 n + m^3).
+    ``A`` (m * m), ``z`` and ``idx`` (m) are scratch.
+    """
+    n, m = R.shape[0], chan.shape[0]
+    hg = scal[I_H] * scal[I_GAMMA]
+    na = 0
+    for c in range(m):
+        if chan[c, CH_ACTIVE] != 0.0:
+            idx[na] = c
+            na += 1
+    for i in range(n):
+        for k in range(13):
+            state[i, THETA_HAT + k] = R[i, k]
+        for k in range(3):
+            jdata[i, F_HAT + k] = jdata[i, F_R + k]
+    if na == 0:
+        return
+    Aa = A[:na * na].reshape((na, na))
+    for a in range(na):
+        ca = int(idx[a])
+        sa = channel_start(chan[ca, CH_JOINT])
+        acc = 0.0
+        for i in range(sa, n):
+            for k in range(13):
+                acc += filt[ca, i, W_ROW + k] * R[i, k]
+            if sees(chan[ca, CH_JOINT], i):
+                for k in range(3):
+                    acc += jfilt[ca, i, JW + k] * jdata[i, F_R + k]
+        z[a] = acc
+        for b in range(a + 1):
+            cb = int(idx[b])
+            s0 = max(sa, channel_start(chan[cb, CH_JOINT]))
+            acc = 0.0
+            for i in range(s0, n):
+                for k in range(13):
+                    acc += filt[ca, i, W_ROW + k] * filt[cb, i, U_ROW + k]
+                if sees(chan[ca, CH_JOINT], i) and sees(chan[cb, CH_JOINT], i):
+                    for k in range(3):
+                        acc += jfilt[ca, i, JW + k] * jfilt[cb, i, JU + k]
+            Aa[a, b] = hg * acc
+            Aa[b, a] = hg * acc
+        Aa[a, a] += 1.0
+    zz = z[:na]
+    cholesky(Aa, zz)
+    for a in range(na):
+        ca = int(idx[a])
+        zc = hg * zz[a]
+        for i in range(channel_start(chan[ca, CH_JOINT]), n):
+            for k in range(13):
+                state[i, THETA_HAT + k] -= zc * filt[ca, i, U_ROW + k]
+            if sees(chan[ca, CH_JOINT], i):
+                for k in range(3):
+                    jdata[i, F_HAT + k] -= zc * jfilt[ca, i, JU + k]
+
+
+@njit(cache=True, inline="always")
+def cholesky(A, b):
+    """Solve ``A x = b`` in place for symmetric positive definite A (lower triangle read)."""
+    n = A.shape[0]
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        d = math.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= A[i, k] * A[j, k]
+            A[i, j] = v / d
+    for i in range(n):
+        v = b[i]
+        for k in range(i):
+            v -= A[i, k] * b[k]
+        b[i] = v / A[i, i]
+    for i in range(n - 1, -1, -1):
+        v = b[i]
+        for k in range(i + 1, n):
+            v -= A[k, i] * b[k]
+        b[i] = v / A[i, i]
+
+
+@njit(FRICTION_SIGNATURE, cache=True)
+def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
+    """One control period of the law with joint terms (module docstring); returns tau.
+
+    ``data``, ``filt`` as the general kernel's (:mod:`rcac_ros.core.composite_kernels`);
+    ``jdata`` (n, JOINT_COLS) and ``jfilt`` (m, n, JFILT_COLS) hold the joint terms.
+    Empty on bad input (code in ``scal[I_ERR]``).
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    chan = filt[:, n]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    m = chan.shape[0]
+    work = np.empty(n * 41 + 84 + m * (m + 2) + 64, q.dtype)
+    M4 = work[-64:].reshape((4, 4, 4))       # the natural geometry's scratch (unused here)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
+    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
+        work[41 * n + 65:41 * n + 78]
+    F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
+    o = 41 * n + 84
+    A = work[o:o + m * m]
+    z = work[o + m * m:o + m * (m + 1)]
+    idx = work[o + m * (m + 1):o + m * (m + 2)]
+    coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
+    tau = np.empty(n, q.dtype)
+    first = scal[I_K] == 0.0
+    start_channels(chan, state, scal, q, first)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    for i in range(n):
+        row = const[i]
+        st = state[i]
+        jrow = jdata[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qd[i], q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        st[S_LINK], st[S_LINK + 1], st[S_LINK + 2] = vx - rvx, vy - rvy, vz - rvz
+        st[S_LINK + 3], st[S_LINK + 4], st[S_LINK + 5] = wx - rwx, wy - rwy, wz - rwz
+        f = reference_wrench(st, THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy,
+                             rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
+                      dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                      wx, wy, wz, gx, gy, gz)
+        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
+        # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri), its share of the channels
+        qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
+        sig = math.tanh(qd[i] / jrow[F_VC])
+        jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qd[i] - qd_d[i])
+        jrow[F_Y + 1] = qdr
+        jrow[F_Y + 2] = sig
+        jrow[F_SQ] = qd[i] - qdr
+        predict_joint(chan, jfilt, i, qd[i], sig, jrow, coef, first)
+    close_channels(chan, scal)
+    frozen = scal[I_FROZEN] != 0.0
+    tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
+    scal[I_TRACKING] = 1.0 if tracking else 0.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        row = const[i]
+        st = state[i]
+        jrow = jdata[i]
+        if i < n - 1:
+            r = const[i + 1]
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
+        feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
+        tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                         + jrow[F_Y + 2] * jrow[F_HAT + 2])                        # eq 20
+        if not frozen:
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
+            adapt_joint(chan, jfilt, i, jrow, scal, tracking)
+    if frozen:
+        pass
+    elif scal[I_IMPLICIT] != 0.0:
+        implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal)
+    else:
+        for i in range(n):
+            for k in range(13):
+                state[i, THETA_HAT + k] = R[i, k]
+            for k in range(3):
+                jdata[i, F_HAT + k] = jdata[i, F_R + k]
+    if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
+        update_least_squares(chan, filt, const, state, scal, grad, Pg)
+    if not frozen and scal[I_PROJECT] != 0.0:
+        project(const, state)
+        for i in range(n):
+            for k in range(3):
+                jdata[i, F_HAT + k] = max(jdata[i, F_HAT + k], 0.0)
+    for i in range(n):
+        state[i, TAU] = tau[i]
+        state[i, Q_PREV] = q[i]
+    scal[I_K] += 1.0
+    return tau
+
+
+@njit(FRICTION_SIGNATURE, cache=True)
+def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
+    """:func:`~rcac_ros.core.composite_kernels.paper_step` with the joint terms: the
+    paper's law (one channel, joint 1; fixed gain; implicit) fused in one loop body, as
+    :func:`friction_step_kernel` computes it for ``channels=[1]`` (the speed, ``rcac bench``).
+
+    Joint 1's channel sees joint 1's terms only, so they join the Sherman-Morrison solve
+    at link 1; every other joint's terms adapt from the tracking term alone.
+    """
+    n = data.shape[0] - 1
+    const = data[:n, :CONST_COLS]
+    state = data[:n, CONST_COLS:]
+    scal = data[n]
+    chan = filt[:, n]
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return np.empty(0, q.dtype)
+    work = np.empty(n * 41 + 6, q.dtype)
+    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
+    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
+    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
+    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
+    F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
+    tau = np.empty(n, q.dtype)
+    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
+    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
+    first = scal[I_K] == 0.0
+    kd_diag = scal[I_KD_DIAG] != 0.0
+    p_diag = scal[I_P_DIAG] != 0.0
+    y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
+    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
+    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
+    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
+    E = 0.0
+    for i in range(n):
+        row = data[i]                                  # link i: constants, then state
+        qdi = qd[i]
+        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
+                                         V, Vr, Vdr, g)
+        jrow = jdata[i]
+        qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
+        sig = math.tanh(qdi / jrow[F_VC])
+        jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qdi - qd_d[i])
+        jrow[F_Y + 1] = qdr
+        jrow[F_Y + 2] = sig
+        jrow[F_SQ] = qdi - qdr
+        if i == 0:                           # joint 1's terms in joint 1's channel
+            for k in range(3):
+                ph = qdi if k == 0 else 0.0
+                ps = 0.0 if k == 0 else (qdi if k == 1 else sig)
+                if first:
+                    jfilt[0, 0, JPHI_F + k] = ph
+                    jfilt[0, 0, JPSI_F + k] = 0.0
+                else:
+                    php = jfilt[0, 0, JPHI_PREV + k]
+                    psp = jfilt[0, 0, JPSI_PREV + k]
+                    jfilt[0, 0, JPHI_F + k] = (fe * jfilt[0, 0, JPHI_F + k] + fb0 * php
+                                               + fb1 * (ph - php))
+                    jfilt[0, 0, JPSI_F + k] = (fe * jfilt[0, 0, JPSI_F + k] + fb0 * psp
+                                               + fb1 * (ps - psp))
+                jfilt[0, 0, JPHI_PREV + k] = ph
+                jfilt[0, 0, JPSI_PREV + k] = ps
+                w = lam * (ph - jfilt[0, 0, JPHI_F + k]) + jfilt[0, 0, JPSI_F + k]
+                jfilt[0, 0, JW + k] = w
+                E += w * jrow[F_HAT + k]
+        vx, vy, vz, wx, wy, wz = V
+        rvx, rvy, rvz, rwx, rwy, rwz = Vr
+        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
+        gx, gy, gz = g
+        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
+        if i == 0:
+            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        else:
+            A, Ad = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qdi, A, Ad, 0.0, 0.0)
+        svx, svy, svz, swx, swy, swz = vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz
+        state[i, S_LINK], state[i, S_LINK + 1], state[i, S_LINK + 2] = svx, svy, svz
+        state[i, S_LINK + 3], state[i, S_LINK + 4], state[i, S_LINK + 5] = swx, swy, swz
+        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
+        f = reference_wrench(row, CONST_COLS + THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(6):
+            Fs[i, k] = f[k]
+        gr = regressor_terms(svx, svy, svz, swx, swy, swz, dvx, dvy, dvz, dwx, dwy, dwz,
+                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
+        for k in range(13):
+            G[i, k] = gr[k]
+        phi, psi = axis_terms(A, Ad, V, g)                           # eq 22
+        for k in range(13):
+            ph = phi[k]
+            ps = psi[k]
+            if first:
+                filt[0, i, PHI_F + k] = ph
+                filt[0, i, PSI_F + k] = 0.0
+            else:
+                php = filt[0, i, PHI_PREV + k]
+                psp = filt[0, i, PSI_PREV + k]
+                filt[0, i, PHI_F + k] = fe * filt[0, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
+                filt[0, i, PSI_F + k] = fe * filt[0, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHI_PREV + k] = ph
+            filt[0, i, PSI_PREV + k] = ps
+            w = lam * (ph - filt[0, i, PHI_F + k]) + filt[0, i, PSI_F + k]     # eq 23
+            filt[0, i, W_ROW + k] = w
+            E += w * state[i, THETA_HAT + k]
+    E -= y
+    chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
+    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
+    for k in range(6):
+        F[k] = 0.0
+    for i in range(n - 1, -1, -1):
+        if i < n - 1:
+            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
+                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
+                F[0], F[1], F[2], F[3], F[4], F[5])
+        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
+        for r in range(6):
+            acc = Fs[i, r]
+            if kd_diag:
+                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
+            else:
+                for k in range(6):
+                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
+            F[r] += acc
+        jrow = jdata[i]
+        tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                         + jrow[F_Y + 2] * jrow[F_HAT + 2])                 # eq 20
+        for k in range(3):
+            gk = jrow[F_Y + k] * jrow[F_SQ]
+            if i == 0:
+                gk -= gamma * jfilt[0, 0, JW + k] * y
+                jfilt[0, 0, JU + k] = jrow[F_GAIN + k] * jfilt[0, 0, JW + k]
+            jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * gk
+        # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
+        for k in range(13):
+            G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
+        if p_diag:
+            for a in range(13):
+                R[i, a] = state[i, THETA_HAT + a] - h * const[i, GAIN_P + 14 * a] * G[i, a]
+                filt[0, i, U_ROW + a] = const[i, GAIN_P + 14 * a] * filt[0, i, W_ROW + a]
+        else:
+            for a in range(13):
+                acc_r = 0.0
+                acc_u = 0.0
+                for c in range(13):
+                    acc_r += const[i, GAIN_P + 13 * a + c] * G[i, c]
+                    acc_u += const[i, GAIN_P + 13 * a + c] * filt[0, i, W_ROW + c]
+                R[i, a] = state[i, THETA_HAT + a] - h * acc_r
+                filt[0, i, U_ROW + a] = acc_u
+    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
+    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
+    w_dot_r = 0.0
+    w_dot_u = 0.0
+    for i in range(n):
+        for k in range(13):
+            w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
+            w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
+    for k in range(3):
+        w_dot_r += jfilt[0, 0, JW + k] * jdata[0, F_R + k]
+        w_dot_u += jfilt[0, 0, JW + k] * jfilt[0, 0, JU + k]
+    kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
+    for i in range(n):
+        for k in range(3):
+            jdata[i, F_HAT + k] = jdata[i, F_R + k]
+    for k in range(3):
+        jdata[0, F_HAT + k] -= kc * jfilt[0, 0, JU + k]
+    for i in range(n):
+        for k in range(13):
+            state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
+        state[i, TAU] = tau[i]
+        state[i, Q_PREV] = q[i]
+    scal[I_K] += 1.0
+    return tau
+
+
+def friction_gain(value, n):
+    """``P_friction`` as (n, 3) positive diagonal gains: a scalar, a (3,) or an (n, 3)."""
+    arr = numeric(value, "P_friction", GainError)
+    if arr.ndim > 2 or (arr.ndim == 1 and arr.shape != (3,)) or \
+            (arr.ndim == 2 and arr.shape != (n, 3)):
+        raise GainError(f"P_friction: expected a scalar, 3 values or ({n}, 3) values, "
+                        f"got {value!r}")
+    arr = np.broadcast_to(arr, (n, 3)).copy()
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+        raise GainError("P_friction: every entry must be finite and > 0")
+    return arr
