@@ -295,6 +295,18 @@ CONTROLLER = _robot("controller") + (
           "state's arrival, s (a phase-locked loop: the state waits for the tick at most "
           "this long instead of up to a period); unset: the ticks keep their own phase",
           lo=0.0, hi=1.0),
+    Param("starvation.delay_margin", "double", None,
+          "timer mode: past this smoothed delay (state age plus the previous effort held "
+          "beyond a period) K_D is scaled down by margin/delay and adaptation frozen until "
+          "the delay has stayed within it for starvation.recover_after, s; unset: "
+          "80 / (largest K_D), the measured margin (doc/failsafe.md); 0: no guard",
+          lo=0.0, hi=1.0),
+    Param("starvation.recover_after", "double", 1.0,
+          "the smoothed delay stays within the margin this long before the nominal gains "
+          "and adaptation return, s", lo=0.0, hi=BIG),
+    Param("starvation.min_scale", "double", 0.02,
+          "the smallest scale of K_D the starvation guard applies", lo=0.0, hi=1.0,
+          strict=True),
     _strict_parameters(),
 )
 

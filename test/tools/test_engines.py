@@ -151,3 +151,19 @@ def test_without_mujoco_a_command_says_so_in_one_line(tmp_path):
     assert out.returncode == 2
     assert out.stderr == ("rcac experiment: error: engine mujoco: the 'mujoco' package is not "
                           "installed (pip install mujoco==4.0.0, or the extra rcac_ros[mujoco])\n")
+
+
+def test_friction_aware_laws_track_the_frictional_panda(tmp_path):
+    """The laws with joint_friction (doc/design.md §7) on panda_joints with the model's own
+    friction law (builtin engine): far better than the friction-blind paper law; on the rigid
+    panda they stay at its level."""
+    out = rcac("compare", "--duration", "1", "--quiet", "--engine", "builtin", "--laws",
+               "paper", "paper_friction", "all_friction", "--scenarios", "panda_joints",
+               "panda_rigid", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    with open(tmp_path / "compare.json", encoding="utf-8") as f:
+        report = json.load(f)
+    joints, rigid = report["panda_joints"], report["panda_rigid"]
+    for law in ("paper_friction", "all_friction"):
+        assert joints[law]["rms"] < 0.2 * joints["paper"]["rms"], (law, joints)
+        assert rigid[law]["rms"] < 5.0 * rigid["paper"]["rms"], (law, rigid)

@@ -409,3 +409,24 @@ def test_channels_reach_the_controller_when_given(tmp_path, capsys):
         assert code == 2
         assert capsys.readouterr().err.startswith("rcac sweep: error: channels: this "
                                                   "controller does not take channels")
+
+
+def test_friction_campaign_pairs_the_joint_terms_across_laws():
+    """campaigns/friction.yaml (doc/design.md §7): both laws of a sample see the same plant
+    joint terms, drawn per joint within the decade; composite_friction has the joint
+    estimates, composite has not; the plant carries the terms."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    campaign = cp.load(os.path.join(root, "campaigns", "friction.yaml"))
+    assert cp.run_count(campaign) == 2 * campaign["samples"]
+    a, b, c = cp.sample(campaign, 0), cp.sample(campaign, 1), cp.sample(campaign, 2)
+    assert {a["law"], b["law"]} == {"composite", "composite_friction"}
+    for q in cp.PAIRED:
+        assert a[q] == b[q] and a[q] != c[q]
+    assert all(0.1 <= v <= 1.0 for v in a["joint_friction"])
+    assert all(0.02 <= v <= 0.2 for v in a["joint_armature"])
+    inputs, ctrl, kwargs = cp.setup(campaign, 1)
+    np.testing.assert_array_equal(kwargs["plant"].damping, inputs["joint_damping"])
+    np.testing.assert_array_equal(kwargs["plant"].armature, inputs["joint_armature"])
+    assert ctrl.joint_friction == (inputs["law"] == "composite_friction")
+    row = cp.input_columns(inputs)
+    assert row["joint_friction_7"] == inputs["joint_friction"][6]

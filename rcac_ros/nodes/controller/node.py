@@ -35,6 +35,7 @@ from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import run
 from rcac_ros.nodes.controller.diagnostics import diagnostics
+from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
 from rcac_ros.nodes.controller.outputs import ControllerOutputs
 from rcac_ros.nodes.controller.params import read_parameters
@@ -76,6 +77,7 @@ class ControllerNode(ManagedNode):
     def __init__(self, **kwargs):
         self.ctrl = None
         self.loop = None                    # the steady-clock pacing of timer mode
+        self._starvation = None             # timer mode's starvation guard
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
 
     # ------------------------------------------------------------------ lifecycle
@@ -91,6 +93,8 @@ class ControllerNode(ManagedNode):
             raise ConfigError(f"timer.phase_offset: must be < one period ({self.h:g} s), got "
                               f"{offset:g}")
         self._phase_offset_ns = None if offset is None else round(offset * 1e9)
+        self._starvation = Starvation(self, values) if self.mode == "timer" \
+            and values["starvation.delay_margin"] != 0.0 else None     # doc/failsafe.md
         self.phase_error_ns = 0
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
@@ -130,6 +134,8 @@ class ControllerNode(ManagedNode):
         self._last_tick = None
         self.filters_stale = False          # the loop restarts the filters at its next step
         self._outputs.last_answer = None
+        if self._starvation is not None:
+            self._starvation.reset()
 
     def restart_motion(self, q0=None):
         """The desired motion starts again, from ``q0`` or the measured state."""
@@ -199,7 +205,12 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
         q, qd = self.states.latest          # one snapshot (timer mode: set by another thread)
+        spell = self.failsafe.stop.active
         self.watchdog.resume()              # a spell of safe effort ends here
+        if self._starvation is not None:    # timer mode: K_D within the delay margin
+            if spell:
+                self._starvation.after_spell()
+            self._starvation.step()
         if self.filters_stale:
             self.filters_stale = False
             self.ctrl.restart_filters()

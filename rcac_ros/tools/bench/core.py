@@ -275,8 +275,8 @@ def add_arguments(parser):
                              "locked to the states' arrival plus this; default: not locked)")
     parser.add_argument("--faults", action="store_true",
                         help="instead: the closed loop over ROS under faults (drops, jitter, "
-                             "noise, simulator restart, frozen /clock, flood); --duration "
-                             "per case (default 60)")
+                             "noise, simulator restart, frozen /clock, flood, hostile flood, "
+                             "starved machine); --duration per case (default 60)")
     parser.add_argument("--cases", default=None,
                         help="--faults: comma-separated cases (default: all)")
     parser.add_argument("--soak", type=positive_float, default=None, metavar="MINUTES",

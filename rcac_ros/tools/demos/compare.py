@@ -60,6 +60,9 @@ LS_FORGETTING = 1.0
 #: where the scenario gives none.
 NATURAL_START = "natural_default"
 
+#: P_friction of the friction-aware direct and paper laws (doc/tools.md, joint friction).
+P_FRICTION_TRACKING = (30.0, 30.0, 30.0)
+
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
 #: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
 #: (in-sample: [2], [1,2], [2,3], [1,2,3], [2,3,4], [1,2,3,4], [4], [3,4], [4,7], [5,6,7],
@@ -88,9 +91,12 @@ LAWS = {
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
-    # the joint terms (doc/design.md §7), with the gains of rcac friction-demo
-    "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True, P_friction=P_FRICTION)),
-    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=P_FRICTION)),
+    # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
+    # direct and paper laws, adapting them mostly from the tracking term (an explicit step),
+    # with P_friction = 30 (100 diverges on the rigid panda, doc/tools.md)
+    "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True,
+                                     P_friction=P_FRICTION_TRACKING)),
+    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=P_FRICTION_TRACKING)),
     "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
 }
 

@@ -45,7 +45,7 @@ from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_e
                                         run_metrics)
 from rcac_ros.tools.demos.payload import GAINS as PANDA_GAINS
 
-LAWS = ("direct", "composite", "slotine_li")
+LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 GEOMETRIES = ("euclidean", "natural")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
@@ -67,11 +67,18 @@ QUANTITIES = {
     "estimate_error": ("float", 1),
     "start_mass_scale": ("float", 1), "start_com_shift": ("signed", 3),
     "trajectory_scale": ("float", 1),
+    # the plant's joint terms, per joint (doc/design.md §7), and the gain of the joint
+    # estimates of composite_friction
+    "joint_damping": ("float", 7), "joint_friction": ("float", 7), "joint_armature": ("float", 7),
+    "P_friction": ("float", 1),
 }
-POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "start_mass_scale")
+#: Quantities drawn once per sample, the same in every grid cell (paired comparisons).
+PAIRED = ("joint_damping", "joint_friction", "joint_armature")
+POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "P_friction", "start_mass_scale")
 GAINS = ("K_D", "Lambda", "P", "gamma", "lam", "h")
 SUFFIXES = {"payload_com": ("x", "y", "z"), "payload_inertia": ("xx", "yy", "zz"),
-            "start_com_shift": ("x", "y", "z")}
+            "start_com_shift": ("x", "y", "z"),
+            **{q: tuple(str(j) for j in range(1, 8)) for q in PAIRED}}
 
 #: Per model: the default gains, where the payload's centre of mass is measured from
 #: (in the last link's frame), and the initial estimates before any error.
@@ -265,8 +272,9 @@ def validate(doc, source="campaign"):
                  **{k: gains[k] for k in GAINS if k != "h"},
                  channels=None, noise_q=0.0, noise_qd=0.0, delay=0, payload_mass=0.0,
                  payload_com=[0.0, 0.0, 0.0], payload_inertia=[0.0, 0.0, 0.0],
-                 estimate_error=0.0, trajectory_scale=1.0, geometry="euclidean",
-                 start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0])
+                 estimate_error=0.0, trajectory_scale=1.0, joint_damping=[0.0] * 7,
+                 joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=30.0,
+                 geometry="euclidean", start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0])
     for q in QUANTITIES:
         if q in sc and q != "law":
             fixed[q] = check_value(q, sc[q], f"scenario.{q}")
@@ -341,10 +349,11 @@ def sample(campaign, index):
     inputs = copy.deepcopy(campaign["scenario"]["fixed"])
     inputs.update(copy.deepcopy(cells[index % len(cells)]))
     rng = np.random.default_rng([campaign["seed"], index, 0])
+    paired = np.random.default_rng([campaign["seed"], index // len(cells), 2])
     for q in QUANTITIES:                       # canonical order, whatever the file's
         spec = campaign["vary"].get(q)
         if spec is not None and "grid" not in spec:
-            inputs[q] = draw(spec, rng, QUANTITIES[q][1])
+            inputs[q] = draw(spec, paired if q in PAIRED else rng, QUANTITIES[q][1])
     return inputs
 
 
@@ -392,6 +401,8 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
     law = inputs["law"]
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
              gamma=0.0 if law == "direct" else inputs["gamma"], lam=inputs["lam"], h=sc["h"])
+    friction = dict(joint_friction=True, P_friction=inputs["P_friction"]) \
+        if law == "composite_friction" else {}
     if sc["model"] == "panda":
         from rcac_ros.tools.demos.payload import gains_for
         gamma = g["gamma"]
@@ -405,7 +416,7 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
     if inputs["channels"] is not None:
         g["channels"] = inputs["channels"]
     try:
-        return RecursiveCompositeController(model, **g)
+        return RecursiveCompositeController(model, **g, **friction)
     except TypeError as err:
         if "channels" in g:
             raise ConfigError(f"channels: this controller does not take channels ({err})") \
@@ -436,6 +447,13 @@ def setup(campaign, index):
     tool = np.array(MODEL_DEFAULTS[sc["model"]]["tool"])
     loaded = attach_payload(model, inputs["payload_mass"], tool + inputs["payload_com"],
                             np.diag(inputs["payload_inertia"]))
+    terms = {k: np.array(inputs[f"joint_{k}"][:model.n])
+             for k in ("damping", "friction", "armature")}
+    joints = any(np.any(v) for v in terms.values())    # the plant's joint terms
+
+    def plant_of(m):
+        return m.replace(**terms) if joints else m
+    loaded = plant_of(loaded)
     trajectory, q0, qd0 = trajectory_for(campaign, inputs, model)
     rng = np.random.default_rng([campaign["seed"], index, 1])
     theta = model.theta()
@@ -446,7 +464,7 @@ def setup(campaign, index):
     events = ()
     plant = loaded
     if sc["payload_time"] > 0.0:
-        plant, events = model, ((sc["payload_time"], loaded),)
+        plant, events = plant_of(model), ((sc["payload_time"], loaded),)
     kwargs = dict(trajectory=trajectory, duration=sc["duration"], plant=plant, q0=q0, qd0=qd0,
                   noise_q=inputs["noise_q"], noise_qd=inputs["noise_qd"],
                   delay=inputs["delay"], rng=rng, events=events, substeps=sc["substeps"],
