@@ -204,6 +204,13 @@ CONTROLLER = _robot("controller") + (
     Param("leakage_bound", "double", 0.0,
           "M_0 of the switching leakage (every link): none while ||theta_hat_i - theta_0i|| "
           "<= M_0, full beyond 2 M_0 (0: leak always)", lo=0.0, hi=BIG),
+    Param("geometry", "string", "euclidean",
+          "adaptation geometry: 'euclidean' (eq 24 as written) or 'natural' (every link's "
+          "estimates stay a physical body at every step, pseudo-inertia J > 0; "
+          "doc/design.md §8)", choices=("euclidean", "natural")),
+    Param("natural_gain", "double", None,
+          "geometry 'natural': gain k_i of every link (unset: matched to P at the start, "
+          "doc/design.md §8)", lo=0.0, hi=BIG, strict=True),
     Param("joint_friction", "bool", False,
           "also estimate each joint's armature, viscous and Coulomb friction "
           "(doc/design.md §7), published on ~/friction_estimates"),
@@ -243,8 +250,10 @@ CONTROLLER = _robot("controller") + (
                 "default goal velocity tolerance, rad/s (0: not checked)"),
     _constraint("goal_time", 0.0, "default goal_time_tolerance, s (0: no time limit)"),
     Param("initial_estimates", "string", "zero",
-          "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters) or the "
-          "path of a file written by ~/save_estimates"),
+          "theta_hat(0): 'zero' (the paper's), 'model' (the model's own parameters), "
+          "'nominal' (the model made a body and halved, doc/design.md §8) or the path of a "
+          "file written by ~/save_estimates; with geometry 'natural' 'zero' (not a body) "
+          "means 'nominal'"),
     Param("estimates_file", "string", "",
           "~/save_estimates writes the estimates here (YAML), and the physically consistent "
           "links as URDF inertials next to it (.inertial.urdf)", read_only=False),

@@ -37,7 +37,9 @@ THETA_MAX = 231     #: upper bounds of theta_i (13)
 TRACE_MAX = 244     #: k_0 of link i: the bound on trace(P_i) (least squares)
 THETA_0 = 245       #: theta_0i (13), the nominal estimates the leakage pulls toward
 LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
-CONST_COLS = 259
+NAT_K = 259         #: k_i, the natural geometry's gain (doc/design.md §8)
+NAT_P_NU = 260      #: P_nu,i, 3x3 row-major, its gain on nu (doc/design.md §8)
+CONST_COLS = 269
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
 THETA_HAT = 0       #: theta_hat_i (13)
@@ -45,7 +47,8 @@ S_LINK = 13         #: s_i = V_i - V_ri (6)
 TAU = 19            #: the torque of joint i applied over the last period
 Q_PREV = 20         #: q_i at the last step (the power channel's tau^T dq)
 P_FACTOR = 21       #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
-STATE_COLS = 190
+THETA_PREV = 190    #: theta_hat_i before this step's update (the natural retraction)
+STATE_COLS = 203
 LINK_COLS = CONST_COLS + STATE_COLS
 
 # ---- scalars: data[n, :] -------------------------------------------------------------------
@@ -71,7 +74,9 @@ I_E = 20            #: E of the first channel (the paper's scalar E)
 I_Y = 21            #: y of the first channel
 I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zone)
 I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
-SCAL_LEN = 24
+I_NATURAL = 24      #: 1: natural geometry, estimates kept consistent (doc/design.md §8)
+I_RETRACT_MIN = 25  #: the smallest step length a of the retraction at the last step
+SCAL_LEN = 26
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 

@@ -46,12 +46,13 @@ import numpy as np
 from numba import njit
 
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT,
-                       I_DZ_S, I_FORGET, I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_P_DIAG, LAMBDA,
-                       LEAK_M0, P_FACTOR, THETA_0, THETA_HAT, THETA_MAX, THETA_MIN, TRACE_MAX,
-                       U_ROW, W_ROW)
+                       I_DZ_S, I_FORGET, I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG,
+                       I_RETRACT_MIN, LAMBDA, LEAK_M0, NAT_K, NAT_P_NU, P_FACTOR, THETA_0,
+                       THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
 from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update
+from .pseudo_inertia import natural_gain_apply, retract
 
 
 @njit(cache=True, inline="always")
@@ -123,21 +124,35 @@ def gain_step(row, p_diag, st, grad, h, R, i):
 
 
 @njit(cache=True, inline="always")
-def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
+def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + leakage + prediction
     part)``, and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares).
-    With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``."""
+    With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``.
+
+    Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
+    (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction.
+    """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     mode = scal[I_ADAPT]
     p_diag = scal[I_P_DIAG] != 0.0
+    natural = scal[I_NATURAL] != 0.0
     for k in range(13):
         grad[k] = G[i, k] if tracking else 0.0
+    if natural:
+        for k in range(13):
+            st[THETA_PREV + k] = st[THETA_HAT + k]
     if scal[I_LEAK] > 0.0:
         leakage_gradient(row, st, scal, grad)
     if mode == ADAPT_GRADIENT:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        gain_step(row, p_diag, st, grad, h, R, i)
+        if natural:
+            natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU,
+                               M4[0], M4[1], M4[2])
+            for k in range(13):
+                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+        else:
+            gain_step(row, p_diag, st, grad, h, R, i)
     elif mode == ADAPT_LS:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
         apply_factored(st, P_FACTOR, grad, Pg, t)
@@ -156,7 +171,10 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
     for c in range(chan.shape[0]):
         if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if mode == ADAPT_GRADIENT:              # U_ci = P_i W_ci^T, fixed P_i
+        if mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
+            natural_gain_apply(st, THETA_HAT, filt[c, i], W_ROW, filt[c, i], U_ROW, row[NAT_K],
+                               row, NAT_P_NU, M4[0], M4[1], M4[2])
+        elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
             if p_diag:
                 for a in range(13):
                     filt[c, i, U_ROW + a] = row[GAIN_P + 14 * a] * filt[c, i, W_ROW + a]
@@ -172,6 +190,19 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t):
             apply_factored(st, P_FACTOR, grad, Pg, t)
             for k in range(13):
                 filt[c, i, U_ROW + k] = Pg[k]
+
+
+@njit(cache=True, inline="always")
+def retract_links(state, scal, M4):
+    """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
+    consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`
+    (doc/design.md §8); the smallest step length goes to ``scal[I_RETRACT_MIN]``."""
+    a_min = 1.0
+    for i in range(state.shape[0]):
+        st = state[i]
+        a = retract(st, THETA_PREV, st, THETA_HAT, M4[0], M4[1], M4[2], M4[3])
+        a_min = min(a_min, a)
+    scal[I_RETRACT_MIN] = a_min
 
 
 @njit(cache=True, inline="always")

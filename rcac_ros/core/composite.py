@@ -34,9 +34,10 @@ import numpy as np
 from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS, CH_ACTIVE, CH_E,
                        CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_DZ_E, I_DZ_S,
-                       I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_PROJECT,
-                       I_TRACKING, I_Y, LEAK_M0, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX,
-                       W_ROW, Gains, block, new_data)
+                       I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_NATURAL,
+                       I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K, NAT_P_NU,
+                       P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block,
+                       new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
@@ -44,8 +45,10 @@ from rcac_ros.errors import GainError
 from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_step_kernel, paper_friction_step)
 from .least_squares import initial_factor
+from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
 UPDATES = ("implicit", "explicit")
+GEOMETRIES = ("euclidean", "natural")
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
@@ -72,7 +75,9 @@ class RecursiveCompositeController:
     h : float
         Control period, s.
     theta_hat0 : array_like (n, 13), optional
-        Initial estimates (default zero, as in the paper).
+        Initial estimates (default zero, as in the paper; with ``geometry="natural"``, a
+        body per link, default :func:`~rcac_ros.core.pseudo_inertia.default_start` of the
+        model's inertials: the nominal model made a body and halved).
     channels : int, str or sequence, optional
         The predicted filtered torques (:func:`~rcac_ros.core.channels.parse_channels`):
         ``[1]`` (default, the paper's), ``"all"``, ``"power"``, or e.g. ``[1, 7, "power"]``.
@@ -90,6 +95,16 @@ class RecursiveCompositeController:
         none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
     theta_bounds : None, "mass" or (theta_min, theta_max)
         Projection after each step: none (default), mass >= 0, or a box (each bound a
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
+    geometry : {"euclidean", "natural"}
+        ``"euclidean"`` (default): eq 24 as written. ``"natural"``: every link's estimates
+        stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
+        ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
+        the three parameters beyond a body), and each step is retracted into the cone
+        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8).
+    natural_gain : float or (n,), optional
+        ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
+        :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
         scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
         joint terms >= 0 with ``joint_friction``).
     joint_friction : bool
@@ -114,7 +129,8 @@ class RecursiveCompositeController:
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
-                 joint_friction=False, friction_hat0=None, P_friction=P_FRICTION):
+                 joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
+                 geometry="euclidean", natural_gain=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -138,6 +154,7 @@ class RecursiveCompositeController:
         self.joint_friction = bool(joint_friction)
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
+        self._geometry(geometry, natural_gain, theta_hat0)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
         self._choose_kernel()               # after every scalar the choice reads
@@ -159,6 +176,43 @@ class RecursiveCompositeController:
         self._const[:, block("theta_0")] = self.theta_0
         self._scal[I_LEAK] = self.leakage
         self._const[:, LEAK_M0] = self.leakage_bound
+
+    def _geometry(self, geometry, natural_gain, theta_hat0):
+        """Pack the natural geometry's gains (doc/design.md §8), matched at the start."""
+        if geometry not in GEOMETRIES:
+            raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
+        self.geometry = geometry
+        self.natural_gain = None
+        if geometry == "natural" and self.joint_friction:
+            raise GainError("geometry: 'natural' with joint_friction is not built yet "
+                            "(doc/design.md §8)")
+        if geometry == "natural" and self.adaptation != "gradient":
+            raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
+                            f"{self.adaptation!r} (doc/design.md §8)")
+        if geometry == "euclidean":
+            if natural_gain is not None:
+                raise GainError("natural_gain: only with geometry='natural'")
+            return
+        start = self._start(theta_hat0)
+        if natural_gain is None:
+            k = matched_gain(self.P, start)
+        else:
+            k = joint_values(natural_gain, self.n, "natural_gain", GainError)
+            if np.any(k <= 0.0):
+                raise GainError("natural_gain: must be > 0")
+        self.natural_gain = k
+        self._const[:, NAT_K] = k
+        self._const[:, NAT_P_NU:NAT_P_NU + 9] = nu_gain(self.P).reshape(self.n, 9)
+        self._scal[I_NATURAL] = 1.0
+        self._scal[I_RETRACT_MIN] = 1.0
+
+    def _start(self, theta_hat0):
+        """The initial estimates: zero (Euclidean) or a body per link (natural)."""
+        if self.geometry == "natural":
+            return default_start(self.model.theta()) if theta_hat0 is None else \
+                as_start(theta_hat0, self.n)
+        return np.zeros((self.n, 13)) if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0")
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
@@ -252,13 +306,18 @@ class RecursiveCompositeController:
         return len(self.channels)
 
     def reset(self, theta_hat0=None, friction_hat0=None):
-        """Restart: estimates to ``theta_hat0`` (default 0), filters, gains and step count.
+        """Restart: estimates to ``theta_hat0`` (default: 0, or the natural geometry's
+        default start), filters, gains and step count.
 
         With ``joint_friction``, the joint estimates go to ``friction_hat0`` (default: the
         constructor's).
+
+        Raises
+        ------
+        InputError
+            On a ``theta_hat0`` of wrong shape, not finite, or (natural geometry) not a body.
         """
-        th = np.zeros((self.n, 13)) if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0")
+        th = self._start(theta_hat0)
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
@@ -355,6 +414,23 @@ class RecursiveCompositeController:
     def theta_hat(self):
         """Current estimates ``theta_hat``, shape (n, 13) (a copy)."""
         return self._state[:, THETA_HAT:THETA_HAT + 13].copy()
+
+    @property
+    def lambda_min(self):
+        """``lambda_min(J(theta_hat_i))`` per link, (n,): > 0 for a physical body
+        (doc/design.md §8)."""
+        return lambda_min(self._state[:, THETA_HAT:THETA_HAT + 13])
+
+    @property
+    def consistent(self):
+        """Per link, whether ``theta_hat_i`` is a physical body (``J > 0``), (n,) bool."""
+        return is_body(self._state[:, THETA_HAT:THETA_HAT + 13])
+
+    @property
+    def retraction_length(self):
+        """The natural geometry's smallest step length ``a`` at the last step (1: no link's
+        step was shortened; doc/design.md §8)."""
+        return float(self._scal[I_RETRACT_MIN])
 
     @property
     def friction_hat(self):

@@ -19,10 +19,11 @@ from numba import njit
 from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
-                       I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_PROJECT,
+                       I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
+                       I_PROJECT,
                        I_P_DIAG, I_TRACKING, I_Y, PHI_F, PHI_PREV, PSI_F, PSI_PREV, Q_PREV,
                        S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import (adapt_link, implicit_solve, project, tracking_active,
+from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
                          update_least_squares)
 from .channels import (axis_terms, close_channels, filtered_output, predict_link,
                        start_channels)
@@ -35,11 +36,12 @@ RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC
 @njit(cache=True, inline="always")
 def is_paper_law(chan, scal):
     """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
-    update, no dead zone, no projection, no leakage, adapting. :func:`paper_step` then runs
-    it."""
+    update, no dead zone, no projection, no leakage, the Euclidean geometry, adapting.
+    :func:`paper_step` then runs it."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
-            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0)
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0
+            and scal[I_NATURAL] == 0.0)
 
 
 @njit(RCAC_SIGNATURE, cache=True)
@@ -195,7 +197,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 84 + m * (m + 29), q.dtype)
+    work = np.empty(n * 41 + 148 + m * (m + 29), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -204,7 +206,8 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
         work[41 * n + 65:41 * n + 78]
     F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
     pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
-    o = 41 * n + 84                               # the implicit solve's scratch:
+    M4 = work[41 * n + 84:41 * n + 148].reshape((4, 4, 4))   # natural geometry's 4x4s
+    o = 41 * n + 148                              # the implicit solve's scratch:
     A = work[o:o + m * m]                         # the m x m system (flat),
     z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
     order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels by first link,
@@ -254,7 +257,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
         feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
         tau[i] = F[5]                                                              # eq 20
         if not frozen:
-            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
@@ -267,6 +270,8 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
         update_least_squares(chan, filt, const, state, scal, grad, Pg)
     if not frozen and scal[I_PROJECT] != 0.0:
         project(const, state)
+    if not frozen and scal[I_NATURAL] != 0.0:
+        retract_links(state, scal, M4)                # doc/design.md §8
     for i in range(n):
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]

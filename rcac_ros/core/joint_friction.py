@@ -248,7 +248,8 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 84 + m * (m + 2), q.dtype)
+    work = np.empty(n * 41 + 84 + m * (m + 2) + 64, q.dtype)
+    M4 = work[-64:].reshape((4, 4, 4))       # the natural geometry's scratch (unused here)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -314,7 +315,7 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
         tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
                          + jrow[F_Y + 2] * jrow[F_HAT + 2])                        # eq 20
         if not frozen:
-            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t)
+            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
             adapt_joint(chan, jfilt, i, jrow, scal, tracking)
     if frozen:
         pass

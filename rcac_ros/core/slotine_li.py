@@ -34,8 +34,10 @@ from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_erro
     reference_motion
 from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
-from ._validate import as_array
+from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError
+from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
+                             natural_gains_into, nu_gain, retract_rows)
 from .joint_friction import P_FRICTION, friction_gain
 from .regressor import fill_regressor
 from .spatial import P0, propagate
@@ -252,14 +254,19 @@ class SlotineLiCompositeController:
     Same parameters (up to ``update``), defaults and exceptions as
     :class:`~rcac_ros.core.composite.RecursiveCompositeController`; ``K_D`` are the link
     gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
-    filtered joint torques (``E`` has n entries). ``joint_friction``, ``friction_hat0`` and
-    ``P_friction`` add each joint's armature, viscous and Coulomb friction as three more
-    columns of its row of ``Y``, ``Phi``, ``Psi`` (doc/design.md §7).
+    filtered joint torques (``E`` has n entries).
+
+    ``geometry="natural"`` (doc/design.md §8): before each step the gains ``P_i`` are
+    replaced by ``P_eff(theta_hat_i)``, after it each link's step is retracted into the cone
+    ``J > 0``, as in the recursive law (same ``natural_gain``, same default start).
+    ``joint_friction``, ``friction_hat0`` and ``P_friction`` add each joint's armature,
+    viscous and Coulomb friction as three more columns of its row of ``Y``, ``Phi``, ``Psi``
+    (doc/design.md §8).
     """
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, update="implicit", joint_friction=False, friction_hat0=None,
-                 P_friction=P_FRICTION):
+                 P_friction=P_FRICTION, geometry="euclidean", natural_gain=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -273,6 +280,23 @@ class SlotineLiCompositeController:
         self.update = update
         self._scal[I_IMPLICIT] = 1.0 if update == "implicit" else 0.0
         self.joint_friction = bool(joint_friction)
+        if geometry not in ("euclidean", "natural"):
+            raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
+        self.geometry = geometry
+        self.natural_gain = None
+        if geometry == "natural" and self.joint_friction:
+            raise GainError("geometry: 'natural' with joint_friction is not built yet "
+                            "(doc/design.md §8)")
+        if geometry == "natural":
+            k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
+                joint_values(natural_gain, n, "natural_gain", GainError)
+            if np.any(k <= 0.0):
+                raise GainError("natural_gain: must be > 0")
+            self.natural_gain = k
+            self._nu_gain = np.ascontiguousarray(nu_gain(self.P).reshape(n, 9))
+            self._prev = np.zeros((n, 13))
+        elif natural_gain is not None:
+            raise GainError("natural_gain: only with geometry='natural'")
         self._joint = np.zeros((n if self.joint_friction else 0, 4))
         if self.joint_friction:
             self.P_friction = friction_gain(P_friction, n)
@@ -290,12 +314,19 @@ class SlotineLiCompositeController:
         """Number of joints."""
         return self.model.n
 
+    def _start(self, theta_hat0):
+        if self.geometry == "natural":
+            return default_start(self.model.theta()) if theta_hat0 is None else \
+                as_start(theta_hat0, self.n)
+        return np.zeros((self.n, 13)) if theta_hat0 is None else \
+            as_array(theta_hat0, (self.n, 13), "theta_hat0")
+
     def reset(self, theta_hat0=None, friction_hat0=None):
-        """Restart: estimates to ``theta_hat0`` (default zero) and, with the joint terms, to
-        ``friction_hat0`` (default the constructor's); filters and step count to zero."""
+        """Restart: estimates to ``theta_hat0`` (default zero; natural geometry: its default
+        start) and, with the joint terms, to ``friction_hat0`` (default the constructor's);
+        filters and step count to zero."""
         nl = 13 * self.n
-        self._theta[:nl] = 0.0 if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0").ravel()
+        self._theta[:nl] = self._start(theta_hat0).ravel()
         if self.joint_friction:
             self._theta[nl:] = (self.friction_hat0 if friction_hat0 is None else
                                 as_array(friction_hat0, (self.n, 3), "friction_hat0")).ravel()
@@ -304,6 +335,11 @@ class SlotineLiCompositeController:
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
+        if self.geometry == "natural":                      # doc/design.md §8
+            th = self._theta[:13 * self.n].reshape(self.n, 13)
+            self._prev[:] = th
+            natural_gains_into(th, self.natural_gain, self._nu_gain,
+                               self._data[:self.n, GAIN_P:GAIN_P + 169])
         try:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint, q, qd,
                                          q_d, qd_d, qdd_d)
@@ -314,7 +350,20 @@ class SlotineLiCompositeController:
                                          *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        if self.geometry == "natural":
+            self.retraction_length = retract_rows(self._prev,
+                                                  self._theta[:13 * self.n].reshape(self.n, 13))
         return tau
+
+    @property
+    def lambda_min(self):
+        """``lambda_min(J(theta_hat_i))`` per link (doc/design.md §8)."""
+        return lambda_min(self.theta_hat)
+
+    @property
+    def consistent(self):
+        """Per link, whether ``theta_hat_i`` is a physical body."""
+        return is_body(self.theta_hat)
 
     def set_applied_torque(self, tau):
         """The torques really applied after the last step (see the recursive controller's)."""

@@ -98,6 +98,39 @@ def test_bad_estimate_files_name_the_parameter(tmp_path, content, text):
     assert "\n" not in str(err.value)
 
 
+def test_natural_geometry_exports_every_link_and_pinocchio_accepts_them(tmp_path):
+    """doc/design.md §8: after a payload run with geometry="natural", save() exports every
+    link, and the panda URDF with those inertials loads in Pinocchio with every pseudo-
+    inertia positive definite (the Euclidean law's run, for contrast, leaves link 7 out)."""
+    pin = pytest.importorskip("pinocchio")
+    from rcac_ros.core import RecursiveCompositeController
+    from rcac_ros.tools.demos.compare import payload_scenario, run_law
+    from rcac_ros.tools.demos.payload import find_panda_urdf
+    urdf = find_panda_urdf()
+    if urdf is None:
+        pytest.skip("example-robot-data's panda.urdf not found")
+    scen = payload_scenario()
+    scen.jump = 0.5                                   # the payload half a second in
+    ctrl = RecursiveCompositeController(scen.model, **dict(scen.gains, geometry="natural"))
+    run_law(scen, ctrl, 3.0)
+    names = scen.model.joint_names
+    _, fragment, problems = save(str(tmp_path / "est.yaml"), ctrl.theta_hat, names, "panda",
+                                 urdf_child_links(urdf, names))
+    assert problems == []
+    exported = {link.get("name"): link.find("inertial")
+                for link in ET.parse(fragment).getroot().findall("link")}
+    assert len(exported) == len(names)
+    root = ET.parse(urdf).getroot()
+    for link in root.findall("link"):
+        if link.get("name") in exported:
+            link.remove(link.find("inertial"))
+            link.append(exported[link.get("name")])
+    model = pin.buildModelFromXML(ET.tostring(root, encoding="unicode"))
+    for j in range(1, model.njoints):
+        J = model.inertias[j].toPseudoInertia().toMatrix()
+        assert np.linalg.eigvalsh(J)[0] > 0.0, model.names[j]
+
+
 def test_joint_terms_saved_restored_and_exported(tmp_path):
     """The joint estimates (doc/design.md §7) round-trip through the YAML, and the URDF
     fragment's <dynamics>, put into the URDF, are what model_from_urdf and Pinocchio read."""

@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 from rcac_ros.core.model import PARAMETER_NAMES
+from rcac_ros.core.pseudo_inertia import default_start
 from rcac_ros.errors import ConfigError
 
 #: the ``format`` key of an estimates file
@@ -232,14 +233,15 @@ def initial_joint_terms(spec, model, joint_names=None):
     names = list(model.joint_names if joint_names is None else joint_names)
     if spec == "zero":
         return np.zeros((model.n, 3))
-    if spec == "model":
+    if spec in ("model", "nominal"):
         return model.joint_terms()
     terms = load_joint_terms(spec, names)
     return np.zeros((model.n, 3)) if terms is None else terms
 
 
 def initial_estimates(spec, model, joint_names=None):
-    """The ``initial_estimates`` parameter: ``zero``, ``model`` or a saved file's path.
+    """The ``initial_estimates`` parameter: ``zero``, ``model``, ``nominal`` (the natural
+    geometry's default start, doc/design.md §8) or a saved file's path.
 
     Returns
     -------
@@ -251,8 +253,11 @@ def initial_estimates(spec, model, joint_names=None):
         return np.zeros((model.n, 13))
     if spec == "model":
         return model.theta()
+    if spec == "nominal":                        # doc/design.md §8
+        return default_start(model.theta())
     if not spec:
-        raise ConfigError("initial_estimates: must be 'zero', 'model' or a file path")
+        raise ConfigError("initial_estimates: must be 'zero', 'model', 'nominal' or a file "
+                          "path")
     return load(spec, names)
 
 

@@ -52,7 +52,10 @@ def read_parameters(node, v):
         goal_time=v["constraints.goal_time"])
     node.publish_every = v["monitor_decimation"]
     gains = per_joint_gains(v, _gain_overrides(node), node.model.joint_names)
-    node.theta0 = initial_estimates(v["initial_estimates"], node.model)
+    spec = v["initial_estimates"]
+    if v["geometry"] == "natural" and spec == "zero":   # not a body: doc/design.md §8
+        spec = "nominal"
+    node.theta0 = initial_estimates(spec, node.model)
     node.friction0 = initial_joint_terms(v["initial_estimates"], node.model) \
         if v["joint_friction"] else None
     node.urdf_links = urdf_child_links(node._description or v["robot_description"],
@@ -81,7 +84,8 @@ def adaptation_options(v, channels):
                 forgetting=v["forgetting"], P_max=v["P_max"], dead_zone_s=v["dead_zone_s"],
                 dead_zone_E=v["dead_zone_E"],
                 theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"],
-                leakage=v["leakage"], leakage_bound=v["leakage_bound"])
+                leakage=v["leakage"], leakage_bound=v["leakage_bound"],
+                geometry=v["geometry"], natural_gain=v["natural_gain"])
 
 
 def channel_names(channels):

@@ -8,8 +8,8 @@ exact (:mod:`rcac_ros.tools.bench.opcount`).
 
 Besides the paper's law (channels ``[1]``) the table times the recursive law with the
 channels ``[1, "power"]`` and ``"all"`` (implicit and explicit update), with the
-least-squares gain (channels ``[1]``) and with the joint terms (``joint_friction=True``,
-doc/design.md §7), against n.
+least-squares gain (channels ``[1]``), with the joint terms (``joint_friction=True``,
+doc/design.md §7) and with the natural geometry (doc/design.md §8), against n.
 """
 
 import json
@@ -19,6 +19,8 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
+from rcac_ros.core.composite_kernels import rcac_step_kernel
+from rcac_ros.core.pseudo_inertia import default_start
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -28,8 +30,17 @@ VARIANTS = {
     "all_us": dict(channels="all"),
     "all_explicit_us": dict(channels="all", update="explicit"),
     "least_squares_us": dict(adaptation="least_squares", forgetting=1.0),
+    "natural_us": dict(geometry="natural"),      # doc/design.md §8
     "friction_us": dict(joint_friction=True),
 }
+
+
+def start_for(model, kwargs):
+    """The variant's initial estimates: the model's own, or (natural geometry, which needs a
+    body per link) its default start."""
+    if kwargs.get("geometry") == "natural":
+        return default_start(model.theta())
+    return model.theta()
 
 
 def _timed(fn, reps):
@@ -89,9 +100,18 @@ def goal_ratios(budget_s=1.0):
                 lambda: fall.step(*args), lambda: every.step(*args), budget_s)
             for key, kwargs in VARIANTS.items():
                 if key != "all_us":
-                    c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+                    c = RecursiveCompositeController(model, theta_hat0=start_for(model, kwargs),
+                                                     **kwargs)
                     out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
                         lambda: c.step(*args), lambda: paper.step(*args), budget_s)
+            # the natural geometry against the same Euclidean law run by the general kernel
+            # (the paper's law alone has a fused kernel of its own)
+            general = RecursiveCompositeController(model, theta_hat0=model.theta())
+            general._kernel = rcac_step_kernel
+            nat = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
+                                               geometry="natural")
+            out["natural_over_general_kernel_n7"] = interleaved_ratio(
+                lambda: nat.step(*args), lambda: general.step(*args), budget_s)
         else:
             sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
             out["all_over_slotine_li_n56"] = interleaved_ratio(
@@ -132,7 +152,7 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
     row = {"model": label, "n": model.n,
            "controller_us": median_us(lambda: ctrl.step(q, qd, q_d, qd_d, qdd_d), budget_s)}
     for key, kwargs in VARIANTS.items():
-        c = RecursiveCompositeController(model, theta_hat0=model.theta(), **kwargs)
+        c = RecursiveCompositeController(model, theta_hat0=start_for(model, kwargs), **kwargs)
         row[key] = median_us(lambda: c.step(q, qd, q_d, qd_d, qdd_d), budget_s,
                              blocks=3 if model.n > 100 else 7)
     rnea = _pin_rnea(model)

@@ -4,8 +4,10 @@ panda with joint friction and rotor inertia on MuJoCo.
 Laws (:data:`LAWS`): computed torque at the nominal parameters (``fixed``), the direct
 law (``gamma = 0``), the paper's composite law (joint-1 channel), ``channels="all"`` with
 the implicit and the explicit update, the power channel, fixed-m channel sets,
-least-squares variants, the non-recursive Slotine-Li law, and the direct, paper and
-``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7). Scenarios
+least-squares variants, the non-recursive Slotine-Li law, the direct, paper and
+``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7), and the natural
+geometry (``*_natural``, doc/design.md §8: estimates that stay physical bodies) with the
+Euclidean paper law from the same start (``paper_nat_start``). Scenarios
 (:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
@@ -25,9 +27,11 @@ adaptation gain. Each scenario has its default laws (``--laws`` overrides them a
 its plant engine (``--engine`` overrides it). Writes ``compare.json``, ``compare.md`` (the
 table; with several scenarios, first their RMS side by side), one figure per
 scenario (``compare_<scenario>.png``: tracking error, parameter error, last link's mass
-estimate, max |E_c| on log scales) and the identifiability report of each run (the
-accumulated excitation ``sum h W_i^T W_i`` per link, and the physical consistency of the
-final estimates, :mod:`rcac_ros.core.identifiability`).
+estimate, max |E_c| on log scales, the smallest ``lambda_min(J_hat_i)`` over time) and the
+identifiability report of each run (the accumulated excitation ``sum h W_i^T W_i`` per
+link, and the physical consistency of the final estimates,
+:mod:`rcac_ros.core.identifiability`). Per law the table says which share of the
+link-steps were consistent (``J(theta_hat_i) > 0``) and the smallest ``lambda_min``.
 """
 
 import argparse
@@ -39,6 +43,7 @@ import numpy as np
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.identifiability import Excitation, summary
+from rcac_ros.core.pseudo_inertia import default_start, lambda_min
 from rcac_ros.errors import RcacError
 from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
@@ -49,6 +54,10 @@ from rcac_ros.tools.scenarios import controller, FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
+
+#: A law's ``theta_hat0`` that means: the natural geometry's default start (doc/design.md §8)
+#: where the scenario gives none.
+NATURAL_START = "natural_default"
 
 #: P_friction of the friction-aware direct and paper laws (doc/tools.md, joint friction).
 P_FRICTION_TRACKING = (30.0, 30.0, 30.0)
@@ -75,6 +84,12 @@ LAWS = {
     "ls_pred_4,6": ("rcac", dict(channels=[4, 6], adaptation="least_squares_prediction",
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
+    "slotine_li_natural": ("slotine_li", dict(geometry="natural")),
+    # doc/design.md §8: estimates kept physically consistent; "paper_nat_start" is the
+    # Euclidean paper law from the natural geometry's default start (the same start)
+    "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
+    "paper_natural": ("rcac", dict(geometry="natural")),
+    "all_natural": ("rcac", dict(channels="all", geometry="natural")),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
     # direct and paper laws, adapting them mostly from the tracking term (an explicit step),
     # with P_friction = 30 (100 diverges on the rigid panda, doc/tools.md)
@@ -110,7 +125,9 @@ GROUPS = {"joint_table": ("panda_rigid", "panda_damping", "panda_friction", "pan
 
 COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
            ("theta_error_end", "‖θ̃‖ end"), ("max_abs_E", "max |E|"),
-           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."))
+           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."),
+           ("consistent_steps", "consist. all steps"), ("lambda_min", "min λ_min(Ĵ)"),
+           ("payload_mass_error", "payload |m̃|"), ("payload_first_moment_error", "payload ‖h̃‖"))
 
 
 class Scenario:
@@ -176,7 +193,11 @@ def scenario_names(names):
 
 def make_controller(scenario, law, laws=None):
     kind, extra = (laws or LAWS)[law]
-    return controller(kind, scenario.model, dict(scenario.gains, **extra))
+    kwargs = dict(scenario.gains, **extra)
+    if isinstance(kwargs.get("theta_hat0"), str):
+        start = scenario.gains.get("theta_hat0")
+        kwargs["theta_hat0"] = default_start(scenario.model.theta()) if start is None else start
+    return controller(kind, scenario.model, kwargs)
 
 
 def run_law(scenario, controller, duration, progress=None, engine=None):
@@ -186,7 +207,8 @@ def run_law(scenario, controller, duration, progress=None, engine=None):
     (``check_estimates``). Returns the time series of the table and the figure, one row
     a period and each taken after that period's update: ``t``, ``e`` (``q - q_d``),
     ``theta_error`` (``||theta_hat - theta||``, the true ``theta`` of the plant then in
-    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``); a
+    use), ``mass_last`` (the last link's mass estimate), ``E`` (``max_c |E_c|``),
+    ``lambda_min`` (per link, ``lambda_min(J(theta_hat_i))``, doc/design.md §8); a
     diverged run's last row has no estimates (NaN) and ``diverged_at`` is its time.
     With them ``us_per_step`` (the controller's step alone), ``excitation`` (the
     accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
@@ -212,8 +234,12 @@ def run_law(scenario, controller, duration, progress=None, engine=None):
         truth[t >= scenario.jump - 1e-12] = scenario.theta_end
     with np.errstate(all="ignore"):                  # a diverged law's huge estimates
         theta_error = np.array([np.linalg.norm(d) for d in theta - truth])
+    with np.errstate(all="ignore"):
+        lam = np.full(theta.shape[:2], np.nan)
+        ok = np.all(np.isfinite(theta), axis=(1, 2))
+        lam[ok] = lambda_min(theta[ok])
     return dict(t=t, e=run["q"] - run["q_d"], theta_error=theta_error,
-                mass_last=theta[:, -1, 0], E=E,
+                mass_last=theta[:, -1, 0], E=E, lambda_min=lam,
                 diverged_at=float(t[-1]) if diverged else None,
                 us_per_step=run["step_time"] / len(t) * 1e6, excitation=exc,
                 theta_end=theta_end)
@@ -239,7 +265,16 @@ def metrics(run, scenario, last_seconds=5.0):
     if scenario.jump is not None:
         after = ok & (t >= scenario.jump)
         out["rms_after_payload"] = measure.rms(e[after]) if after.any() else float("nan")
+    lam = run["lambda_min"]
+    finite = np.all(np.isfinite(lam), axis=1)
+    out["consistent_steps"] = float(np.mean(lam[finite] > 0.0)) if finite.any() else 0.0
+    out["consistent_every_step"] = bool(finite.all() and (lam > 0.0).all())
+    out["lambda_min"] = float(np.min(lam[finite])) if finite.any() else float("nan")
     out["mass_last_end"] = float(run["mass_last"][ok][-1])
+    if scenario.jump is not None:
+        est, true = run["theta_end"][-1], scenario.theta_end[-1]
+        out["payload_mass_error"] = float(abs(est[0] - true[0]))
+        out["payload_first_moment_error"] = float(np.linalg.norm(est[1:4] - true[1:4]))
     out["mass_last_true"] = float(scenario.theta_end[-1, 0])
     if run["excitation"] is not None and run["diverged_at"] is None:
         ident = summary(run["excitation"], run["theta_end"])
@@ -281,6 +316,8 @@ def _cell(v, key):
         return str(v)
     if key == "us_per_step":
         return f"{v:.1f}"
+    if key == "consistent_steps":
+        return f"{100 * v:.4g} %"
     return f"{v:.3g}"
 
 
@@ -319,11 +356,12 @@ def markdown(report, n_links=None):
 
 
 def plot(series, report, out_dir):
-    """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
+    """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|, and
+    the smallest lambda_min(J_hat_i) over the links (doc/design.md §8)."""
     from rcac_ros.tools.plots import plt, save
     paths = []
     for name, runs in series.items():
-        fig, axes = plt.subplots(1, 4, figsize=(24, 5))
+        fig, axes = plt.subplots(1, 5, figsize=(30, 5))
         colors = plt.cm.tab20(np.linspace(0.0, 1.0, 20))      # up to 20 laws, all distinct
         for ax in axes:
             ax.set_prop_cycle(color=list(colors))
@@ -337,9 +375,11 @@ def plot(series, report, out_dir):
                 axes[2].plot(t, r["mass_last"], lw=0.9, label=law)
             axes[0].semilogy(t, err + 1e-12, lw=0.7, label=law)
             axes[3].semilogy(t, np.minimum(r["E"], 1e12) + 1e-16, lw=0.6, label=law)
+            axes[4].plot(t, np.min(r["lambda_min"], axis=1), lw=0.8, label=law)
         truth = next(iter(report[name].values())).get("mass_last_true")
         for ax, title in zip(axes, ("|q - q_d| (rad)", "||theta_hat - theta|| (all links)",
-                                    "last link's mass estimate (kg)", "max_c |E_c| (N m, W)")):
+                                    "last link's mass estimate (kg)", "max_c |E_c| (N m, W)",
+                                    "min_i lambda_min(J_hat_i) (< 0: not a body)")):
             ax.set_title(title)
             ax.set_xlabel("time (s)")
             ax.grid(alpha=0.3)
@@ -347,6 +387,8 @@ def plot(series, report, out_dir):
             axes[2].axhline(truth, color="k", ls="--", lw=0.9, label="true (end)")
         axes[0].set_ylim(1e-7, 1.0)
         axes[3].set_ylim(bottom=1e-12)
+        axes[4].set_yscale("symlog", linthresh=1e-6)
+        axes[4].axhline(0.0, color="k", lw=0.8)
         axes[0].legend(fontsize=7, ncol=2)
         fig.suptitle(f"rcac compare: {name} scenario")
         path = os.path.join(out_dir, f"compare_{name}.png")

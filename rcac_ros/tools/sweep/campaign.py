@@ -35,6 +35,9 @@ import time
 import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
+from rcac_ros.core.identifiability import inertia_about_com
+from rcac_ros.core.model import theta_from_inertia
+from rcac_ros.core.pseudo_inertia import lambda_min
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.plants import check_engine, ENGINES
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
@@ -44,6 +47,7 @@ from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_fo
 from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
+GEOMETRIES = ("euclidean", "natural")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
 MODELS = ("css_arm", "panda")
@@ -53,6 +57,7 @@ DISTRIBUTIONS = ("normal", "uniform", "loguniform", "choice", "grid")
 #: "law", "channels"; size 1 or 3 (a vector, columns _x _y _z or _xx _yy _zz).
 QUANTITIES = {
     "law": ("law", 1),
+    "geometry": ("geometry", 1),
     "K_D": ("float", 1), "Lambda": ("float", 1), "P": ("float", 1), "gamma": ("float", 1),
     "lam": ("float", 1),
     "channels": ("channels", 1),
@@ -61,6 +66,7 @@ QUANTITIES = {
     "payload_mass": ("float", 1), "payload_com": ("signed", 3),
     "payload_inertia": ("float", 3),
     "estimate_error": ("float", 1),
+    "start_mass_scale": ("float", 1), "start_com_shift": ("signed", 3),
     "trajectory_scale": ("float", 1),
     # the plant's joint terms, per joint (doc/design.md §7), and the gain of the joint
     # estimates of composite_friction
@@ -69,9 +75,10 @@ QUANTITIES = {
 }
 #: Quantities drawn once per sample, the same in every grid cell (paired comparisons).
 PAIRED = ("joint_damping", "joint_friction", "joint_armature")
-POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "P_friction")
+POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "P_friction", "start_mass_scale")
 GAINS = ("K_D", "Lambda", "P", "gamma", "lam", "h")
 SUFFIXES = {"payload_com": ("x", "y", "z"), "payload_inertia": ("xx", "yy", "zz"),
+            "start_com_shift": ("x", "y", "z"),
             **{q: tuple(str(j) for j in range(1, 8)) for q in PAIRED}}
 
 #: Per model: the default gains, where the payload's centre of mass is measured from
@@ -89,7 +96,7 @@ MODEL_DEFAULTS = {
                   trajectory=dict(type="sinusoid")),
 }
 SCENARIO_KEYS = ("model", "law", "trajectory", "duration", "gains", "substeps", "error_limit",
-                 "initial_estimate", "payload_time", "engine")
+                 "initial_estimate", "payload_time", "engine", "adapt_all")
 TOP_KEYS = ("name", "seed", "samples", "scenario", "vary")
 TRAJECTORY_KEYS = {"paper": ("type", "reading", "amplitude", "period"),
                    "sinusoid": ("type", "offset", "amplitude", "frequency")}
@@ -134,9 +141,10 @@ def mapping(value, key, allowed, required=()):
 def check_value(name, value, key):
     """A value of quantity ``name`` (a fixed value, a choice or a grid item), normalised."""
     kind, size = QUANTITIES[name]
-    if kind == "law":
-        if value not in LAWS:
-            fail(key, f"expected one of {', '.join(LAWS)}, got {value!r}")
+    if kind in ("law", "geometry"):
+        allowed = LAWS if kind == "law" else GEOMETRIES
+        if value not in allowed:
+            fail(key, f"expected one of {', '.join(allowed)}, got {value!r}")
         return value
     if kind == "channels":               # the controller checks the names and the joint range
         def channel(c):
@@ -185,7 +193,7 @@ def check_spec(name, spec, key):
         if not params:
             fail(sub, "empty list")
         return {dist: [check_value(name, v, f"{sub}[{j}]") for j, v in enumerate(params)]}
-    if kind in ("law", "channels", "int"):
+    if kind in ("law", "geometry", "channels", "int"):
         fail(sub, f"{name} takes choice or grid, not {dist}")
     if dist == "normal":
         p = mapping(params, sub, ("mean", "std", "low", "high"), ("mean", "std"))
@@ -265,7 +273,8 @@ def validate(doc, source="campaign"):
                  channels=None, noise_q=0.0, noise_qd=0.0, delay=0, payload_mass=0.0,
                  payload_com=[0.0, 0.0, 0.0], payload_inertia=[0.0, 0.0, 0.0],
                  estimate_error=0.0, trajectory_scale=1.0, joint_damping=[0.0] * 7,
-                 joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=30.0)
+                 joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=30.0,
+                 geometry="euclidean", start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0])
     for q in QUANTITIES:
         if q in sc and q != "law":
             fixed[q] = check_value(q, sc[q], f"scenario.{q}")
@@ -278,7 +287,11 @@ def validate(doc, source="campaign"):
         duration=number(sc.get("duration", 5.0), "scenario.duration", 0.0, True),
         substeps=number(sc.get("substeps", 1), "scenario.substeps", 1, integer=True),
         error_limit=number(sc.get("error_limit", 1.0), "scenario.error_limit", 0.0, True),
-        payload_time=number(sc.get("payload_time", 0.0), "scenario.payload_time", 0.0))
+        payload_time=number(sc.get("payload_time", 0.0), "scenario.payload_time", 0.0),
+        adapt_all=sc.get("adapt_all", False))
+    if not isinstance(out["scenario"]["adapt_all"], bool) or (
+            out["scenario"]["adapt_all"] and model != "panda"):
+        fail("scenario.adapt_all", "expected true or false (panda only: P on every link)")
     engine = check_engine(sc.get("engine", ENGINES[0]), "scenario.engine")
     if engine != ENGINES[0]:         # recorded only when not the default: older results resume
         out["scenario"]["engine"] = engine
@@ -363,7 +376,7 @@ def input_columns(inputs):
             row.update(zip(columns_of(q), (float(x) for x in v)))
         elif q == "channels":
             row[q] = "" if v is None else json.dumps(v)
-        elif q in ("law",):
+        elif q in ("law", "geometry"):
             row[q] = v
         elif q == "delay":
             row[q] = int(v)
@@ -380,8 +393,9 @@ def nominal_model(name):
     return load_panda()
 
 
-def controller_for(campaign, inputs, model):
-    """The controller of one run (``channels`` passed only when given)."""
+def controller_for(campaign, inputs, model, theta_hat0=None):
+    """The controller of one run (``channels`` passed only when given; ``theta_hat0`` at
+    construction, where the natural geometry matches its gain, doc/design.md §8)."""
     sc = campaign["scenario"]
     law = inputs["law"]
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
@@ -391,9 +405,10 @@ def controller_for(campaign, inputs, model):
     if sc["model"] == "panda":
         gamma = g["gamma"]
         g = gains_for(model, kappa=g["K_D"], Lambda=g["Lambda"], rho=g["P"], gamma=gamma,
-                      lam=g["lam"], h=g["h"])
+                      lam=g["lam"], h=g["h"], adapt_all=sc["adapt_all"])
         g["gamma"] = gamma
         g.pop("theta_hat0")
+    g.update(theta_hat0=theta_hat0, geometry=inputs["geometry"])
     if law == "slotine_li":
         return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
@@ -437,11 +452,13 @@ def setup(campaign, index):
     def plant_of(m):
         return m.replace(**terms) if joints else m
     loaded = plant_of(loaded)
-    controller = controller_for(campaign, inputs, model)
     trajectory, q0, qd0 = trajectory_for(campaign, inputs, model)
     rng = np.random.default_rng([campaign["seed"], index, 1])
     theta = model.theta()
-    base = np.zeros_like(theta) if sc["initial_estimate"] == "zero" else theta
+    base = np.zeros_like(theta) if sc["initial_estimate"] == "zero" else \
+        shifted_start(theta, inputs["start_mass_scale"], inputs["start_com_shift"])
+    start = perturbed_estimates(base, theta, inputs["estimate_error"], rng)
+    controller = controller_for(campaign, inputs, model, start)
     events = ()
     plant = loaded
     if sc["payload_time"] > 0.0:
@@ -450,9 +467,22 @@ def setup(campaign, index):
                   noise_q=inputs["noise_q"], noise_qd=inputs["noise_qd"],
                   delay=inputs["delay"], rng=rng, events=events, substeps=sc["substeps"],
                   engine=sc.get("engine", ENGINES[0]),
-                  error_limit=sc["error_limit"],
-                  theta_hat0=perturbed_estimates(base, theta, inputs["estimate_error"], rng))
+                  error_limit=sc["error_limit"], theta_hat0=start)
     return inputs, controller, kwargs
+
+
+def shifted_start(theta, mass_scale, com_shift):
+    """Initial estimates: every link's nominal body with its mass and inertia scaled by
+    ``mass_scale`` and its centre of mass moved by ``com_shift`` (m, link frame); a body
+    stays a body (doc/design.md §8)."""
+    if mass_scale == 1.0 and not any(com_shift):
+        return theta
+    out = np.empty_like(theta)
+    for i, t in enumerate(theta):
+        m, c, I_c = inertia_about_com(t)
+        out[i] = theta_from_inertia(mass_scale * m, c + np.asarray(com_shift),
+                                    mass_scale * I_c)
+    return out
 
 
 def simulate(campaign, index, keep_run=False):
@@ -463,9 +493,25 @@ def simulate(campaign, index, keep_run=False):
     row = {"run": int(index)}
     row.update(input_columns(inputs))
     row.update(run_metrics(run))
+    row.update(consistency_metrics(run))
     row["wall_time_s"] = time.perf_counter() - t0
     row["cpu_time_s"] = time.process_time() - c0
     return (row, run) if keep_run else row
+
+
+def consistency_metrics(run):
+    """Whether every link's estimates were a body at every period of the run, the share of
+    link-periods that were, and the smallest ``lambda_min(J(theta_hat_i))`` (doc/design.md
+    §8), over the periods whose estimates are finite."""
+    theta = run["theta_hat"]
+    ok = np.all(np.isfinite(theta), axis=(1, 2))
+    if not ok.any():
+        return dict(consistent_every_step=False, consistent_link_steps=0.0,
+                    min_lambda_min=float("nan"))
+    lam = lambda_min(theta[ok])
+    return dict(consistent_every_step=bool(ok.all() and (lam > 0.0).all()),
+                consistent_link_steps=float(np.mean(lam > 0.0)),
+                min_lambda_min=float(lam.min()))
 
 
 def warm_up():

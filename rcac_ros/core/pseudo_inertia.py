@@ -1,0 +1,453 @@
+"""Physical consistency of the 13 parameters, the natural adaptation geometry (doc/design.md §8).
+
+A body's standard parameters ``pi`` (mass m, first moment h = m c, inertia I_o about the
+frame origin; Pinocchio's order ``[m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]``) are
+physically consistent exactly when the pseudo-inertia
+
+    J(pi) = [[Sigma, h], [h^T, m]],     Sigma = 1/2 tr(I_o) 1 - I_o = int r r^T dm
+
+is positive definite (Wensing, Kim, Slotine, RA-L 2018). In the paper's 13 parameters
+(doc/design.md §2) J is linear and reads
+
+    J(theta) = [[t5 + (-t11 + t12 + t13)/2, t8, t9, t2],
+                [t8, t6 + (t11 - t12 + t13)/2, t10, t3],
+                [t9, t10, t7 + (t11 + t12 - t13)/2, t4],
+                [t2, t3, t4, t1]]                                   (1-based t_k)
+
+and ``theta -> (J, nu)`` with ``nu = (t5, t6, t7)`` is a linear bijection of R^13 onto
+(symmetric 4x4) x R^3. ``nu`` is what the 13 add to a body: for a body ``nu = h_k^2 / m``,
+and the regressor sees it only through ``t5 + t6 + t7`` (the rank-11 direction).
+
+The natural geometry (doc/design.md §8) replaces the gain ``P`` of eq 24 by
+
+    P_eff(theta_hat): J(dtheta) = k J_hat G(g) J_hat,   dnu = P_nu u_nu(g)
+
+where ``G(g)`` is the symmetric 4x4 with ``tr(G J(dtheta)) + u_nu . dnu = g . dtheta`` for
+every dtheta (the gradient g split on the two factors), i.e. ``k`` times the inverse Hessian
+of ``-log det J`` on J and a fixed ``P_nu`` on nu. A step ``Delta = J(theta_lin -
+theta_hat)`` is then made consistent by the retraction
+
+    J+ = J_hat + a Delta + a^2/2 Delta J_hat^-1 Delta = L (I + a Z + a^2 Z^2 / 2) L^T,
+    Z = L^-1 Delta L^-T,  J_hat = L L^T,  a = min(1, 1 / ||Z||_F)
+
+positive definite for any Delta (eigenvalues of ``I + aZ + a^2 Z^2/2`` lie in [1/2, 5/2]),
+with a numerical floor ``lambda_min(J+) >= FLOOR tr(J+)`` (:func:`retract`).
+Everything here is O(1) per link: 4x4 products and one 4x4 Cholesky factorisation.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ._validate import as_array
+from rcac_ros.errors import GainError, InputError
+
+#: Pinocchio's order of the standard parameters (``Inertia.toDynamicParameters``).
+STANDARD_NAMES = ("m", "hx", "hy", "hz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+
+#: d theta / d nu at fixed J (13 x 3): nu_k moves t5+k and takes it off the two other
+#: diagonal inertia entries (doc/design.md §8).
+NU_BASIS = np.zeros((13, 3))
+for _k in range(3):
+    NU_BASIS[4 + _k, _k] = 1.0
+    for _j in range(3):
+        if _j != _k:
+            NU_BASIS[10 + _j, _k] = -1.0
+
+#: Default scale of the nominal model when no ``theta_hat0`` is given (doc/design.md §8).
+NOMINAL_SCALE = 0.5
+#: Smallest eigenvalue of the centre-of-mass second moment of a default start, as a
+#: fraction of its trace (a nominal that is not a body is made one, doc/design.md §8).
+SECOND_MOMENT_FLOOR = 0.01
+
+
+#: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
+#: above the rounding of a 4x4 factorisation and far below any real body's ratio.
+FLOOR = 1e-12
+#: Numerical guard on nu: |nu_k| <= NU_RATIO tr(J), so that the 13 stored parameters keep
+#: J's digits (a body has 0 <= nu_k = h_k^2 / m <= Sigma_kk <= tr(J)).
+NU_RATIO = 100.0
+#: Most halvings of a step that would cross the floor (2^-30: the step is then kept out).
+HALVINGS = 30
+
+
+# ---- the linear maps (numba, one link: 13 entries at th[o:o+13]) ---------------------------
+
+@njit(cache=True, inline="always")
+def pseudo_inertia_into(th, o, J):
+    """``J(theta)`` (4x4) of the 13 parameters ``th[o:o+13]`` into ``J`` (module docstring)."""
+    t11, t12, t13 = th[o + 10], th[o + 11], th[o + 12]
+    J[0, 0] = th[o + 4] + 0.5 * (-t11 + t12 + t13)
+    J[1, 1] = th[o + 5] + 0.5 * (t11 - t12 + t13)
+    J[2, 2] = th[o + 6] + 0.5 * (t11 + t12 - t13)
+    J[3, 3] = th[o]
+    J[0, 1] = J[1, 0] = th[o + 7]
+    J[0, 2] = J[2, 0] = th[o + 8]
+    J[1, 2] = J[2, 1] = th[o + 9]
+    J[0, 3] = J[3, 0] = th[o + 1]
+    J[1, 3] = J[3, 1] = th[o + 2]
+    J[2, 3] = J[3, 2] = th[o + 3]
+
+
+@njit(cache=True, inline="always")
+def theta_from_pseudo(J, n0, n1, n2, out, o):
+    """``out[o:o+13]``: the 13 parameters with pseudo-inertia ``J`` and ``nu = (n0, n1, n2)``."""
+    a, b, c = J[0, 0] - n0, J[1, 1] - n1, J[2, 2] - n2      # Sigma_c diagonal
+    out[o] = J[3, 3]
+    out[o + 1], out[o + 2], out[o + 3] = J[0, 3], J[1, 3], J[2, 3]
+    out[o + 4], out[o + 5], out[o + 6] = n0, n1, n2
+    out[o + 7], out[o + 8], out[o + 9] = J[0, 1], J[0, 2], J[1, 2]
+    out[o + 10], out[o + 11], out[o + 12] = b + c, a + c, a + b
+
+
+@njit(cache=True, inline="always")
+def dual_into(g, o, G):
+    """``G(g)`` (4x4) and ``u_nu`` (returned) with ``tr(G J(d)) + u_nu . d_nu = g . d``.
+
+    ``g[o:o+13]`` is a gradient in the 13 parameters (e.g. ``Y^T s``); ``G`` is symmetric.
+    """
+    g10, g11, g12 = g[o + 10], g[o + 11], g[o + 12]
+    G[0, 0] = g11 + g12
+    G[1, 1] = g10 + g12
+    G[2, 2] = g10 + g11
+    G[3, 3] = g[o]
+    G[0, 1] = G[1, 0] = 0.5 * g[o + 7]
+    G[0, 2] = G[2, 0] = 0.5 * g[o + 8]
+    G[1, 2] = G[2, 1] = 0.5 * g[o + 9]
+    G[0, 3] = G[3, 0] = 0.5 * g[o + 1]
+    G[1, 3] = G[3, 1] = 0.5 * g[o + 2]
+    G[2, 3] = G[3, 2] = 0.5 * g[o + 3]
+    return g[o + 4] - g11 - g12, g[o + 5] - g10 - g12, g[o + 6] - g10 - g11
+
+
+@njit(cache=True, inline="always")
+def cholesky4(J, L):
+    """Lower Cholesky factor of the 4x4 ``J`` into ``L``; False (L partial) if not PD."""
+    for j in range(4):
+        d = J[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, 4):
+            s = J[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / d
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@njit(cache=True, inline="always")
+def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
+    """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §8).
+
+    ``th[o:o+13]`` is theta_hat, ``k`` the natural gain, ``Pnu[po:po+9]`` the 3x3 gain on nu
+    (row-major); ``J``, ``G``, ``T`` are 4x4 scratch. ``g . out = k tr(G J G J) + u_nu^T P_nu
+    u_nu >= 0``: P_eff is symmetric positive semi-definite (definite where J is).
+    """
+    pseudo_inertia_into(th, o, J)
+    u0, u1, u2 = dual_into(g, go, G)
+    for i in range(4):                              # T = G J
+        for j in range(4):
+            T[i, j] = G[i, 0] * J[0, j] + G[i, 1] * J[1, j] + G[i, 2] * J[2, j] \
+                + G[i, 3] * J[3, j]
+    for i in range(4):                              # G <- k J G J = k J T (symmetric)
+        for j in range(i, 4):
+            v = k * (J[i, 0] * T[0, j] + J[i, 1] * T[1, j] + J[i, 2] * T[2, j]
+                     + J[i, 3] * T[3, j])
+            G[i, j] = v
+            G[j, i] = v
+    n0 = Pnu[po] * u0 + Pnu[po + 1] * u1 + Pnu[po + 2] * u2
+    n1 = Pnu[po + 3] * u0 + Pnu[po + 4] * u1 + Pnu[po + 5] * u2
+    n2 = Pnu[po + 6] * u0 + Pnu[po + 7] * u1 + Pnu[po + 8] * u2
+    theta_from_pseudo(G, n0, n1, n2, out, oo)
+
+
+@njit(cache=True, inline="always")
+def retract(old, oo, new, on, J, D, L, K):
+    """Make the step ``old -> new`` (13 parameters each) consistent, in place in ``new``.
+
+    ``J_hat = J(old)`` must be positive definite. With ``Delta = J(new) - J_hat``, ``new``
+    becomes the parameters of ``J_hat + a Delta + a^2/2 Delta J_hat^-1 Delta`` (its nu
+    unchanged), ``a = min(1, 1/||Z||_F)``, ``Z = L^-1 Delta L^-T`` (module docstring).
+    ``J``, ``D``, ``L``, ``K`` are 4x4 scratch. Returns ``a`` (1: the step was not shortened).
+
+    Floating point: ``a`` is halved (at most :data:`HALVINGS` times) until ``J+ - FLOOR
+    tr(J+) 1`` passes a Cholesky factorisation, so every stored J stays clear of rounding
+    (:data:`FLOOR`); if none passes, or ``J_hat`` itself is not positive definite, J is kept
+    (``a = 0``) and only nu moves; a step that is not finite is not taken at all. ``nu`` is
+    clipped to ``|nu_k| <= NU_RATIO tr(J+)`` (:data:`NU_RATIO`).
+    """
+    pseudo_inertia_into(old, oo, J)
+    pseudo_inertia_into(new, on, D)
+    for i in range(4):
+        for j in range(4):
+            D[i, j] -= J[i, j]
+    if not cholesky4(J, L):                        # never, from a checked start
+        theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
+        return 0.0
+    d0, d1, d2, d3 = 1.0 / L[0, 0], 1.0 / L[1, 1], 1.0 / L[2, 2], 1.0 / L[3, 3]
+    for j in range(4):                              # L <- L^-1 in place (lower triangular)
+        dj = d0 if j == 0 else d1 if j == 1 else d2 if j == 2 else d3
+        for i in range(j + 1, 4):
+            acc = L[i, j] * dj
+            for m in range(j + 1, i):
+                acc += L[i, m] * L[m, j]
+            L[i, j] = -acc * (d1 if i == 1 else d2 if i == 2 else d3)
+        L[j, j] = dj
+    for i in range(4):                              # K <- J^-1 = L^-T L^-1
+        for j in range(i, 4):
+            acc = 0.0
+            for m in range(j, 4):
+                acc += L[m, i] * L[m, j]
+            K[i, j] = acc
+            K[j, i] = acc
+    tr_inv = K[0, 0] + K[1, 1] + K[2, 2] + K[3, 3]  # >= 1 / lambda_min(J)
+    for i in range(4):                              # L <- J^-1 D
+        for j in range(4):
+            L[i, j] = K[i, 0] * D[0, j] + K[i, 1] * D[1, j] + K[i, 2] * D[2, j] \
+                + K[i, 3] * D[3, j]
+    z2 = 0.0                                       # ||Z||_F^2 = tr(J^-1 D J^-1 D)
+    for i in range(4):
+        for j in range(4):
+            z2 += L[i, j] * L[j, i]
+    if not (math.isfinite(z2) and math.isfinite(new[on + 4] + new[on + 5] + new[on + 6])):
+        for k in range(13):                         # a step that is not finite: no step
+            new[on + k] = old[oo + k]
+        return 0.0
+    a = 1.0 if z2 <= 1.0 else 1.0 / math.sqrt(z2)
+    for h in range(HALVINGS):
+        half = 0.5 * a * a
+        tr = 0.0
+        for i in range(4):                          # K <- J + a D + a^2/2 D J^-1 D
+            for j in range(i, 4):
+                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
+                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
+                K[i, j] = v
+                K[j, i] = v
+            tr += K[i, i]
+        # the numerical floor (module docstring). Shortcut: lambda_min(J+) >= (1 - r + r^2/2)
+        # lambda_min(J) >= lambda_min(J) / 2 (r = a ||Z||_F <= 1) and lambda_min(J) >= 1 /
+        # tr(J^-1), so a J of condition tr(J) tr(J^-1) <= 1e6 keeps J+ far above the floor and
+        # far above the rounding of this step; otherwise a factorisation decides.
+        if h == 0 and tr * tr_inv <= 1e6:
+            break
+        for i in range(4):
+            K[i, i] -= FLOOR * tr
+        if cholesky4(K, K):
+            break
+        a *= 0.5
+    else:
+        a = 0.0                                     # keep J_hat (it passed before)
+    if a > 0.0:
+        for i in range(4):
+            for j in range(i, 4):
+                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
+                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
+                J[i, j] = v
+                J[j, i] = v
+    bound = NU_RATIO * (J[0, 0] + J[1, 1] + J[2, 2] + J[3, 3])
+    theta_from_pseudo(J, min(max(new[on + 4], -bound), bound),
+                      min(max(new[on + 5], -bound), bound),
+                      min(max(new[on + 6], -bound), bound), new, on)
+    return a
+
+
+@njit(cache=True)
+def natural_gains_into(theta, k, Pnu, out):
+    """``out[i]`` (169, row-major) = ``P_eff(theta_i)`` for every link (the non-recursive
+    law's explicit gains, doc/design.md §8); ``theta`` (n, 13), ``k`` (n,), ``Pnu`` (n, 9)."""
+    M = np.empty((3, 4, 4))
+    e = np.zeros(13)
+    col = np.empty(13)
+    for i in range(theta.shape[0]):
+        for c in range(13):
+            e[c] = 1.0
+            natural_gain_apply(theta[i], 0, e, 0, col, 0, k[i], Pnu[i], 0, M[0], M[1], M[2])
+            e[c] = 0.0
+            for r in range(13):
+                out[i, 13 * r + c] = col[r]
+
+
+@njit(cache=True)
+def retract_rows(prev, theta):
+    """:func:`retract` of every link's step ``prev[i] -> theta[i]``, in place; the smallest
+    step length."""
+    M = np.empty((4, 4, 4))
+    a_min = 1.0
+    for i in range(theta.shape[0]):
+        a_min = min(a_min, retract(prev[i], 0, theta[i], 0, M[0], M[1], M[2], M[3]))
+    return a_min
+
+
+# ---- Python side: conversions, checks, defaults --------------------------------------------
+
+def pseudo_inertia(theta):
+    """``J(theta)`` of 13-parameter sets, shape (..., 4, 4) for ``theta`` (..., 13)."""
+    t = np.asarray(theta, dtype=float)
+    J = np.empty(t.shape[:-1] + (4, 4))
+    J[..., 0, 0] = t[..., 4] + 0.5 * (-t[..., 10] + t[..., 11] + t[..., 12])
+    J[..., 1, 1] = t[..., 5] + 0.5 * (t[..., 10] - t[..., 11] + t[..., 12])
+    J[..., 2, 2] = t[..., 6] + 0.5 * (t[..., 10] + t[..., 11] - t[..., 12])
+    J[..., 3, 3] = t[..., 0]
+    for (i, j), k in (((0, 1), 7), ((0, 2), 8), ((1, 2), 9), ((0, 3), 1), ((1, 3), 2),
+                      ((2, 3), 3)):
+        J[..., i, j] = J[..., j, i] = t[..., k]
+    return J
+
+
+def standard_parameters(theta):
+    """The 10 standard parameters ``pi`` (Pinocchio's order, :data:`STANDARD_NAMES`) of the
+    13 parameters ``theta`` (..., 13): mass, first moment, inertia about the frame origin."""
+    t = np.asarray(theta, dtype=float)
+    return np.stack([t[..., 0], t[..., 1], t[..., 2], t[..., 3],
+                     t[..., 10] + t[..., 5] + t[..., 6], -t[..., 7],
+                     t[..., 11] + t[..., 4] + t[..., 6], -t[..., 8], -t[..., 9],
+                     t[..., 12] + t[..., 4] + t[..., 5]], axis=-1)
+
+
+def theta_from_parts(pi, nu):
+    """The 13 parameters with standard parameters ``pi`` (..., 10) and ``nu`` (..., 3)."""
+    p = np.asarray(pi, dtype=float)
+    nu = np.asarray(nu, dtype=float)
+    t = np.empty(np.broadcast_shapes(p.shape[:-1], nu.shape[:-1]) + (13,))
+    t[..., 0:4] = p[..., 0:4]
+    t[..., 4:7] = nu
+    t[..., 7], t[..., 8], t[..., 9] = -p[..., 5], -p[..., 7], -p[..., 8]
+    t[..., 10] = p[..., 4] - nu[..., 1] - nu[..., 2]
+    t[..., 11] = p[..., 6] - nu[..., 0] - nu[..., 2]
+    t[..., 12] = p[..., 9] - nu[..., 0] - nu[..., 1]
+    return t
+
+
+def body_theta(pi):
+    """The 13 parameters of the body with standard parameters ``pi`` (``nu = h_k^2 / m``).
+
+    For a body these are eq 13's ``[m, m px, ..., Izz]`` (doc/design.md §2); ``m`` must be > 0.
+    """
+    p = np.asarray(pi, dtype=float)
+    return theta_from_parts(p, p[..., 1:4] ** 2 / p[..., 0:1])
+
+
+def lambda_min(theta):
+    """Smallest eigenvalue of ``J(theta_i)`` per link, shape (...,) for ``theta`` (..., 13).
+
+    > 0 exactly when the link's estimates are a physical body (Wensing, Kim, Slotine 2018).
+    """
+    return np.linalg.eigvalsh(pseudo_inertia(theta))[..., 0]
+
+
+def is_body(theta):
+    """Per link, whether ``J(theta_i)`` is positive definite (a 4x4 Cholesky factorisation)."""
+    J = pseudo_inertia(np.atleast_2d(theta))
+    ok = np.empty(J.shape[0], dtype=bool)
+    L = np.empty((4, 4))
+    for i in range(J.shape[0]):
+        ok[i] = bool(np.all(np.isfinite(J[i]))) and cholesky4(J[i], L)
+    return ok.reshape(np.shape(theta)[:-1])
+
+
+def check_body(theta, name="theta_hat0", exc=InputError):
+    """Raise ``exc`` with one line naming the first link whose ``theta`` is not a body."""
+    ok = np.atleast_1d(is_body(theta))
+    if not ok.all():
+        i = int(np.argmin(ok))
+        lam = float(np.atleast_1d(lambda_min(theta))[i])
+        raise exc(f"{name}: link {i + 1} is not a physical body (lambda_min of its "
+                  f"pseudo-inertia J = {lam:.3g} <= 0); the natural geometry needs one "
+                  f"(doc/design.md §8)")
+
+
+def nearest_body(theta, floor=SECOND_MOMENT_FLOOR):
+    """A body close to ``theta`` (n, 13): same mass and centre of mass, second moment about
+    the centre of mass with its eigenvalues raised to at least ``floor`` times its trace.
+
+    A body is returned unchanged (up to ``nu = h^2 / m``) when it already passes; a mass
+    <= 0 raises :class:`GainError` (no centre of mass to keep).
+    """
+    J = pseudo_inertia(np.atleast_2d(theta))
+    out = np.empty((J.shape[0], 13))
+    for i, Ji in enumerate(J):
+        m, h = Ji[3, 3], Ji[:3, 3]
+        if not m > 0.0:
+            raise GainError(f"theta_0: link {i + 1} has mass {m:.3g} <= 0, no body near it")
+        Sc = Ji[:3, :3] - np.outer(h, h) / m             # second moment about the CoM
+        w, V = np.linalg.eigh(0.5 * (Sc + Sc.T))
+        lo = floor * max(float(np.sum(np.abs(w))), 1e-12 * m)
+        if w[0] < lo:
+            Sc = (V * np.maximum(w, lo)) @ V.T
+        Jn = np.zeros((4, 4))
+        Jn[:3, :3] = Sc + np.outer(h, h) / m
+        Jn[:3, 3] = Jn[3, :3] = h
+        Jn[3, 3] = m
+        nu = h ** 2 / m
+        theta_from_pseudo(Jn, nu[0], nu[1], nu[2], out[i], 0)
+    return out
+
+
+def default_start(theta_nominal, scale=NOMINAL_SCALE):
+    """The natural geometry's default ``theta_hat0``: the nominal model made a body
+    (:func:`nearest_body`), then scaled by ``scale`` (mass, first and second moments; the
+    centres of mass stay). A scaled body is a body: J scales by ``scale``."""
+    return scale * nearest_body(theta_nominal)
+
+
+def nu_gain(P):
+    """``P_nu = (B^T P^-1 B)^-1`` per link for gains ``P`` (n, 13, 13): the Euclidean metric
+    restricted to the nu directions at fixed J (``B`` = :data:`NU_BASIS`)."""
+    Pinv = np.linalg.inv(P)
+    return np.linalg.inv(NU_BASIS.T @ Pinv @ NU_BASIS)
+
+
+def log_det_hessian(theta):
+    """The Hessian of ``-log det J(theta)`` in the 13 parameters (13 x 13, rank 10)."""
+    J = pseudo_inertia(theta)
+    Ji = np.linalg.inv(J)
+    basis = [pseudo_inertia(e) for e in np.eye(13)]
+    return np.array([[np.trace(Ji @ a @ Ji @ b) for b in basis] for a in basis])
+
+
+def matched_gain(P, theta_hat0):
+    """Default natural gain ``k_i`` per link: the largest k for which the natural law's gain
+    at the start nowhere exceeds ``P_i`` on the pseudo-inertia (doc/design.md §8).
+
+    With ``A`` the map theta -> J's 10 entries and ``H`` the Hessian of ``-log det J`` in
+    those entries, ``k`` is the smallest eigenvalue of ``H^1/2 A P A^T H^1/2``: then
+    ``k H^-1 <= A P A^T`` (the Euclidean law's gain on J), with equality along one direction.
+    """
+    A = np.array([_entries(pseudo_inertia(e)) for e in np.eye(13)]).T       # 10 x 13
+    E = [_unpack(e) for e in np.eye(10)]
+    k = np.empty(len(P))
+    for i, (Pi, th) in enumerate(zip(P, theta_hat0)):
+        Ji = np.linalg.inv(pseudo_inertia(th))
+        H = np.array([[np.trace(Ji @ a @ Ji @ b) for b in E] for a in E])
+        w, V = np.linalg.eigh(0.5 * (H + H.T))
+        Hh = (V * np.sqrt(w)) @ V.T
+        k[i] = np.linalg.eigvalsh(Hh @ A @ Pi @ A.T @ Hh)[0]
+    return k
+
+
+_IDX = ((0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3))
+
+
+def _entries(J):
+    return np.array([J[i, j] for i, j in _IDX])
+
+
+def _unpack(v):
+    J = np.zeros((4, 4))
+    for x, (i, j) in zip(v, _IDX):
+        J[i, j] = J[j, i] = x
+    return J
+
+
+def as_start(theta_hat0, n, name="theta_hat0"):
+    """``theta_hat0`` (n, 13) checked to be finite and a body per link, else InputError."""
+    th = as_array(theta_hat0, (n, 13), name)
+    check_body(th, name)
+    return th
