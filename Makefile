@@ -27,16 +27,16 @@ payload-demo: $(VENV)/.test
 	$(BIN)/rcac payload-demo --out $(OUT)/payload_demo
 
 bench: $(VENV)/.test
-	$(BIN)/rcac bench --json $(OUT)/bench.json
+	$(BIN)/rcac bench core --json $(OUT)/bench.json
 
 bench-ros: $(VENV)/.runtime
-	$(BIN)/rcac bench --ros --json $(OUT)/bench_ros.json
+	$(BIN)/rcac bench ros --json $(OUT)/bench_ros.json
 
 # time `make demo` and `make test` in a fresh clone of HEAD and write them into README.md
 readme-timings:
 	$(PYTHON) rcac_ros/tools/readme_timings.py --clean
 
-# run rcac bench --ros in each controller mode and write the timing table into README.md
+# run rcac bench ros in each controller mode and write the timing table into README.md
 readme-bench: $(VENV)/.runtime
 	$(BIN)/python -m rcac_ros.tools.readme_bench
 

@@ -26,6 +26,14 @@ class InputError(RcacError, ValueError):
     """A run-time input (state, desired motion, torque) has a wrong shape or is not finite."""
 
 
+class BagError(RcacError, ValueError):
+    """A bag is missing, cut short by a crash, or corrupt (the message names the problem)."""
+
+
+class CutBagError(BagError):
+    """A bag was not closed (its recorder was killed): ``rcac inspect --recover`` salvages it."""
+
+
 def read_yaml(path, label=None):
     """Parse the YAML file at ``path``.
 
@@ -62,4 +70,5 @@ def read_yaml(path, label=None):
 
 
 class DependencyError(RcacError, ImportError):
-    """An optional dependency a command needs is not installed (the message names it)."""
+    """An optional dependency a command needs is not installed (the message names it: an
+    extra of setup.py, or ROS 2)."""

@@ -169,7 +169,8 @@ CONTROLLER = _robot("controller") + (
           "weight of the prediction error (eq 24); 0 = direct adaptive law", lo=0.0, hi=BIG),
     Param("lambda", "double", PAPER_GAINS["lam"],
           "bandwidth of the filter lambda/(p+lambda), rad/s", lo=0.0, hi=BIG, strict=True),
-    # issue 8: prediction channels, discretisation, least squares, robust adaptation
+    # prediction channels, discretisation, least squares, robust adaptation (doc/nodes.md,
+    # "Choosing the prediction channels"; doc/design.md §6)
     Param("channels", "string_array", ("1",),
           "predicted filtered torques (eqs 21-24): joint numbers (1-based) and 'power', or "
           "['all'] (= 1..n, Slotine-Li's information); ['1'] is the paper's law; "
@@ -248,7 +249,7 @@ CONTROLLER = _robot("controller") + (
           "~/save_estimates writes the estimates here (YAML), and the physically consistent "
           "links as URDF inertials next to it (.inertial.urdf)", read_only=False),
     _diagnostics_period(),
-    # fail-safe (issue 9): rcac_ros.nodes.safety.guards, .state_guards, .realtime
+    # fail-safe (doc/failsafe.md): rcac_ros.nodes.safety.guards, .state_guards, .realtime
     Param("max_state_bytes", "integer", 65_536,
           "JointStates larger than this (serialised) are refused before deserialising, "
           "bytes; 0: no cap", lo=0, hi=2 ** 31 - 1),
@@ -286,6 +287,18 @@ CONTROLLER = _robot("controller") + (
           "state's arrival, s (a phase-locked loop: the state waits for the tick at most "
           "this long instead of up to a period); unset: the ticks keep their own phase",
           lo=0.0, hi=1.0),
+    Param("starvation.delay_margin", "double", None,
+          "timer mode: past this smoothed delay (state age plus the previous effort held "
+          "beyond a period) K_D is scaled down by margin/delay and adaptation frozen until "
+          "the delay has stayed within it for starvation.recover_after, s; unset: "
+          "80 / (largest K_D), the measured margin (doc/failsafe.md); 0: no guard",
+          lo=0.0, hi=1.0),
+    Param("starvation.recover_after", "double", 1.0,
+          "the smoothed delay stays within the margin this long before the nominal gains "
+          "and adaptation return, s", lo=0.0, hi=BIG),
+    Param("starvation.min_scale", "double", 0.02,
+          "the smallest scale of K_D the starvation guard applies", lo=0.0, hi=1.0,
+          strict=True),
     _strict_parameters(),
 )
 
@@ -442,7 +455,7 @@ def check_file_params(node, params):
         Naming the first unknown parameter or invalid value.
     """
     known = {p.name: p for p in TABLE[node]}
-    for name, value in _flatten(params):
+    for name, value in flatten(params):
         if name in ("use_sim_time", "start_type_description_service"):
             continue
         if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
@@ -453,10 +466,11 @@ def check_file_params(node, params):
         check(known[name], value)
 
 
-def _flatten(params, prefix=""):
+def flatten(params, prefix=""):
+    """``(dotted name, value)`` of every leaf of a nested ``ros__parameters`` mapping."""
     for key, value in params.items():
         if isinstance(value, dict):
-            yield from _flatten(value, f"{prefix}{key}.")
+            yield from flatten(value, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}", value
 

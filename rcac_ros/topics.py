@@ -35,6 +35,16 @@ DIAGNOSTICS = "/diagnostics"
 CLOCK = "/clock"
 
 
+def resolve(topic, node=CONTROLLER_NODE, namespace=""):
+    """The absolute name of ``topic`` for node ``node`` in ``namespace``, by the ROS 2 rules
+    without remappings (offline: a bag's topic names): ``~/x`` -> ``<namespace>/<node>/x``,
+    ``x`` -> ``<namespace>/x``, ``/x`` unchanged. A node has ``Node.resolve_topic_name``."""
+    ns = namespace.rstrip("/")
+    if topic.startswith("~/"):
+        return f"{ns}/{node}/{topic[2:]}"
+    return topic if topic.startswith("/") else f"{ns}/{topic}"
+
+
 def channels_label(names):
     """The label of ``~/prediction_errors``'s dimension: the channel names, comma-separated
     (``"joint1,power"``; ``joint<k>`` is the model's k-th joint, 1-based)."""
@@ -83,6 +93,12 @@ def effort_label(stamp=None, watchdog=False):
     if stamp is not None:
         return f"{EFFORT_LABEL}{_STAMP}{stamp.sec}.{stamp.nanosec:09d}"
     return EFFORT_LABEL
+
+
+def is_watchdog_effort(raw):
+    """Whether a serialised effort message (the bytes of a ``raw=True`` subscription) is
+    tagged watchdog, without deserialising it: the label lies within its first 96 bytes."""
+    return _WATCHDOG.strip().encode() in bytes(raw[:96])
 
 
 def effort_tag(label):

@@ -33,10 +33,10 @@ import numpy as np
 
 from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS, CH_ACTIVE, CH_E,
-                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR,
-                       I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_PROJECT, I_TRACKING, I_Y,
-                       LEAK_M0, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block,
-                       new_data)
+                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_DZ_E, I_DZ_S,
+                       I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_PROJECT,
+                       I_TRACKING, I_Y, LEAK_M0, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX,
+                       W_ROW, Gains, block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
@@ -134,6 +134,7 @@ class RecursiveCompositeController:
         self._chan = self._buf[:, n, :CHAN_COLS]
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
+        self.K_D_scale = 1.0
         self.joint_friction = bool(joint_friction)
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
@@ -309,6 +310,24 @@ class RecursiveCompositeController:
         self._scal[I_FROZEN] = 0.0 if enabled else 1.0
         self.adapting = bool(enabled)
         self._choose_kernel()
+
+    def scale_K_D(self, factor):
+        """Use ``factor * K_D`` in eq 19b from the next step on (1: the gains as built).
+
+        Only the feedback term ``K_Di (V_ri - V_i)`` changes; :attr:`K_D` keeps the gains as
+        built. The degraded mode of a controller whose states come later than the delay
+        margin of ``K_D`` allows (doc/failsafe.md, "starved machine").
+
+        Raises
+        ------
+        GainError
+            If ``factor`` is not in (0, 1].
+        """
+        factor = scalar(factor, "factor", GainError, minimum=0.0, strict=True)
+        if factor > 1.0:
+            raise GainError(f"factor: must be <= 1, got {factor:g}")
+        self._const[:, GAIN_K_D:GAIN_K_D + 36] = factor * self.K_D.reshape(self.n, 36)
+        self.K_D_scale = factor
 
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.

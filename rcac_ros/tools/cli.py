@@ -2,32 +2,40 @@
 
 Each subcommand lives in its own module exposing ``add_arguments(parser)`` and
 ``run(args) -> int``; modules are imported only when their subcommand runs, so
-``rcac --help`` stays fast and ``rcac experiment`` never imports rclpy.
+``rcac --help`` stays fast and ``rcac experiment`` never imports rclpy. A module whose
+options depend on its first argument (the forms of ``rcac sweep``, the benchmarks of
+``rcac bench``) takes ``add_arguments(parser, argv)``, ``argv`` the words after the
+subcommand. The command line is read, never rewritten.
 Numbers are checked as they are parsed (the ``type=`` helpers of ``tools/args.py``); a bad
-argument gives one line naming it and exit code 2.
+argument gives one line naming it and exit code 2, and so does a missing optional
+dependency (``tools/extras.py``).
 """
 
 import argparse
 import importlib
+import inspect
 import sys
 
-#: subcommand -> (module, one-line help)
+#: subcommand -> (module, one-line help, what it needs: extras of setup.py, or "ros")
 SUBCOMMANDS = {
     "experiment": ("rcac_ros.tools.demos.experiment",
-                   "run the paper's Section 4 experiment (both laws)"),
-    "bench": ("rcac_ros.tools.bench.core",
-              "time the controller against Pinocchio and the baseline"),
-    "record": ("rcac_ros.tools.bags.record", "record the package's topics into a rosbag2 bag"),
-    "inspect": ("rcac_ros.tools.bags.inspect", "summarise a bag and plot what it holds"),
+                   "run the paper's Section 4 experiment (both laws)", ()),
+    "bench": ("rcac_ros.tools.bench.commands",
+              "benchmarks: core, ros, faults, soak, delay-margin, noise", ()),
+    "record": ("rcac_ros.tools.bags.record", "record the package's topics into a rosbag2 bag",
+               ("bags", "ros")),
+    "inspect": ("rcac_ros.tools.bags.inspect", "summarise a bag and plot what it holds",
+                ("bags",)),
     "demo": ("rcac_ros.tools.demos.demo",
-             "simulator + controller over ROS 2, bag, summary and plots"),
+             "simulator + controller over ROS 2, bag, summary and plots", ("bags", "ros")),
     "payload-demo": ("rcac_ros.tools.demos.payload",
-                     "panda with an unknown 2 kg payload attached"),
+                     "panda with an unknown 2 kg payload attached", ()),
     "friction-demo": ("rcac_ros.tools.demos.friction",
-                      "panda learning its joints' armature, viscous and Coulomb friction"),
-    "sweep": ("rcac_ros.tools.sweep.engine", "Monte Carlo campaigns of closed-loop runs on Dask"),
+                      "panda learning its joints' armature, viscous and Coulomb friction", ()),
+    "sweep": ("rcac_ros.tools.sweep.engine", "Monte Carlo campaigns of closed-loop runs on Dask",
+              ("sweep",)),
     "compare": ("rcac_ros.tools.demos.compare",
-                "every adaptive law on the paper's run and the payload demo"),
+                "every adaptive law on the paper's run and the payload demo", ()),
 }
 
 
@@ -38,26 +46,37 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser():
+def add_module_arguments(parser, module, argv):
+    """``module.add_arguments(parser[, argv])``: ``argv`` only where the module takes it."""
+    add = importlib.import_module(module).add_arguments
+    if "argv" in inspect.signature(add).parameters:
+        add(parser, argv)
+    else:
+        add(parser)
+
+
+def build_parser(argv=()):
+    """The parser of ``rcac``; only the subcommand named by ``argv[0]`` gets its options."""
     parser = OneLineParser(
         prog="rcac", description="rcac_ros tools: the recursive composite adaptive controller "
         "offline, over ROS 2, and its bags.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name, (module, help_text) in SUBCOMMANDS.items():
+    for name, (module, help_text, needs) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
-        p.set_defaults(_module=module)
-        if name in sys.argv[1:2]:  # only the chosen subcommand imports its module
-            importlib.import_module(module).add_arguments(p)
+        p.set_defaults(_module=module, _needs=needs)
+        if list(argv[:1]) == [name]:  # only the chosen subcommand imports its module
+            add_module_arguments(p, module, list(argv[1:]))
     return parser
 
 
 def main(argv=None):
-    if argv is not None:
-        sys.argv = [sys.argv[0]] + list(argv)
-    args = build_parser().parse_args()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     from rcac_ros.errors import RcacError
+    from rcac_ros.tools.extras import require
     try:
+        require(*args._needs)
         return importlib.import_module(args._module).run(args) or 0
     except RcacError as err:
         print(f"rcac {args.command}: error: {err}", file=sys.stderr)

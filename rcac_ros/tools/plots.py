@@ -9,6 +9,16 @@ import numpy as np  # noqa: E402
 from rcac_ros.core.model import PARAMETER_NAMES  # noqa: E402
 
 
+def save(fig, path, dpi, rect=None):
+    """Lay out ``fig`` (within ``rect`` if given), write it to ``path`` and close it."""
+    if rect is None:
+        fig.tight_layout()
+    else:
+        fig.tight_layout(rect=rect)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def plot_tracking_errors(t, errors, path, joint_names=None, title="Joint tracking errors"):
     """Figure 3's equivalent: ``q - q_d`` of every joint, one panel per law, side by side.
 
@@ -32,9 +42,7 @@ def plot_tracking_errors(t, errors, path, joint_names=None, title="Joint trackin
     axes[0][0].set_ylabel("q - q_d (rad)")
     axes[0][-1].legend(fontsize=7, loc="upper right", ncol=2)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save(fig, path, 120)
 
 
 def plot_parameter_estimates(t, estimates, theta_true, path, link=7, names=PARAMETER_NAMES):
@@ -65,9 +73,7 @@ def plot_parameter_estimates(t, estimates, theta_true, path, link=7, names=PARAM
     for ax in axes[8:13]:
         ax.set_xlabel("time (s)")
     fig.suptitle(f"Link {link} parameter estimates")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path, 110)
 
 
 def plot_series(t, series, path, title, ylabel, logy=False, legend=None):
@@ -93,6 +99,4 @@ def plot_series(t, series, path, title, ylabel, logy=False, legend=None):
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel(ylabel)
     fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save(fig, path, 120)

@@ -1,6 +1,6 @@
 """The README's table of the ROS loop's timing, from a run (``make readme-bench``).
 
-Runs ``rcac bench --ros`` (:func:`rcac_ros.tools.bench.ros.run_ros_bench`) once per
+Runs ``rcac bench ros`` (:func:`rcac_ros.tools.bench.ros.run_ros_bench`) once per
 controller mode, one after the other: the free-running timer, the timer locked to the
 states' arrival (``timer.phase_offset`` 0) and ``on_state`` (the controller's ``lockstep``
 mode answering each state of the real-time simulator). It then replaces the block between the two

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import random_chain, to_pin
+from chains import random_chain, to_pin
 
 from rcac_ros.core import (css_arm, energy, forward_dynamics, forward_kinematics,
                            inverse_dynamics, mass_matrix, RobotModel)

@@ -3,7 +3,7 @@ parameters, channels="all" equals Slotine-Li, the option off changes nothing."""
 
 import numpy as np
 import pytest
-from conftest import random_chain
+from chains import random_chain
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)

@@ -7,7 +7,7 @@ numbers, its own recursions); it is a test-only dependency of this module.
 
 import numpy as np
 import pytest
-from conftest import random_chain
+from chains import random_chain
 
 from rcac_ros.core import forward_dynamics, inverse_dynamics, mass_matrix, Simulator
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import random_chain
+from chains import random_chain
 
 from rcac_ros.core import (coriolis_gravity_regressor, css_arm, inverse_dynamics, link_matrices,
                            link_regressor, mass_regressor, theta_from_inertia)

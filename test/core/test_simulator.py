@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import random_chain
+from chains import random_chain
 
 from rcac_ros.core import (InputError, PaperTrajectory, PolynomialTrajectory, Simulator,
                            SinusoidTrajectory, css_arm, energy)

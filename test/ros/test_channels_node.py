@@ -1,4 +1,4 @@
-"""The controller node's prediction channels (issue 8): parameters, ~/prediction_errors,
+"""The controller node's prediction channels (doc/nodes.md): parameters, ~/prediction_errors,
 diagnostics, against an offline core run of the same closed loop."""
 
 import os

@@ -5,7 +5,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from conftest import random_chain
+from chains import random_chain
 
 from rcac_ros.core.model import css_arm
 from rcac_ros.core.urdf import model_from_urdf

@@ -1,4 +1,5 @@
-"""Issue 9.3: a flood of huge messages does not starve the 500 Hz loop (processes over DDS)."""
+"""doc/failsafe.md, "starvation": a flood of huge messages does not starve the 500 Hz loop
+(processes over DDS)."""
 
 import subprocess
 import sys
@@ -9,7 +10,7 @@ import numpy as np
 
 from failsafe_harness import controller, PAPER_Q0, ROOT, session, wait
 
-FLOOD = [sys.executable, "-m", "rcac_ros.tools.bench.flood"]     # also ``rcac bench --faults``
+FLOOD = [sys.executable, "-m", "rcac_ros.tools.bench.flood"]     # also ``rcac bench faults``
 #: the machine's own stalls: a process that does nothing but wake every period (the VM
 #: stalls every process for up to ~100 ms while the flood's 8 MB messages cross DDS)
 SLEEPER = """

@@ -1,4 +1,5 @@
-"""Issue 9.4: goals that cannot hurt the arm, against a controller process over DDS."""
+"""doc/failsafe.md, "goals": goals that cannot hurt the arm, against a controller process over
+DDS."""
 
 from builtin_interfaces.msg import Duration
 import numpy as np

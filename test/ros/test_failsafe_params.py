@@ -1,4 +1,5 @@
-"""Issue 9.7: parameters that are wrong, not only invalid (node processes, real files)."""
+"""doc/failsafe.md, "parameters": parameters that are wrong, not only invalid (node processes,
+real files)."""
 
 import subprocess
 

@@ -1,4 +1,5 @@
-"""Issue 9.1-9.2: stamps and the watchdog, against a controller process over DDS."""
+"""doc/failsafe.md, "stamps" and "watchdog": stamps and the watchdog, against a controller process
+over DDS."""
 
 import threading
 import time

@@ -1,4 +1,5 @@
-"""Recordings survive a crash (issue 9 item 5): ``kill -9`` of ``rcac record`` loses at most the
+"""Recordings survive a crash (doc/tools.md, "rcac record"): ``kill -9`` of ``rcac record`` loses
+at most the
 last second, for mcap and sqlite3; ``rcac inspect`` says to use ``--recover``, which salvages
 the bag; a recorder that joins late records within 1 s of discovering the publishers."""
 

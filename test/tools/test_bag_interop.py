@@ -1,4 +1,5 @@
-"""Bags other tools open (issue 10 item 8): ``rcac record`` writes the publishers' real QoS
+"""Bags other tools open (doc/tools.md, "rcac record"): ``rcac record`` writes the publishers'
+real QoS
 profiles and ``ros_distro: jazzy``, stamps with ``/clock`` under ``--use-sim-time``, and its
 mcap files read back through ``mcap`` + ``mcap-ros2-support`` and through rosbags; ``rcac
 inspect`` prints the header ``ros2 bag info`` prints."""

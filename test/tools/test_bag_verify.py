@@ -1,6 +1,7 @@
-"""Corrupt bags give one clear line and a non-zero exit, never silent partial data (issue 9
-item 6); ``--recover`` says what it salvaged and lost; ``rcac inspect`` finds the bag in a
-parent folder (issue 11). The bags are written by the package's writer and read back by
+"""Corrupt bags give one clear line and a non-zero exit, never silent partial data
+(doc/tools.md, "rcac inspect"); ``--recover`` says what it salvaged and lost; ``rcac inspect``
+finds the bag in a
+parent folder. The bags are written by the package's writer and read back by
 rosbags and by ``mcap`` + ``mcap-ros2-support``."""
 
 import importlib
@@ -11,6 +12,7 @@ import pytest
 import yaml
 from bagtest_support import bag_file, cli_module, read_mcap_ros2, read_rosbags
 
+from rcac_ros.errors import BagError, ConfigError, CutBagError
 from rcac_ros.tools.bags.writer import BagWriter, recover, verify
 
 N_MSG = 2000
@@ -119,6 +121,16 @@ def _inspect_fails_then_recover(tmp_path, capsys, chunk, damage, *words):
     return report, start
 
 
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_damaged_bag_is_a_bag_error_not_a_configuration_error(tmp_path, storage):
+    """Exceptions by kind: verify raises BagError (CutBagError for an unclosed bag), which a
+    handler of configuration errors does not catch."""
+    write_bag(tmp_path / "bag", storage, n=400, close=False)
+    with pytest.raises(CutBagError) as err:
+        verify(str(tmp_path / "bag"))
+    assert isinstance(err.value, BagError) and not isinstance(err.value, ConfigError)
+
+
 def test_flipped_byte_in_a_chunk_is_a_crc_error(tmp_path, capsys):
     report, start = _inspect_fails_then_recover(tmp_path, capsys, 3, _flip_byte,  # 4th chunk
                                                 "damaged record", "corrupt")
@@ -200,7 +212,7 @@ def test_inspect_finds_the_bag_in_a_parent_folder(tmp_path, capsys):
 
 def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
     """efforts.png names the joints, prediction_error.png shows log |E|, and the loop-timing
-    figure says which stamps it comes from (issue 11)."""
+    figure says which stamps it comes from."""
     import matplotlib.figure
     import numpy as np
 

@@ -18,10 +18,13 @@ NUMERIC_OPTIONS = [
     ("experiment", [], "--lam", "10"),
     ("experiment", [], "--h", "0.002"),
     ("experiment", [], "--substeps", "2"),
-    ("bench", [], "--duration", "60"),
-    ("bench", [], "--budget", "0.3"),
-    ("bench", [], "--K_D", "1e4"),
-    ("bench", [], "--soak", "1"),
+    ("bench", ["ros"], "--duration", "60"),
+    ("bench", ["faults"], "--duration", "60"),
+    ("bench", ["noise"], "--duration", "600"),
+    ("bench", ["core"], "--budget", "0.3"),
+    ("bench", ["ros"], "--K_D", "1e4"),
+    ("bench", ["faults"], "--K_D", "1e4"),
+    ("bench", ["soak", "5"], "--K_D", "1e4"),
     ("demo", [], "--duration", "20"),
     ("record", [], "--duration", "5"),
     ("inspect", ["some_bag"], "--link", "7"),
@@ -35,8 +38,8 @@ NUMERIC_OPTIONS = [
 #: options where 0 is allowed and a negative number is not
 NON_NEGATIVE_OPTIONS = [
     ("experiment", [], "--gamma"),
-    ("bench", [], "--lookahead"),
-    ("bench", [], "--phase-offset"),
+    ("bench", ["ros"], "--lookahead"),
+    ("bench", ["faults"], "--phase-offset"),
     ("payload-demo", [], "--gamma"),
     ("payload-demo", [], "--jump"),
     ("payload-demo", [], "--payload-mass"),
@@ -58,19 +61,24 @@ def assert_one_line(code, lines, command, option):
     assert lines[0].startswith(f"rcac {command}: error: argument {option}"), lines
 
 
+def named(command, extra):
+    """How the parser names the command: ``bench ros`` for a benchmark, else ``command``."""
+    return f"{command} {extra[0]}" if command == "bench" else command
+
+
 @pytest.mark.parametrize("command,extra,option,good", NUMERIC_OPTIONS)
 @pytest.mark.parametrize("bad", ["0", "-5", "nan", "inf", "abc"])
 def test_a_non_positive_or_non_numeric_value_stops_at_the_parser(
         capsys, monkeypatch, command, extra, option, good, bad):
     code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, bad])
-    assert_one_line(code, lines, command, option)
+    assert_one_line(code, lines, named(command, extra), option)
 
 
 @pytest.mark.parametrize("command,extra,option", NON_NEGATIVE_OPTIONS)
 @pytest.mark.parametrize("bad", ["-1", "-1e-9", "nan", "-inf", "x"])
 def test_a_negative_value_stops_at_the_parser(capsys, monkeypatch, command, extra, option, bad):
     code, lines = parse_error(capsys, monkeypatch, [command, *extra, option, bad])
-    assert_one_line(code, lines, command, option)
+    assert_one_line(code, lines, named(command, extra), option)
 
 
 @pytest.mark.parametrize("command,option", sorted(INTEGER_OPTIONS))
@@ -87,16 +95,26 @@ def test_the_payload_centre_of_mass_must_be_finite(capsys, monkeypatch):
     assert_one_line(code, lines, "payload-demo", "--payload-com")
 
 
-def subcommand_parser(command):
-    """The parser of one subcommand, built as ``rcac COMMAND`` builds it."""
-    parser = argparse.ArgumentParser(prog=f"rcac {command}")
-    cli.importlib.import_module(cli.SUBCOMMANDS[command][0]).add_arguments(parser)
-    return parser
+def subparsers(parser):
+    """The parsers below ``parser`` (its subcommands, theirs, ...), and itself."""
+    found = [parser]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                found += subparsers(sub)
+    return found
+
+
+def subcommand_parsers(command):
+    """Every parser of one subcommand (its benchmarks, its forms), built as ``rcac`` does."""
+    forms = {"sweep": [["CAMPAIGN"], ["report"], ["rerun"]]}.get(command, [[]])
+    return [p for words in forms for p in subparsers(cli.build_parser([command, *words]))
+            if p.prog.startswith(f"rcac {command}")]
 
 
 @pytest.mark.parametrize("command,extra,option,good", NUMERIC_OPTIONS)
 def test_valid_values_are_accepted(command, extra, option, good):
-    args = subcommand_parser(command).parse_args([*extra, option, good])
+    args = cli.build_parser([command]).parse_args([command, *extra, option, good])
     value = getattr(args, option.lstrip("-").replace("-", "_"))
     assert value == float(good)
     assert isinstance(value, int if (command, option) in INTEGER_OPTIONS else float)
@@ -105,8 +123,10 @@ def test_valid_values_are_accepted(command, extra, option, good):
 @pytest.mark.parametrize("command", sorted(cli.SUBCOMMANDS))
 def test_every_numeric_option_of_every_subcommand_is_checked(command):
     """No option is parsed with a bare ``float`` or ``int``; each default passes its own check."""
-    parser = subcommand_parser(command)
-    for action in parser._actions:
+    parsers = subcommand_parsers(command)
+    assert parsers
+    actions = [a for p in parsers for a in p._actions]
+    for action in actions:
         assert action.type not in (float, int), f"rcac {command} {action.option_strings}"
         if action.type is not None and action.default not in (None, argparse.SUPPRESS):
             defaults = (action.default if isinstance(action.default, (list, tuple))
@@ -146,7 +166,7 @@ def test_the_payload_must_attach_before_the_end(tmp_path, capsys, monkeypatch):
                                   ["experiment", "--duration", "0"],
                                   ["payload-demo", "--duration", "-1"]])
 def test_the_cases_a_new_user_hit(argv):
-    """As typed in a shell (issue 11): no traceback, one line naming --duration, exit 2."""
+    """As typed in a shell: no traceback, one line naming --duration, exit 2."""
     out = subprocess.run([sys.executable, "-m", "rcac_ros.tools.cli", *argv],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2

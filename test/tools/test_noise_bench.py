@@ -1,4 +1,4 @@
-"""``rcac bench --noise``: the dead-zone sizing rule, the growth criterion, its options."""
+"""``rcac bench noise``: the dead-zone sizing rule, the growth criterion, its options."""
 
 import sys
 from statistics import NormalDist
@@ -56,15 +56,15 @@ def test_each_variant_runs_with_its_options():
             assert len(r["options"]["leakage_bound"]) == model.n
 
 
-@pytest.mark.parametrize("option,value", [("--noise-laws", "paper;4,5"),
-                                          ("--noise-variants", "plain,deadzone")])
+@pytest.mark.parametrize("option,value", [("--laws", "paper;4,5"),
+                                          ("--variants", "plain,deadzone")])
 def test_an_unknown_law_or_variant_stops_at_the_parser(capsys, monkeypatch, option, value):
     monkeypatch.setattr(sys, "argv", ["rcac"])
     with pytest.raises(SystemExit) as stop:
-        cli.main(["bench", "--noise", option, value])
+        cli.main(["bench", "noise", option, value])
     lines = capsys.readouterr().err.splitlines()
     assert stop.value.code == 2 and len(lines) == 1
-    assert lines[0].startswith(f"rcac bench: error: argument {option}: unknown")
+    assert lines[0].startswith(f"rcac bench noise: error: argument {option}: unknown")
 
 
 def test_weak_share_splits_a_deviation_by_excitation():
@@ -82,7 +82,7 @@ def test_weak_share_splits_a_deviation_by_excitation():
 
 
 def test_noise_sources_writes_its_report(tmp_path):
-    """Four seconds of ``--noise-sources``: each case against the clean run of its own
+    """Four seconds of ``rcac bench noise --sources``: each case against the clean run of its own
     gamma, the cosine of the reference case with itself 1, the JSON and the plot."""
     report = noise_bench.run_noise_sources(4.0, str(tmp_path))
     assert set(report) == set(noise_bench.SOURCES)

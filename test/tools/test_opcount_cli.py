@@ -45,7 +45,7 @@ def test_experiment_rejects_bad_gain_with_one_line(tmp_path):
 
 def test_bench_command_json(tmp_path):
     path = tmp_path / "bench.json"
-    out = run("bench", "--budget", "0.02", "--json", str(path), timeout=900)
+    out = run("bench", "core", "--budget", "0.02", "--json", str(path), timeout=900)
     assert out.returncode == 0, out.stderr
     result = json.loads(path.read_text())
     assert [r["n"] for r in result["rows"][:6]] == [7, 14, 28, 56, 112, 224]

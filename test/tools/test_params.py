@@ -25,7 +25,7 @@ def test_shipped_parameter_files_pass_the_check(node):
 @pytest.mark.parametrize("node", sorted(SECTIONS))
 def test_shipped_parameter_files_restate_the_defaults(node):
     """What a file sets and the table defaults agree (the files reproduce the paper)."""
-    flat = dict(params._flatten(shipped(node)))
+    flat = dict(params.flatten(shipped(node)))
     for name, value in flat.items():
         row = params.row(node, name)
         if row.default is not None:

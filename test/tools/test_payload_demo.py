@@ -5,10 +5,11 @@ import json
 import numpy as np
 import pytest
 
+from rcac_ros.tools import scenarios
 from rcac_ros.tools.demos import payload as demo
 
 pin = pytest.importorskip("pinocchio")
-pytestmark = pytest.mark.skipif(demo.find_panda_urdf() is None,
+pytestmark = pytest.mark.skipif(scenarios.find_panda_urdf() is None,
                                 reason="example-robot-data's panda.urdf not installed")
 
 JUMP, DURATION, WINDOW = 1.0, 4.0, 1.0
@@ -28,7 +29,7 @@ def rms(run, start, stop):
 def test_payload_is_a_rigid_body_sum(short_run):
     model, loaded, _ = short_run
     # independent reference: Pinocchio's inertia algebra (sum of two bodies about their com)
-    c_p = np.array(demo.FLANGE) + [0.03, -0.02, 0.08]
+    c_p = np.array(scenarios.FLANGE) + [0.03, -0.02, 0.08]
     ref = (pin.Inertia(model.mass[-1], model.com[-1], model.inertia[-1])
            + pin.Inertia(2.0, c_p, 0.4 * 2.0 * 0.05 ** 2 * np.eye(3)))
     assert loaded.mass[-1] == pytest.approx(ref.mass, rel=1e-14)

@@ -95,7 +95,7 @@ def test_experiment_runs_the_reference_loop():
 
 def test_payload_grasp_is_the_reference_loops():
     """closed_loop's plant event is the grasp of the reference loop, state carried over."""
-    from rcac_ros.tools.demos.payload import gains_for, with_payload
+    from rcac_ros.tools.scenarios import gains_for, with_payload
     model = css_arm(gravity=(0.0, 0.0, -9.81))
     loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
     traj = SinusoidTrajectory(np.array(PAPER_Q0), 0.1, 0.3)
@@ -116,8 +116,9 @@ def test_payload_grasp_is_the_reference_loops():
 
 def test_payload_demo_runs_the_reference_loop():
     """rcac payload-demo's run (closed_loop with the grasp event) is the reference loop's."""
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, find_panda_urdf, GAINS,
-                                              gains_for, READY, run_demo)
+    from rcac_ros.tools.demos.payload import run_demo
+    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, find_panda_urdf, GAINS,
+                                          gains_for, READY)
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data's panda.urdf not installed")
     model, loaded, runs, _ = run_demo(0.4, 0.2, progress=False, laws=("composite",))
@@ -131,7 +132,7 @@ def test_payload_demo_runs_the_reference_loop():
 
 def test_attach_payload_matches_parallel_axis():
     """Parameter additivity (attach_payload) against payload-demo's parallel-axis sums."""
-    from rcac_ros.tools.demos.payload import FLANGE, with_payload
+    from rcac_ros.tools.scenarios import FLANGE, with_payload
     model = css_arm()
     for mass, com, radius in ((2.0, (0.03, -0.02, 0.08), 0.05), (80.0, (1.0, 0.5, -0.3), 0.4)):
         ref = with_payload(model, mass, com, radius)
@@ -251,7 +252,7 @@ def test_shipped_campaigns_validate_and_build():
         c = cp.load(os.path.join(ROOT, "campaigns", f"{name}.yaml"))
         assert c["scenario"]["model"] == model and cp.run_count(c) == runs
         if model == "panda":
-            from rcac_ros.tools.demos.payload import find_panda_urdf
+            from rcac_ros.tools.scenarios import find_panda_urdf
             if find_panda_urdf() is None:
                 pytest.skip("example-robot-data's panda.urdf not installed")
         inputs, ctrl, kw = cp.setup(c, 0)

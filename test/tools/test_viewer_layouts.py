@@ -1,4 +1,5 @@
-"""The shipped PlotJuggler and Foxglove layouts (issue 10 item 8) name fields that exist in the
+"""The shipped PlotJuggler and Foxglove layouts (doc/tools.md, "rcac record") name fields that
+exist in the
 recorded topics: every curve resolves on a message of the topic's type, with the CSS arm's
 sizes (7 joints, 7 x 13 estimates)."""
 

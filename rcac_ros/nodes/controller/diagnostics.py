@@ -36,6 +36,12 @@ def diagnostics(node):
         "channels": ",".join(node.channel_names),
         "adaptation": "on" if node.ctrl.adapting else "frozen",
     }
+    if node._starvation is not None:    # timer mode's starvation guard (doc/failsafe.md)
+        values.update(node._starvation.diagnostics())
+        if node.running and node._starvation.guard.starved and level == DiagnosticStatus.OK:
+            level, message = DiagnosticStatus.WARN, \
+                "starved: K_D scaled down and adaptation frozen (the loop's delay is past " \
+                "the delay margin)"
     for name, e in zip(node.channel_names, E):     # every channel's E_c
         values[f"prediction_error_{name}"] = f"{e:.6g}"
     for kind, c in sorted(node._throttle.counts.items()):

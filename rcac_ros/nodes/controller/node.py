@@ -1,40 +1,29 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
-A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`, ``~/get_state``,
-``~/change_state``): configure reads the parameters, the model, the gains (and their
-overrides ``gains.<joint>.<gain>``) and warms the kernels; activate starts the efforts (the
-motion starts again from the next state); deactivate sends one zero effort, then silence;
-``autostart`` (default) does both at start-up. Services ``~/reset_estimates``,
-``~/set_adaptation``, ``~/save_estimates`` (:mod:`~rcac_ros.nodes.controller.estimate_services`);
-``~/controller_state/*`` (:mod:`~rcac_ros.nodes.controller.controller_state`); doc/nodes.md.
-
-Thin: message -> arrays -> :class:`~rcac_ros.core.composite.RecursiveCompositeController` ->
-message. ``lockstep`` (default): one step per valid JointState, the trajectory time taken
-from its stamp (deterministic with the simulator node); ``timer``: ``rate`` Hz on the
-latest valid state (real arms), on absolute deadlines of the steady clock
-(:class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop`), or on ``/clock`` with ``use_sim_time``.
-Its parts: the state input (:mod:`~rcac_ros.nodes.controller.state_input`: stamps through a
-:class:`~rcac_ros.nodes.safety.state_guards.StampGate`, a restart followed, a stamp in the future
-refused; in timer mode in its own thread, so the loop only ticks); the watchdog
-(:mod:`~rcac_ros.nodes.safety.watchdog`: ``safe_effort`` while no valid state has
-arrived for ``state_timeout`` s of the steady clock, or no tick of ``/clock`` comes; after
-``watchdog.replan_after`` s of it the motion restarts from the measured state,
-doc/failsafe.md); the trajectory sources (:mod:`~rcac_ros.nodes.controller.trajectory_input`:
-size caps checked before deserialising, parsed in their own thread, checked against the
-model's limits); the outputs (:mod:`~rcac_ros.nodes.controller.outputs`). The fail-safe
-guards (issue 9) are built by :class:`~rcac_ros.nodes.safety.failsafe.ControllerGuards`; the
-desired state is rate-limited. Parameters: ``config/controller.yaml``, doc/parameters.md.
+A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`): configure reads the
+parameters (:mod:`.params`) and warms the kernels, activate starts the efforts, deactivate
+sends one zero effort. Thin: message -> arrays ->
+:class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
+(one step per valid JointState, time from its stamp) or ``timer`` mode (``rate`` Hz on
+the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop` or
+``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
+the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the trajectory sources
+(:mod:`.trajectory_input`), the outputs (:mod:`.outputs`), the estimate services
+(:mod:`.estimate_services`) and the fail-safe guards (:mod:`rcac_ros.nodes.safety.failsafe`).
+doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/parameters.md.
 """
 
 import sys
 import time
 
 import numpy as np
+from rclpy.clock import Clock, ClockType
 
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import run
 from rcac_ros.nodes.controller.diagnostics import diagnostics
+from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
 from rcac_ros.nodes.controller.outputs import ControllerOutputs
 from rcac_ros.nodes.controller.params import read_parameters
@@ -57,18 +46,9 @@ class ControllerNode(ManagedNode):
     :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
     parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
 
-    Attributes
-    ----------
-    ctrl : RecursiveCompositeController
-        The core controller (built at configure, :mod:`~rcac_ros.nodes.controller.params`).
-    states : StateInput
-        The latest valid state (:mod:`~rcac_ros.nodes.controller.state_input`).
-    watchdog : Watchdog
-        The safe effort and the spells of it (:mod:`~rcac_ros.nodes.safety.watchdog`).
-    failsafe : ControllerGuards
-        The guards built from the parameters (:mod:`~rcac_ros.nodes.safety.failsafe`).
-    filters_stale : bool
-        The filters of eqs 21-24 missed states: the next control step restarts them.
+    Attributes: ``ctrl`` (the core controller), ``states`` (:class:`StateInput`, the latest
+    valid state), ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the filters of
+    eqs 21-24 missed states: the next control step restarts them).
     """
 
     PARAMETERS = params.CONTROLLER
@@ -76,6 +56,7 @@ class ControllerNode(ManagedNode):
     def __init__(self, **kwargs):
         self.ctrl = None
         self.loop = None                    # the steady-clock pacing of timer mode
+        self._starvation = None             # timer mode's starvation guard
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
 
     # ------------------------------------------------------------------ lifecycle
@@ -91,18 +72,32 @@ class ControllerNode(ManagedNode):
             raise ConfigError(f"timer.phase_offset: must be < one period ({self.h:g} s), got "
                               f"{offset:g}")
         self._phase_offset_ns = None if offset is None else round(offset * 1e9)
+        self._starvation = Starvation(self, values) if self.mode == "timer" \
+            and values["starvation.delay_margin"] != 0.0 else None     # doc/failsafe.md
         self.phase_error_ns = 0
         self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, self._out, tagged=self.mode == "lockstep",
             channels=self.channel_names, joint_friction=self.ctrl.joint_friction))
         self._steps = self._deadline_misses = self._late_ticks = self._nonfinite = 0
-        self.watchdog = Watchdog(self)
-        self.states = self.keep(StateInput.close, StateInput(self))
+        self.watchdog = Watchdog(
+            self.failsafe.stop, lambda: self._outputs.effort(self.safe_effort, watchdog=True),
+            lambda: self.states.received,
+            self.state_timeout, self.mode == "lockstep", self.get_logger(),
+            stepped=lambda: self._steps > 0,
+            filters_missed=lambda: setattr(self, "filters_stale", True),
+            replan=self._replan)
+        self.states = self.keep(StateInput.close, StateInput(
+            self, self.model.joint_names, self.mode == "lockstep", self.h, self.velocity_cutoff,
+            self.failsafe, self.watchdog, self._outputs, self._throttle.warn,
+            is_running=lambda: self.running, steps=lambda: self._steps,
+            restarted=self._stream_restarted, control=self._control))
         self._reset_motion()
         self._fjt = None                    # the FollowJointTrajectory server, if any
         if self.trajectory_source == "topic":   # checked aside, applied in this thread
-            self.keep(TrajectoryInput.close, TrajectoryInput(self))
+            self.keep(TrajectoryInput.close, TrajectoryInput(
+                self, self.model.joint_names, self.failsafe, self._throttle.warn,
+                self.time_now_ns, self.follow, self.hold_position, self._abort_goal))
             self._fjt = create_server(self, ActionSink(self), defaults=self.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
@@ -113,7 +108,8 @@ class ControllerNode(ManagedNode):
             self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
             self.keep(lambda _: setattr(self, "loop", None), self.loop)
         if self.loop is None:               # lockstep, or timer mode on /clock
-            self.keep(timer, self.watchdog.timer())
+            self.keep(timer, self.create_timer(self.watchdog.check_period, self._on_watchdog,
+                                               clock=Clock(clock_type=ClockType.STEADY_TIME)))
         self.keep(EstimateServices.destroy, EstimateServices(self))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
@@ -130,6 +126,28 @@ class ControllerNode(ManagedNode):
         self._last_tick = None
         self.filters_stale = False          # the loop restarts the filters at its next step
         self._outputs.last_answer = None
+        if self._starvation is not None:
+            self._starvation.reset()
+
+    def _stream_restarted(self):
+        """The state stream restarted: the motion starts at the new state, the filters too."""
+        self.restart_motion(self.paper_q0)
+        self.filters_stale = self._steps > 0
+
+    def _replan(self, held):
+        """The watchdog held the safe effort ``held`` s: the motion restarts from the arm."""
+        self.restart_motion()
+        self._abort_goal(f"the controller sent the safe effort for {held:.3f} s")
+
+    def _abort_goal(self, text):
+        """Abort the FollowJointTrajectory goal, if any."""
+        if self._fjt is not None:
+            self._fjt.abort(text)
+
+    def _on_watchdog(self):
+        """The watchdog's steady timer (lockstep, or timer mode on /clock)."""
+        if self.running:
+            self.watchdog.check()
 
     def restart_motion(self, q0=None):
         """The desired motion starts again, from ``q0`` or the measured state."""
@@ -167,7 +185,12 @@ class ControllerNode(ManagedNode):
         """
         if not self.running:
             return False
-        return self._motion.follow(parsed, self._time_now_ns(), self.states.q)
+        return self._motion.follow(parsed, self.time_now_ns(), self.states.q)
+
+    @property
+    def active_trajectory(self):
+        """The trajectory being followed (:class:`ActiveTrajectory`), or ``None``."""
+        return self._motion.active
 
     def hold_position(self):
         """Stop any trajectory and hold the measured position (``False``: no state yet)."""
@@ -181,7 +204,7 @@ class ControllerNode(ManagedNode):
         """Post-set callback: the run-time parameters take effect."""
         for p in changed:
             if p.name == "state_timeout":
-                self.state_timeout = float(p.value)
+                self.state_timeout = self.watchdog.state_timeout = float(p.value)
             elif p.name == "monitor_decimation":
                 self.publish_every = int(p.value)
 
@@ -189,7 +212,7 @@ class ControllerNode(ManagedNode):
     def _now_ns(self):
         return self.get_clock().now().nanoseconds
 
-    def _time_now_ns(self):
+    def time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
         if self.mode == "lockstep":
             stamp = self.states.stamp
@@ -199,7 +222,12 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
         q, qd = self.states.latest          # one snapshot (timer mode: set by another thread)
+        spell = self.failsafe.stop.active
         self.watchdog.resume()              # a spell of safe effort ends here
+        if self._starvation is not None:    # timer mode: K_D within the delay margin
+            if spell:
+                self._starvation.after_spell()
+            self._starvation.step()
         if self.filters_stale:
             self.filters_stale = False
             self.ctrl.restart_filters()

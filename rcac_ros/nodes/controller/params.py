@@ -12,6 +12,7 @@ from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import declare
+from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
 from rcac_ros.nodes.controller.estimates import (initial_estimates, initial_joint_terms,
                                                  urdf_child_links)
 from rcac_ros.nodes.fjt.tolerances import Tolerances
@@ -91,6 +92,6 @@ def channel_names(channels):
 
 def _gain_overrides(node):
     """``gains.<joint>.<gain>`` given to the node (JTC style): declared and checked."""
-    names = [k for k in node._parameter_overrides if k.startswith(params.GAINS_PREFIX)]
+    names = [k for k in parameter_overrides(node) if k.startswith(params.GAINS_PREFIX)]
     values = {name: declare(node, params.gain_override(name)) for name in names}
     return parse_overrides(values, node.model.joint_names)

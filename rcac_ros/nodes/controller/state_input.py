@@ -1,6 +1,6 @@
 """The controller's state input: ``/joint_states`` in, the latest valid ``(q, qd)`` out.
 
-:class:`StateInput` subscribes with the size cap checked on the serialised bytes (issue 9;
+:class:`StateInput` subscribes with the size cap checked on the serialised bytes (doc/failsafe.md;
 in timer mode in its own thread, :class:`~rcac_ros.nodes.runtime.inputs.SideInput`, so the loop
 thread only ticks), reads each message into model order
 (:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`), judges its stamp
@@ -24,13 +24,36 @@ from rcac_ros.nodes.safety.state_guards import StampGate
 
 
 class StateInput:
-    """``/joint_states`` of a controller ``node``.
+    """``/joint_states`` of a controller: what it reads and what it calls, nothing more.
 
     Parameters
     ----------
-    node : ControllerNode
-        Configured: its ``model``, ``mode``, ``h``, ``velocity_cutoff``, ``failsafe``
-        guards, ``watchdog``, ``_outputs`` and ``_throttle`` are used.
+    node : rclpy.node.Node
+        Where the subscription lives (rclpy's API only), and its logger.
+    joint_names : sequence of str
+        The model's joints.
+    lockstep : bool
+        Each valid state is answered in its callback (else timer mode: a side thread).
+    h : float
+        The control period, s.
+    velocity_cutoff : float
+        Of the velocity estimate (:class:`~rcac_ros.nodes.msgs.joint_state.VelocityEstimate`).
+    guards : ControllerGuards
+        ``gate`` (the stamps) and ``max_state_bytes``.
+    watchdog : Watchdog
+        Told of each valid state; its ``tripped`` lets the gate take a restart at once.
+    outputs : ControllerOutputs
+        Lockstep: the last answer, sent again for a repeated state.
+    warn : callable
+        ``warn(kind, text)``: a throttled warning.
+    is_running : callable
+        The controller is active.
+    steps : callable
+        The controller's steps since its start.
+    restarted : callable
+        ``restarted()``: the stream restarted; the motion and the filters start over.
+    control : callable
+        Lockstep: ``control(t_ns, header_stamp)``, the answer to a valid state.
 
     Attributes
     ----------
@@ -44,30 +67,35 @@ class StateInput:
         Steady-clock ns at which it came.
     """
 
-    def __init__(self, node):
+    def __init__(self, node, joint_names, lockstep, h, velocity_cutoff, guards, watchdog,
+                 outputs, warn, is_running, steps, restarted, control):
         self.node = node
-        self._reader = JointStateReader(node.model.joint_names)
+        self.lockstep, self.h, self.velocity_cutoff = lockstep, h, velocity_cutoff
+        self.gate, self.watchdog, self.outputs, self.warn = guards.gate, watchdog, outputs, warn
+        self.is_running, self.steps = is_running, steps
+        self.restarted, self.control = restarted, control
+        self._reader = JointStateReader(joint_names)
         self._rate_warned = False
-        cap, warn = node.failsafe.max_state_bytes, node._throttle.warn
-        if node.mode == "timer":            # states in their own thread: the loop only ticks
+        cap = guards.max_state_bytes
+        if not lockstep:                    # states in their own thread: the loop only ticks
             self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS, self._on_state,
-                                   cap, "state", warn)
+                                   cap, "state", self.warn)
             self._sub = None
         else:                               # lockstep: the answer is the state's callback
             self._side = None
             self._sub = node.create_subscription(
                 JointState, topics.JOINT_STATES,
-                capped(JointState, cap, "state", self._on_state, warn), QOS, raw=True)
+                capped(JointState, cap, "state", self._on_state, self.warn), QOS, raw=True)
         self.reset()
 
     def reset(self):
         """A fresh start: no state yet, a new velocity estimate, the stamp gate reset."""
-        self.velocity = VelocityEstimate(self.node.velocity_cutoff)
+        self.velocity = VelocityEstimate(self.velocity_cutoff)
         self.q = self.qd = None
         self.latest = None
         self.stamp = None
         self.received = None
-        self.node.failsafe.gate.reset()
+        self.gate.reset()
 
     def close(self):
         """Stop the side thread or destroy the subscription (cleanup)."""
@@ -78,18 +106,16 @@ class StateInput:
 
     def _restart(self, stamp):
         """The stream restarted (a simulator or driver restart): start over from it."""
-        node = self.node
-        node.get_logger().warning(
+        self.node.get_logger().warning(
             f"joint state stamps restarted ({self.stamp * 1e-9:.6f} s -> "
             f"{stamp * 1e-9:.6f} s): filters, velocity estimate and desired motion restart "
             "from the new state; the estimates are kept")
         self.velocity.reset()
-        node.restart_motion(node.paper_q0)  # it starts at the measured state
-        node.filters_stale = node._steps > 0
+        self.restarted()
 
     def _warn_rate(self, stamp):
         """Lockstep: once, if the state period is not the control period ``h``."""
-        h = self.node.h
+        h = self.h
         gap = (stamp - self.stamp) * 1e-9
         if abs(gap - h) > 0.01 * h:
             self._rate_warned = True
@@ -98,27 +124,26 @@ class StateInput:
                 "(set 'rate' to 1/dt of the simulator)")
 
     def _on_state(self, msg):
-        node = self.node
-        if not node.running:
+        if not self.is_running():
             return
         try:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
-            return node._throttle.warn(err.kind, str(err))
+            return self.warn(err.kind, str(err))
         stamp = stamp_ns(msg.header.stamp)
         now = time.monotonic_ns()           # state silence: on the steady clock, always
-        lockstep = node.mode == "lockstep"
-        if lockstep and node._outputs.last_answer is not None \
+        lockstep = self.lockstep
+        if lockstep and self.outputs.last_answer is not None \
                 and stamp == self.stamp and np.array_equal(q, self.q):
             # the same state again (a simulator re-sending after a lost message at start-up):
             # answer it again, do not step twice
-            node._outputs.answer_again()
+            self.outputs.answer_again()
             self.received = now
             return
-        verdict = node.failsafe.gate.check(stamp, now, stale=node.watchdog.tripped)
+        verdict = self.gate.check(stamp, now, stale=self.watchdog.tripped)
         if verdict in (StampGate.BACKWARDS, StampGate.FUTURE):
-            return node._throttle.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
-                                       f"after {self.stamp * 1e-9:.6f} s")
+            return self.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
+                             f"after {self.stamp * 1e-9:.6f} s")
         if verdict == StampGate.RESTART and self.stamp is not None:
             self._restart(stamp)
         # velocity: given, or estimated from positions (finite difference, low-pass)
@@ -132,12 +157,12 @@ class StateInput:
         # lockstep: the state right after the last one answered means no step was lost (the
         # watchdog's tagged safe effort is not applied by a lockstep simulator): keep the filters
         unbroken = lockstep and self.stamp is not None \
-            and 0 < stamp - self.stamp <= 1.5 * node.h * 1e9
+            and 0 < stamp - self.stamp <= 1.5 * self.h * 1e9
         self.latest = (q, qd)
         self.q, self.qd = q, qd
         self.stamp = stamp
         self.received = now
-        node.watchdog.valid_state(unbroken)
+        self.watchdog.valid_state(unbroken)
         if lockstep:
-            t_ns = stamp if stamp > 0 else node._steps * round(node.h * 1e9)
-            node._control(t_ns, msg.header.stamp)
+            t_ns = stamp if stamp > 0 else self.steps() * round(self.h * 1e9)
+            self.control(t_ns, msg.header.stamp)

@@ -6,7 +6,8 @@ thread (the control thread), where the FollowJointTrajectory server also runs:
 
 * :class:`TrajectoryInput` (``~/joint_trajectory``): the message is deserialised, parsed
   and checked (size cap, joints, times, the model's limits, an end in the past) in its own
-  thread (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`, issue 9); only the result crosses
+  thread (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`, doc/failsafe.md); only the result
+  crosses
   over, through a guard condition whose callback runs in the executor. There it starts
   (or, empty, holds) the motion and aborts a running goal, as a goal does in the action
   server's callbacks.
@@ -28,34 +29,46 @@ _HOLD = None        # the parsed form of an empty trajectory: hold the position
 
 
 class TrajectoryInput:
-    """``~/joint_trajectory`` of a controller ``node``: checked aside, applied in its executor.
+    """``~/joint_trajectory`` of a controller: checked aside, applied in its executor.
 
     Parameters
     ----------
-    node : ControllerNode
-        Configured: its ``model``, ``failsafe`` guards, ``_throttle`` and ``_fjt`` (the
-        action server or ``None``) are read.
+    node : rclpy.node.Node
+        Where the subscription and the guard condition live (rclpy's API only).
+    joint_names : sequence of str
+        The model's joints.
+    guards : ControllerGuards
+        ``max_trajectory_bytes`` and ``check_goal`` (the model's limits).
+    warn : callable
+        ``warn(kind, text)``: a throttled warning.
+    now_ns : callable
+        The time base of trajectories.
+    follow, hold : callable
+        ``follow(parsed)`` and ``hold()`` start the motion (``False``: not started).
+    replaced : callable
+        ``replaced(text)``: a new trajectory replaced any action goal.
     """
 
-    def __init__(self, node):
+    def __init__(self, node, joint_names, guards, warn, now_ns, follow, hold, replaced):
         self.node = node
+        self.joint_names, self.guards, self.warn = joint_names, guards, warn
+        self.now_ns, self.follow, self.hold, self.replaced = now_ns, follow, hold, replaced
         self._pending = deque(maxlen=1)     # the latest checked trajectory (atomic ops)
         self._wake = node.create_guard_condition(self._apply)
         self._side = SideInput(
             node, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_message,
-            node.failsafe.max_trajectory_bytes, "trajectory", self._warn)
+            guards.max_trajectory_bytes, "trajectory", self._warn)
 
     def _warn(self, kind, text):
-        self.node._throttle.warn(f"trajectory {kind}", text)
+        self.warn(f"trajectory {kind}", text)
 
     def _on_message(self, msg):
         """Side thread: parse and check, then hand over to the executor."""
         parsed = _HOLD              # as JTC: an empty trajectory holds the position
         if msg.points:
-            node = self.node
             try:
-                parsed = parse_trajectory(msg, node.model.joint_names)
-                node.failsafe.check_goal(parsed, node._time_now_ns())
+                parsed = parse_trajectory(msg, self.joint_names)
+                self.guards.check_goal(parsed, self.now_ns())
             except (TrajectoryRejected, Rejected) as err:
                 return self._warn(err.kind, str(err))
         self._pending.append(parsed)        # a newer one replaces one not yet applied
@@ -67,12 +80,10 @@ class TrajectoryInput:
             parsed = self._pending.popleft()
         except IndexError:
             return
-        node = self.node
-        started = node.hold_position() if parsed is _HOLD else node.follow(parsed)
+        started = self.hold() if parsed is _HOLD else self.follow(parsed)
         if not started:
             return self._warn("early", "no joint state received yet")
-        if node._fjt is not None:
-            node._fjt.abort("replaced by a ~/joint_trajectory message")
+        self.replaced("replaced by a ~/joint_trajectory message")
 
     def close(self):
         """Stop the side thread and remove the guard condition (cleanup)."""
@@ -93,14 +104,14 @@ class ActionSink:
         return None if self.node.states.q is not None else "no joint state received yet"
 
     def now_ns(self):
-        return self.node._time_now_ns()
+        return self.node.time_now_ns()
 
     def check(self, parsed):
         """The model's limits, as for ``~/joint_trajectory`` (the server checks the end)."""
         self.node.failsafe.check_goal(parsed, None)
 
     def follow(self, parsed):
-        return self.node._motion.active if self.node.follow(parsed) else None
+        return self.node.active_trajectory if self.node.follow(parsed) else None
 
     def hold(self):
         self.node.hold_position()

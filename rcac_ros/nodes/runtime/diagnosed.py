@@ -10,6 +10,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.nodes.runtime import gcwatch, paramcheck
+from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
 
 
 class RcacNodeMixin:
@@ -18,7 +19,8 @@ class RcacNodeMixin:
 
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
-        unknown = paramcheck.unknown_parameters(self._parameter_overrides, self._parameters)
+        unknown = paramcheck.unknown_parameters(parameter_overrides(self),
+                                                self.list_parameters([], 0).names)
         if unknown:
             text = paramcheck.describe_unknown(unknown, self.get_name())
             if strict:

@@ -7,7 +7,7 @@ after start-up (rclpy, numpy, numba's dispatchers, the model): 120-150 ms on the
 nodes' diagnostics report the longest pause and the number of full collections.
 
 Measured (doc/failsafe.md): the steady loop allocates almost no tracked objects, and a 20 s
-``rcac bench --ros`` saw no collection at all in the controller. Freezing the start-up
+``rcac bench ros`` saw no collection at all in the controller. Freezing the start-up
 objects (:func:`gc.freeze`, so a full collection would walk only newer ones) was tried and
 measured worse: in the fault benchmark's nominal case it brought 22-26 gaps of more than two
 periods per 20 s against 0-1 without, and watchdog trips, for a reason not found. The nodes

@@ -1,23 +1,23 @@
 """Inputs received off the control thread, and size caps checked before deserialising.
 
-The control loop (500 Hz) must never wait for the parsing of a large input (issue 9,
-section 3). :class:`SideInput` subscribes on a helper node spun by its own executor in
-its own thread: a big trajectory is deserialised and checked there, and only the result
-is handed over (one attribute assignment, atomic under the GIL). The process's
-interpreter switch interval is lowered so that a Python loop in that thread yields the
-interpreter to the control thread within half a millisecond.
+The control loop (500 Hz) must never wait for the parsing of a large input (doc/failsafe.md,
+"starvation"). :class:`SideInput` subscribes on a helper node and takes in its own thread
+without the interpreter lock (:mod:`~rcac_ros.nodes.runtime.rawtake`): a sample above the
+cap is never turned into Python objects, one within it is deserialised and checked there,
+and only the result is handed over (one attribute assignment, atomic under the GIL). The
+process's interpreter switch interval is lowered so that a Python loop in that thread yields
+the interpreter to the control thread within half a millisecond.
 
 :func:`capped` wraps a raw (serialised) subscription callback: the byte count is
 checked first, and only a message within the cap is deserialised.
 """
 
 import sys
-import threading
 
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from rcac_ros.nodes.runtime.rawtake import RawReader
 from rcac_ros.nodes.safety.guards import oversize, Rejected
 
 #: the interpreter switch interval of a node process with a side thread, s (default 5 ms:
@@ -40,7 +40,12 @@ def capped(msg_type, cap, what, callback, reject):
 
 
 class SideInput:
-    """A subscription served by a helper node in its own thread.
+    """A subscription served in its own thread, taken without the interpreter lock.
+
+    The subscription lives on a helper node that no executor spins; a
+    :class:`~rcac_ros.nodes.runtime.rawtake.RawReader` waits and takes in its own thread through
+    ``rcl`` with the lock released, checks the size on the taken bytes, and deserialises only
+    a message within the cap (doc/failsafe.md, "Where the time of a flood goes").
 
     Parameters
     ----------
@@ -58,33 +63,34 @@ class SideInput:
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
-        if topic.startswith("~/"):
-            ns = owner.get_namespace().rstrip("/")
-            topic = f"{ns}/{owner.get_name()}/{topic[2:]}"
+        if topic.startswith("~/"):      # the owner's private topic, not this side node's
+            topic = owner.resolve_topic_name(topic, only_expand=True)
         self.topic = topic
         self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,
                          enable_rosout=False)
         self.subscription = self.node.create_subscription(
-            msg_type, topic, capped(msg_type, cap, what, callback, reject), qos, raw=True)
-        self._executor = SingleThreadedExecutor(context=owner.context)
-        self._executor.add_node(self.node)
-        self._stop = threading.Event()
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
-        self._thread = threading.Thread(target=self._spin, name=f"{what} input", daemon=True)
-        self._thread.start()
+            msg_type, topic, lambda _: None, qos, raw=True)
 
-    def _spin(self):
-        try:
-            while not self._stop.is_set() and self.node.context.ok():
-                self._executor.spin_once(timeout_sec=0.05)
-        except (ExternalShutdownException, RuntimeError):
-            pass        # the context went down under us: the owner is shutting down
+        def on_oversize(nbytes):
+            try:
+                oversize(nbytes, cap, what)
+            except Rejected as err:
+                reject(err.kind, str(err))
+
+        def on_bytes(data):
+            try:
+                msg = deserialize_message(data, msg_type)
+            except Exception as err:        # noqa: BLE001 -- malformed CDR from the wire
+                return reject("malformed", f"{what}: {len(data)} bytes do not deserialise "
+                              f"({err})")
+            return callback(msg)
+
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
+        self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,
+                                 f"{what} input")
 
     def close(self):
         """Stop the thread and destroy the helper node."""
-        self._stop.set()
-        self._thread.join(2.0)
-        self._executor.remove_node(self.node)
-        self._executor.shutdown()
+        self._reader.close()
         self.node.destroy_node()

@@ -29,6 +29,8 @@ from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import declare, declare_parameters, QOS
 from rcac_ros.nodes.runtime.description import subscribe_description
 from rcac_ros.nodes.runtime.diagnosed import RcacNodeMixin
+from rcac_ros.nodes.runtime.rclpy_private import (change_state_service, lifecycle_state,
+                                                  release_state_machine)
 from rcac_ros.nodes.runtime.stats import Throttle
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
@@ -88,7 +90,7 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
 
     def _on_description(self, xml):
         self._description = xml
-        if self._state_machine.current_state[1] != "unconfigured":
+        if lifecycle_state(self) != "unconfigured":
             self.get_logger().warning("a new robot description arrived: it is used at the "
                                       "next configure (after a cleanup)")
         elif self.autostart:
@@ -97,7 +99,7 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
     def _guard_change_state(self):
         """A transition that the current state does not offer answers ``success: false``
         (as rclcpp does); rclpy's own service would raise out of the executor."""
-        service = self._service_change_state
+        service = change_state_service(self)
         inner = service.callback
 
         def change_state(request, response):
@@ -107,7 +109,7 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
                 self.get_logger().warning(
                     f"change_state: transition {request.transition.id} "
                     f"{request.transition.label!r} is not available from "
-                    f"{self._state_machine.current_state[1]!r}")
+                    f"{lifecycle_state(self)!r}")
                 response.success = False
                 return response
         service.callback = change_state
@@ -188,4 +190,4 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
         """Destroy the node and its lifecycle state machine (which holds the node's handle:
         without this, the node's name keeps its /rosout publisher in the process)."""
         super().destroy_node()
-        self._state_machine.destroy_when_not_in_use()
+        release_state_machine(self)

@@ -1,4 +1,4 @@
-"""Parameters that are wrong, not only invalid (issue 9, section 7).
+"""Parameters that are wrong, not only invalid (doc/failsafe.md, "parameters").
 
 * :func:`check_params_files` reads every ``--params-file`` of the command line before
   ``rclpy.init`` does, so that a malformed file gives one line naming it (and the CLI
@@ -11,6 +11,7 @@
 import difflib
 
 from rcac_ros.errors import ConfigError, read_yaml
+from rcac_ros.params import flatten
 
 #: parameters every rclpy node declares itself
 BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
@@ -42,17 +43,8 @@ def load_params_file(path):
         if not isinstance(params, dict):
             raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
                               "holding a mapping")
-        out[str(node)] = dict(_flatten(params))
+        out[str(node)] = dict(flatten(params))
     return out
-
-
-def _flatten(params, prefix=""):
-    for key, value in params.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            yield from _flatten(value, name + ".")
-        else:
-            yield name, value
 
 
 def check_params_files(argv):

@@ -1,4 +1,4 @@
-"""Opt-in real-time options of a node process, each best-effort (issue 9, section 8).
+"""Opt-in real-time options of a node process, each best-effort (doc/failsafe.md, "real time").
 
 * ``SCHED_FIFO`` priority of the calling thread (the control loop's);
 * ``mlockall`` of the current and future pages (no page fault in the loop);

@@ -1,4 +1,5 @@
-"""The controller's fail-safe guards and real-time options, built from its parameters (issue 9).
+"""The controller's fail-safe guards and real-time options, built from its parameters
+(doc/failsafe.md).
 
 :class:`ControllerGuards` holds the objects the node's hooks call: the stamp gate, the size
 caps, the goal check against the model's limits, the limiter of the desired state, the

@@ -1,7 +1,7 @@
 """Guards between the wires and the controller: what a node accepts, and what it commands.
 
 Pure Python and numpy (numba for the per-step limiter), no rclpy, so that each rule is
-unit-tested on its own (issue 9). The guards of the state stream in time (its stamps, its
+unit-tested on its own (doc/failsafe.md). The guards of the state stream in time (its stamps, its
 silences) are in :mod:`rcac_ros.nodes.safety.state_guards`.
 
 * :func:`oversize`: the size cap checked on the serialised bytes, before deserialising.

@@ -1,4 +1,4 @@
-"""Guards of the JointState stream in time: its stamps and its silences (issue 9).
+"""Guards of the JointState stream in time: its stamps and its silences (doc/failsafe.md).
 
 Pure Python, no rclpy, so that each rule is unit-tested on its own (the guards of what a
 node accepts and commands are in :mod:`rcac_ros.nodes.safety.guards`):

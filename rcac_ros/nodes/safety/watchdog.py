@@ -15,18 +15,31 @@ at once: the simulator waited, the safe effort never acted.
 
 import time
 
-from rclpy.clock import Clock, ClockType
-
 
 class Watchdog:
-    """The watchdog of a controller ``node``.
+    """The watchdog of a controller: what it reads and what it calls, nothing more.
 
     Parameters
     ----------
-    node : ControllerNode
-        Configured: its ``failsafe.stop`` (the spells), ``state_timeout``, ``safe_effort``,
-        ``mode``, ``_outputs`` and its state input ``states`` (the time of the latest valid
-        state, ``states.received``) are read.
+    stop : SafeStop
+        The spells of safe effort (:class:`~rcac_ros.nodes.safety.state_guards.SafeStop`).
+    send_safe_effort : callable
+        ``send_safe_effort()`` publishes the safe effort, tagged watchdog.
+    state_received : callable
+        ``state_received()``: steady-clock ns of the latest valid state, or ``None``.
+    state_timeout : float
+        s (the node sets :attr:`state_timeout` again when the parameter changes).
+    lockstep : bool
+        The controller answers each state (else timer mode, where the ticks are watched).
+    log : rclpy logger
+        One line a spell.
+    stepped : callable
+        ``stepped()``: the controller has stepped since its last (re)start.
+    filters_missed : callable
+        ``filters_missed()``: the filters of eqs 21-24 missed states; restart them.
+    replan : callable
+        ``replan(held)``: after ``held`` s of safe effort the motion restarts from the
+        measured state.
 
     Attributes
     ----------
@@ -37,9 +50,17 @@ class Watchdog:
         Spells of safe effort after a valid state (diagnostics ``watchdog_trips``).
     """
 
-    def __init__(self, node):
-        self.node = node
-        self.stop = node.failsafe.stop
+    def __init__(self, stop, send_safe_effort, state_received, state_timeout, lockstep, log,
+                 stepped, filters_missed, replan):
+        self.stop = stop
+        self.send_safe_effort = send_safe_effort
+        self.state_received = state_received
+        self.state_timeout = state_timeout
+        self.lockstep = lockstep
+        self.log = log
+        self.stepped = stepped
+        self.filters_missed = filters_missed
+        self.replan = replan
         self.trips = 0
         self.reset()
 
@@ -49,19 +70,18 @@ class Watchdog:
         self.tick_ns = None         # steady ns of the latest tick (timer mode)
         self.stop.cancel()
 
-    def timer(self):
-        """The steady timer that calls :meth:`check` (lockstep, or timer mode on /clock)."""
-        node = self.node
-        return node.create_timer(min(node.state_timeout / 2.0, 0.01), self.check,
-                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+    @property
+    def check_period(self):
+        """s between two :meth:`check` calls of the steady timer (lockstep, timer on /clock)."""
+        return min(self.state_timeout / 2.0, 0.01)
 
     # ------------------------------------------------------------------ staleness
     def _older(self, ns):
-        return ns is None or time.monotonic_ns() - ns > self.node.state_timeout * 1e9
+        return ns is None or time.monotonic_ns() - ns > self.state_timeout * 1e9
 
     def state_is_stale(self):
         """No valid state for ``state_timeout`` s of the steady clock (or none yet)."""
-        return self._older(self.node.states.received)
+        return self._older(self.state_received())
 
     def tick_is_stale(self):
         """Timer mode on /clock: no tick for ``state_timeout`` (a frozen or absent /clock)."""
@@ -72,27 +92,24 @@ class Watchdog:
         self.tick_ns = time.monotonic_ns()
 
     def check(self):
-        """Steady clock: the safe effort while no valid state (lockstep) or no tick (/clock)."""
-        node = self.node
-        if not node.running:
-            return
+        """Steady clock (the node calls it while active): the safe effort while no valid
+        state (lockstep) or no tick (/clock)."""
         stale = self.state_is_stale()
-        if stale if node.mode == "lockstep" else self.tick_is_stale():
+        if stale if self.lockstep else self.tick_is_stale():
             self.send_safe(no_state=stale)
 
     # ------------------------------------------------------------------ spells
     def send_safe(self, no_state):
         """The safe effort: no valid state (``no_state``), or no tick of /clock."""
-        node = self.node
-        heard = node.states.received is not None
+        heard = self.state_received() is not None
         if no_state and heard:
             self.tripped = True             # (the stamp gate then takes a restart at once)
         if self.stop.trip(time.monotonic_ns()) and heard:
             self.trips += 1                 # once per spell (state_guards.SafeStop)
-            node.get_logger().warning(
+            self.log.warning(
                 f"watchdog: {'no valid state' if no_state else 'no tick of /clock'} for "
-                f"{node.state_timeout * 1e3:g} ms, publishing the safe effort")
-        node._outputs.effort(node.safe_effort, watchdog=True)
+                f"{self.state_timeout * 1e3:g} ms, publishing the safe effort")
+        self.send_safe_effort()
 
     def valid_state(self, unbroken):
         """A valid state came (after :attr:`tripped`: control goes on).
@@ -103,26 +120,21 @@ class Watchdog:
         """
         if not self.tripped:
             return
-        node = self.node
         self.tripped = False
-        if node._steps:
-            node.filters_stale |= not unbroken  # a gap broke the filters of eqs 21-24
+        if self.stepped() and not unbroken:
+            self.filters_missed()           # a gap broke the filters of eqs 21-24
         if unbroken:                        # the lockstep simulator waited: nothing to resume
             self.stop.cancel()
-            node.get_logger().info("watchdog: valid state again, control resumed")
+            self.log.info("watchdog: valid state again, control resumed")
 
     def resume(self):
         """At each control step: end the spell of safe effort, if one is on."""
         resumed = self.stop.resume(time.monotonic_ns())
-        node = self.node
-        if resumed is None or not node._steps:
+        if resumed is None or not self.stepped():
             return
         held, replan = resumed
-        node.filters_stale = True           # the filters of eqs 21-24 missed the spell
+        self.filters_missed()               # the filters of eqs 21-24 missed the spell
         if replan:                          # the arm drifted: go on from where it is
-            node.restart_motion()
-            if node._fjt is not None:
-                node._fjt.abort(f"the controller sent the safe effort for {held:.3f} s")
-        node.get_logger().info(f"watchdog: control resumed after {held:.3f} s of safe effort"
-                               + ("; the motion restarts from the measured state" if replan
-                                  else ""))
+            self.replan(held)
+        self.log.info(f"watchdog: control resumed after {held:.3f} s of safe effort"
+                      + ("; the motion restarts from the measured state" if replan else ""))

@@ -21,7 +21,7 @@ import os
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import BagError, ConfigError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_int
 from rcac_ros.tools.bags.writer import (bag_info, default_recovered_path, find_bag,
@@ -117,7 +117,7 @@ def read_bag(path, report=None):
         reader = Reader(path)
         reader.open()
     except Exception as err:  # rosbags raises several types for unreadable bags
-        raise ConfigError(f"bag: cannot open {path}: {err}") from err
+        raise BagError(f"bag: cannot open {path}: {err}") from err
     try:
         for conn in reader.connections:
             data.setdefault(conn.topic, TopicData(conn.topic, conn.msgtype))
@@ -239,8 +239,8 @@ class Timeline:
 
     def __init__(self, data, controller_node=topics.CONTROLLER_NODE):
         self.t0_recv = min((td.recv[0] for td in data.values() if td.count), default=0)
-        js = data.get("/" + topics.JOINT_STATES)
-        ds = data.get(f"/{controller_node}/{topics.DESIRED_STATE[2:]}")
+        js = data.get(topics.resolve(topics.JOINT_STATES))
+        ds = data.get(topics.resolve(topics.DESIRED_STATE, controller_node))
         clock = data.get(topics.CLOCK)
         self.state = None
         if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -415,7 +415,7 @@ def _estimates(td):
     """Parameter estimates as (T, n, 13), using the layout dims when present."""
     vals = td.values
     if not isinstance(vals, np.ndarray) or vals.ndim != 2 or vals.shape[1] % 13:
-        raise ConfigError(f"bag: {td.name} does not hold n x 13 parameter estimates")
+        raise BagError(f"bag: {td.name} does not hold n x 13 parameter estimates")
     n = vals.shape[1] // 13
     if td.dims and len(td.dims) == 2 and td.dims[0][1] * td.dims[1][1] == vals.shape[1]:
         n = td.dims[0][1]
@@ -440,9 +440,8 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         name -> (t, values) for the plots.
     """
     tl = Timeline(data, controller_node)
-    priv = f"/{controller_node}/"
     metrics, series = {}, {}
-    te = data.get(priv + topics.TRACKING_ERROR[2:])
+    te = data.get(topics.resolve(topics.TRACKING_ERROR, controller_node))
     if te is not None and te.count and isinstance(te.values, np.ndarray):
         t, e = tl.controller_time(te), te.values
         series["tracking_error"] = (t, e)
@@ -466,17 +465,18 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
         metrics.update(measure.torque(eff.values))
-    pe = data.get(priv + topics.PARAMETER_ESTIMATES[2:])
+    pe = data.get(topics.resolve(topics.PARAMETER_ESTIMATES, controller_node))
     if pe is not None and pe.count:
         est = _estimates(pe)
         series["parameter_estimates"] = (tl.controller_time(pe), est)
         if theta_true is not None and theta_true.shape == est.shape[1:]:
             metrics.update(measure.estimates(est, theta_true))
-    pr = data.get(priv + topics.PREDICTION_ERROR[2:])
+    pr = data.get(topics.resolve(topics.PREDICTION_ERROR, controller_node))
     if pr is not None and pr.count:
         series["prediction_error"] = (tl.controller_time(pr), pr.values)
         metrics.update(measure.prediction(pr.values))
-    prs = data.get(priv + topics.PREDICTION_ERRORS[2:])    # every channel (older bags: none)
+    # every channel (older bags: none)
+    prs = data.get(topics.resolve(topics.PREDICTION_ERRORS, controller_node))
     if prs is not None and prs.count and isinstance(prs.values, np.ndarray) \
             and prs.values.ndim == 2:
         names = topics.channel_names(prs.dims[0][0]) if prs.dims else []
@@ -552,6 +552,8 @@ def plot_timing(timing, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from rcac_ros.tools.plots import save
+
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, key, title in ((axes[0], "period_ms", "period between joint states"),
                            (axes[1], "latency_ms", "joint state -> effort latency")):
@@ -575,9 +577,7 @@ def plot_timing(timing, path):
                    "messages queued meanwhile are stamped together,\nso a cluster near 0 ms "
                    "is the recorder catching up, not the loop.")
     fig.text(0.01, 0.01, caption, fontsize=8, va="bottom")
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path, 110, rect=(0, 0.08, 1, 1))
 
 
 def write_plots(series, out_dir, theta_true=None, names=None, link=None, label="ROS 2"):

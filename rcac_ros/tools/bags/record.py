@@ -64,15 +64,7 @@ def recorded_topics(controller_node=topics.CONTROLLER_NODE):
     list of (str, str)
         ``(topic, "pkg/msg/Type")`` pairs.
     """
-    out = []
-    for name, msgtype in TOPIC_TYPES:
-        if name.startswith("~/"):
-            out.append((f"/{controller_node}/{name[2:]}", msgtype))
-        elif name.startswith("/"):
-            out.append((name, msgtype))
-        else:
-            out.append((f"/{name}", msgtype))
-    return out
+    return [(topics.resolve(name, controller_node), msgtype) for name, msgtype in TOPIC_TYPES]
 
 
 def default_bag_path():

@@ -30,7 +30,7 @@ import time
 
 import yaml
 
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import BagError, ConfigError, CutBagError
 
 #: rosbag2 metadata version written (Jazzy)
 METADATA_VERSION = 9
@@ -58,14 +58,6 @@ CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,
                       timestamp INTEGER NOT NULL, data BLOB NOT NULL);
 CREATE INDEX timestamp_idx ON messages (timestamp ASC);
 """
-
-
-class BagError(ConfigError):
-    """A bag is missing, cut short by a crash, or corrupt (the message names the problem)."""
-
-
-class CutBagError(BagError):
-    """A bag was not closed (its recorder was killed): ``rcac inspect --recover`` salvages it."""
 
 
 # ----------------------------------------------------------------------------- QoS

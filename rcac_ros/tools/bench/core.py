@@ -1,4 +1,5 @@
-"""``rcac bench``: the recursive controller against Pinocchio, the Slotine-Li baseline and itself.
+"""``rcac bench core``: the recursive controller against Pinocchio, the Slotine-Li baseline
+and itself.
 
 Chains of n = 7, 14, ..., 224 are the CSS arm repeated. Each figure is the
 median over blocks of the mean time per call (µs), measured in one run on this
@@ -11,7 +12,6 @@ least-squares gain (channels ``[1]``) and with the joint terms (``joint_friction
 doc/design.md §7), against n.
 """
 
-import argparse
 import json
 import time
 
@@ -19,8 +19,6 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
-from rcac_ros.tools.args import non_negative_float, positive_float
-from rcac_ros.tools.bench import noise as noise_bench
 
 SIZES = (7, 14, 28, 56, 112, 224)
 
@@ -230,116 +228,8 @@ def _format_row(r):
             + "".join(f"     {f(r[k])}" for k in VARIANTS))
 
 
-def add_arguments(parser):
-    parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
-    parser.add_argument("--ros", action="store_true",
-                        help="instead: the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)")
-    parser.add_argument("--duration", type=positive_float, default=60.0,
-                        help="seconds of the --ros run (default 60)")
-    parser.add_argument("--ros-mode", choices=("timer", "on_state"), default="on_state",
-                        help="--ros: the controller answering each joint state (default, the "
-                             "node's default mode) or on its 500 Hz timer")
-    parser.add_argument("--budget", type=positive_float, default=0.3,
-                        help="seconds of timing per cell (default 0.3)")
-    parser.add_argument("--rt", action="store_true",
-                        help="--ros/--faults: the controller with its real-time options "
-                             "(SCHED_FIFO 80, mlockall, cpu_dma_latency 0; best effort)")
-    parser.add_argument("--K_D", type=positive_float, default=None,
-                        help="--ros/--faults: the controller's K_D (default: the bench's)")
-    parser.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
-                        help="--ros/--faults: the controller's timer.lookahead (state "
-                             "prediction; default: none)")
-    parser.add_argument("--phase-offset", type=non_negative_float, default=None,
-                        metavar="SECONDS",
-                        help="--ros/--faults: the controller's timer.phase_offset (ticks "
-                             "locked to the states' arrival plus this; default: not locked)")
-    parser.add_argument("--faults", action="store_true",
-                        help="instead: the closed loop over ROS under faults (drops, jitter, "
-                             "noise, simulator restart, frozen /clock, flood); --duration "
-                             "per case (default 60)")
-    parser.add_argument("--cases", default=None,
-                        help="--faults: comma-separated cases (default: all)")
-    parser.add_argument("--soak", type=positive_float, default=None, metavar="MINUTES",
-                        help="--faults: instead, the nominal case for MINUTES (memory growth, "
-                             "late ticks)")
-    parser.add_argument("--plot", metavar="FILE",
-                        help="--faults: tracking errors per case; --delay-margin: RMS vs K_D")
-    parser.add_argument("--delay-margin", action="store_true",
-                        help="instead: offline, tracking RMS against K_D with the effort 0-2 "
-                             "periods late (the stable range of timer mode)")
-    parser.add_argument("--noise", action="store_true",
-                        help="instead: 10-minute closed loops with sensor noise, plain and with "
-                             "dead zones + projection (are the estimates bounded?)")
-    parser.add_argument("--noise-duration", type=positive_float, default=600.0,
-                        help="seconds of each --noise run (default 600)")
-    parser.add_argument("--noise-sources", action="store_true",
-                        help="--noise: instead, where the paper law's drift comes from (noise "
-                             "on q only, qd only, another seed, half, gamma = 0)")
-    parser.add_argument("--noise-laws", type=noise_laws, default=None,
-                        help="--noise: laws, ';'-separated, among paper; 4,6; all (default: "
-                             "all three)")
-    parser.add_argument("--noise-variants", type=noise_variants, default=None,
-                        help="--noise: variants, comma-separated, among plain, dead zone, "
-                             "sigma, switching (default: all; the clean run always)")
-    parser.add_argument("--out", default="results/noise", help="--noise: output directory")
-
-
-def _choices(text, sep, known):
-    items = [v.strip() for v in text.split(sep)]
-    bad = [v for v in items if v not in known]
-    if bad:
-        raise argparse.ArgumentTypeError(f"unknown {', '.join(bad)} (known: "
-                                         f"{sep.join(known)})")
-    return items
-
-
-def noise_laws(text):
-    """``--noise-laws``: ';'-separated names of :data:`noise_bench.LAWS`."""
-    return _choices(text, ";", tuple(noise_bench.LAWS))
-
-
-def noise_variants(text):
-    """``--noise-variants``: comma-separated names of :data:`noise_bench.VARIANTS`."""
-    return tuple(_choices(text, ",", noise_bench.VARIANTS))
-
-
-#: the controller's real-time options of ``--rt``
-RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
-              "realtime.cpu_dma_latency": 0}
-
-
-def run(args):
-    if args.noise:
-        from rcac_ros.tools.bench.noise import run_noise_bench, run_noise_sources
-        if args.noise_sources:
-            run_noise_sources(args.noise_duration, args.out)
-            return 0
-        run_noise_bench(args.noise_duration, args.out, laws=args.noise_laws,
-                        variants=args.noise_variants or noise_bench.VARIANTS)
-        return 0
-    over = dict(RT_OPTIONS) if args.rt else {}
-    if args.K_D is not None:
-        over["K_D"] = float(args.K_D)
-    if args.lookahead is not None:
-        over["timer.lookahead"] = float(args.lookahead)
-    if args.phase_offset is not None:
-        over["timer.phase_offset"] = float(args.phase_offset)
-    if args.delay_margin:
-        from rcac_ros.tools.bench.delay_margin import run_delay_margin
-        run_delay_margin(plot_path=args.plot)
-        return 0
-    if args.faults:
-        from rcac_ros.tools.bench.faults import CASES, run_faults
-        from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
-        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
-        run_faults(args.duration, cases, dict(BENCH_CONTROLLER, **over), json_path=args.json,
-                   plot_path=args.plot, soak_minutes=args.soak)
-        return 0
-    if args.ros:
-        from rcac_ros.tools.bench.ros import run_ros_bench
-        result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.ros_mode,
-                               controller_overrides=over)
-        return 0 if result else 1
+def main(budget=0.3, json_path=None):
+    """``rcac bench core``: print the table, the ratios and the operation counts."""
     try:
         import pinocchio  # noqa: F401
     except ImportError:
@@ -347,7 +237,7 @@ def run(args):
     print(f"{'model':>10s} {'n':>5s} {'step us':>12s} {'pin.rnea us':>12s} "
           f"{'SlotineLi us':>12s} {'sim step us':>12s}"
           + "".join(f" {k[:-3] + ' us':>16s}" for k in VARIANTS))
-    result = run_bench(budget_s=args.budget)
+    result = run_bench(budget_s=budget)
     print("\nratios (targets: n7/pin <= 3, n224/n28 <= 10, SlotineLi/step at n56 >= 20,\n"
           "        all/paper at n7 <= 2, all/SlotineLi at n56 <= 0.1, friction n224/n28 <= 10):")
     for k, v in result["ratios"].items():
@@ -368,8 +258,8 @@ def run(args):
               f"n=7 {ops['rcac_all']['7']}")
         for kind in ("rcac_all_explicit", "rcac_power", "rcac_least_squares"):
             print(f"{kind} n=7: {ops[kind + '_n7']}")
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
+    if json_path:
+        with open(json_path, "w", encoding="utf-8") as f:
             json.dump(result, f, indent=2)
-        print(f"wrote {args.json}")
+        print(f"wrote {json_path}")
     return 0

@@ -1,6 +1,6 @@
-"""The stable range of K_D against a delayed effort, offline (``rcac bench --delay-margin``).
+"""The stable range of K_D against a delayed effort, offline (``rcac bench delay-margin``).
 
-Timer mode answers a state up to a period old (issue 9, section 8). This runs the paper's
+Timer mode answers a state up to a period old (doc/failsafe.md, "Measured"). This runs the paper's
 closed loop without ROS (core simulator + controller, the CSS arm, the paper's motion and
 gains but K_D) with the effort applied ``d`` periods late, ``d`` = 0 (lockstep), 1, 2, for
 a grid of K_D, and reports the tracking RMS over the second half of the run (``inf``:
@@ -58,7 +58,7 @@ def run_delay_margin(gains=GAINS, delays=DELAYS, duration=10.0, plot_path=None, 
                               for (kd, d, p) in out if kd == K_D)
             print(f"K_D {K_D:8.0f}  {cells}", flush=True)
     if plot_path:
-        from rcac_ros.tools.plots import plt
+        from rcac_ros.tools.plots import plt, save
         fig, ax = plt.subplots(figsize=(7, 4))
         for d in delays:
             for predict in ((False, True) if d else (False,)):
@@ -72,9 +72,7 @@ def run_delay_margin(gains=GAINS, delays=DELAYS, duration=10.0, plot_path=None, 
         ax.set_title("CSS arm, paper's motion: missing points diverged")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(plot_path, dpi=110)
-        plt.close(fig)
+        save(fig, plot_path, 110)
         if verbose:
             print(f"wrote {plot_path}")
     return out

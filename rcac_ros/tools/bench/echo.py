@@ -1,4 +1,4 @@
-"""A plain DDS echo: the baseline of the ROS benchmark's latency (``rcac bench --ros``).
+"""A plain DDS echo: the baseline of the ROS benchmark's latency (``rcac bench ros``).
 
 One rclpy node, nothing of this package's control code: it republishes every
 ``sensor_msgs/JointState`` it receives on :data:`PING` to :data:`PONG`, from the

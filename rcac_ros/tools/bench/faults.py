@@ -1,4 +1,4 @@
-"""The fault benchmark behind ``rcac bench --faults`` (issue 9, section 9).
+"""The fault benchmark behind ``rcac bench faults`` (doc/failsafe.md, "Measured").
 
 The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
 processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go
@@ -16,6 +16,11 @@ frozen_clock  the controller on ``use_sim_time``; ``/clock`` stops for a third o
               the run while the states go on
 flood         a third process publishes 8 MB JointStates and 5.6 MB trajectories
               for a third of the run
+hostile_flood a third process (niced) publishes every 100 ms a JointState of 1e6 joint
+              names (24 MB) and a trajectory of 1e5 points (8 MB) for a third of the
+              run, while a plain 500 Hz loop in a fourth process measures the
+              machine's own stalls in the same window
+starved       busy processes (two per core) beside the nodes for a third of the run
 ============  ===================================================================
 
 Per case it reports the tracking RMS (the controller's ``~/tracking_error``, norm over
@@ -25,7 +30,7 @@ of the run tracks within 3x nominal; after the restart, also the first non-watch
 effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
 non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
 3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
-``--soak MINUTES`` runs the nominal case that long and reports the controller's memory
+``rcac bench soak MINUTES`` runs the nominal case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
 
@@ -40,24 +45,41 @@ import time
 
 import numpy as np
 
+from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 
-CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood")
+CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood",
+         "hostile_flood", "starved")
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
-         "memory_growth": 0.05, "settle_s": 5.0}
+         "memory_growth": 0.05, "settle_s": 5.0, "starved_ratio": 10.0}
+#: the hostile flood (doc/failsafe.md): 1e6 joint names, a pair of messages every 100 ms
+HOSTILE = ["--names", "1000000", "--period", "0.1"]
+#: a process that only wakes every period (``h``, ``seconds``) and prints its wake-up times
+PLAIN_LOOP = """
+import sys, time
+h, secs = float(sys.argv[1]), float(sys.argv[2])
+t, nxt = [], time.monotonic()
+end = nxt + secs
+while nxt < end:
+    nxt += h
+    time.sleep(max(0.0, nxt - time.monotonic()))
+    t.append(time.monotonic_ns())
+print(" ".join(str(x) for x in t))
+"""
+BUSY = "while True:\n    pass\n"
 FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "flood.py")
 BOUND = 1e6                 # |theta_hat| above this: not bounded
+#: the namespace the simulator's states and clock are remapped into, ahead of the relay
+SIM = "/sim"
 
 
 class Relay:
     """Forward the simulator's states and clock, with drops, jitter and a clock freeze."""
 
     def __init__(self, node, h, seed=0):
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                         reliability=ReliabilityPolicy.RELIABLE)
+        qos = topics.qos()
         self.drop = 0.0
         self.jitter = 0.0           # s: each message delayed by U(0, jitter)
         self.freeze_clock = False
@@ -66,11 +88,12 @@ class Relay:
         self.dropped = 0
         self._rng = np.random.default_rng(seed)
         self._queue = queue.Queue()
-        self._pub_state = node.create_publisher(JointState, "/joint_states", qos)
-        self._pub_clock = node.create_publisher(Clock, "/clock", qos)
-        self._subs = [node.create_subscription(JointState, "/sim/joint_states", self._on_state,
-                                               qos, raw=True),
-                      node.create_subscription(Clock, "/sim/clock", self._on_clock, qos,
+        states = topics.resolve(topics.JOINT_STATES)
+        self._pub_state = node.create_publisher(JointState, states, qos)
+        self._pub_clock = node.create_publisher(Clock, topics.CLOCK, qos)
+        self._subs = [node.create_subscription(JointState, SIM + states, self._on_state, qos,
+                                               raw=True),
+                      node.create_subscription(Clock, SIM + topics.CLOCK, self._on_clock, qos,
                                                raw=True)]
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -114,11 +137,10 @@ class Probe:
     """Efforts (sender's stamps), tracking errors, estimates and diagnostics."""
 
     def __init__(self, node):
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from std_msgs.msg import Float64MultiArray
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                         reliability=ReliabilityPolicy.RELIABLE)
+
+        from rcac_ros.tools.bench.ros import subscribe_diagnostics
+        qos = topics.qos(topics.MONITOR_DEPTH)
         self.recording = False
         self.efforts = []           # (source ns, receive steady ns, watchdog)
         self.tracking = []          # (receive steady ns, |q - q_d|)
@@ -126,18 +148,19 @@ class Probe:
         self.theta_finite = True
         self.diagnostics = {}
         self.subs = [
-            node.create_subscription(Float64MultiArray, "/effort_controller/commands",
+            node.create_subscription(Float64MultiArray, topics.resolve(topics.EFFORT_COMMANDS),
                                      self._on_effort, qos, raw=True),
-            node.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+            node.create_subscription(Float64MultiArray, topics.resolve(topics.TRACKING_ERROR),
                                      self._on_tracking, qos),
-            node.create_subscription(Float64MultiArray, "/rcac_controller/parameter_estimates",
+            node.create_subscription(Float64MultiArray,
+                                     topics.resolve(topics.PARAMETER_ESTIMATES),
                                      self._on_theta, qos),
-            node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos)]
+            subscribe_diagnostics(node, self.diagnostics, qos)]
 
     def _on_effort(self, data, info):
         if self.recording:
             self.efforts.append((info["source_timestamp"], time.monotonic_ns(),
-                                 b"watchdog" in bytes(data[:96])))
+                                 topics.is_watchdog_effort(data)))
 
     def _on_tracking(self, msg):
         if self.recording:
@@ -149,10 +172,6 @@ class Probe:
             self.theta_finite &= bool(np.all(np.isfinite(theta)))
             if theta.size and np.all(np.isfinite(theta)):
                 self.theta_max = max(self.theta_max, float(np.max(np.abs(theta))))
-
-    def _on_diag(self, msg):
-        for status in msg.status:
-            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
 
 def rss_kb(pid):
@@ -187,9 +206,11 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
     if case == "noise":
         sim_over.update(position_noise=1e-4, velocity_noise=1e-3)
-    remap = ["-r", "joint_states:=/sim/joint_states", "-r", "/clock:=/sim/clock"]
+    remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
+             "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
     children, ctx, executor, flood, relay = [], None, None, None, None
-    out = {"case": case}
+    plain, busy, window = None, [], None
+    out = {"case": case, "rate": float(rate)}
     with domain_coordinator.domain_id() as domain:
         env = child_env(domain)
         try:
@@ -236,17 +257,31 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
                 t_restart = time.monotonic_ns()
                 children[1] = sim_child("_restarted")
                 spin_for(duration / 2.0 - 0.5)
-            elif case in ("frozen_clock", "flood"):
+            elif case in ("frozen_clock", "flood", "hostile_flood", "starved"):
                 spin_for(third)
                 if case == "frozen_clock":
                     relay.freeze_clock = True
+                elif case == "starved":
+                    busy = [subprocess.Popen([sys.executable, "-c", BUSY])
+                            for _ in range(2 * (os.cpu_count() or 1))]
                 else:
-                    flood = subprocess.Popen([sys.executable, FLOOD, str(third)], env=env,
-                                             stdout=subprocess.DEVNULL,
+                    cmd = [sys.executable, FLOOD, str(third)]
+                    if case == "hostile_flood":
+                        cmd = ["nice", "-n", "10"] + cmd + HOSTILE
+                    flood = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
                                              stderr=subprocess.DEVNULL)
+                if case in ("hostile_flood", "starved"):
+                    plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
+                                              str(third)], stdout=subprocess.PIPE, text=True)
+                window = (time.time_ns(), time.monotonic_ns())
                 spin_for(third)
+                window += (time.time_ns(), time.monotonic_ns())
                 t_resume = time.monotonic_ns()
                 relay.freeze_clock = False
+                for p in busy:
+                    p.kill()
+                    p.wait()
+                busy = []
                 spin_for(duration - 2 * third)
             else:
                 step = 10.0 if soak else duration
@@ -260,9 +295,9 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
             t1 = time.monotonic_ns()
             spin_for(1.2)           # one more diagnostics message
         finally:
-            if flood is not None:
-                flood.kill()
-                flood.wait()
+            for p in busy + [p for p in (flood,) if p is not None]:
+                p.kill()
+                p.wait()
             if relay is not None:
                 relay.close()
             shut_down(children, executor, ctx)
@@ -280,6 +315,11 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         if tail.size else None
     out["tracking_t_s"] = ((track[:, 0] - t0) * 1e-9).tolist() if track.size else []
     out["tracking"] = track[:, 1].tolist() if track.size else []
+    if window is not None and case in ("hostile_flood", "starved"):
+        out.update(window_figures(probe, track, window, h))
+        ticks = plain.communicate(timeout=60.0)[0].split() if plain is not None else []
+        machine = np.diff(np.array(ticks, dtype=np.int64)) * 1e-6
+        out["plain_loop_gap_ms"] = float(machine.max()) if machine.size else None
     if case == "restart":
         first = relay.first_state_after[1]
         resumed = [e[1] for e in probe.efforts if not e[2] and first is not None
@@ -291,7 +331,8 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         out["control_back_s"] = (resumed[0] - t_resume) * 1e-9 if resumed else None
         out["resume_at_s"] = (t_resume - t0) * 1e-9
     diag = probe.diagnostics.get("rcac_controller: control loop", {})
-    for key in ("late_ticks", "skipped_ticks", "watchdog_trips", "rejected_messages",
+    for key in ("starved_spells", "delay_worst_ms", "late_ticks", "skipped_ticks",
+                "watchdog_trips", "rejected_messages",
                 "stamp_restarts"):
         if key in diag:
             out[f"controller_{key}"] = diag[key]
@@ -301,6 +342,21 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         out["rss_kb"] = good
         out["memory_growth"] = (good[-1] - base) / base
     return out
+
+
+def window_figures(probe, track, window, h):
+    """Efforts and tracking in the faulty third (``window``: wall and steady ns, start/end)."""
+    wall0, steady0, wall1, steady1 = window
+    inside = [e for e in probe.efforts if wall0 <= e[0] <= wall1]
+    src = np.array([e[0] for e in inside], dtype=np.int64)
+    gaps = np.diff(src) * 1e-6 if src.size > 1 else np.array([np.inf])
+    during = track[(track[:, 0] >= steady0) & (track[:, 0] <= steady1)] if track.size \
+        else track
+    return {"window_efforts": len(inside), "window_safe": int(sum(e[2] for e in inside)),
+            "window_gap_ms": float(gaps.max()),
+            "window_gaps_over_2h": int(np.sum(gaps > 2e3 * h)),
+            "window_tracking_rms": float(np.sqrt(np.mean(during[:, 1] ** 2)))
+            if during.size else None}
 
 
 def judge(results):
@@ -320,6 +376,13 @@ def judge(results):
             back = r.get("control_back_s")
             r["recovered"] = back is not None and back <= GOALS["restart_recovery_s"] \
                 and r["settle_s"] is not None and r["settle_s"] <= GOALS["settle_s"]
+        if r["case"] == "hostile_flood" and r.get("plain_loop_gap_ms") is not None:
+            # no safe effort, and no gap beyond the machine's own plus two periods
+            r["window_ok"] = r["window_safe"] == 0 and r["window_gap_ms"] <= \
+                r["plain_loop_gap_ms"] + GOALS["gap_periods"] * 1e3 / r["rate"]
+        if r["case"] == "starved" and ref and r.get("window_tracking_rms") is not None:
+            r["window_ratio"] = r["window_tracking_rms"] / ref
+            r["window_ok"] = r["window_ratio"] <= GOALS["starved_ratio"] and r["theta_bounded"]
     return results
 
 
@@ -354,6 +417,17 @@ def format_table(results, h):
             notes.append(f"{r['dropped']} states dropped")
         if r.get("watchdog_efforts"):
             notes.append(f"{r['watchdog_efforts']} safe efforts")
+        if "window_efforts" in r:
+            notes.append(f"in the faulty third: {r['window_safe']}/{r['window_efforts']} safe, "
+                         f"longest gap {r['window_gap_ms']:.1f} ms (plain loop "
+                         f"{r.get('plain_loop_gap_ms') or float('nan'):.1f} ms)")
+        if r.get("window_ratio") is not None:
+            notes.append(f"tracking in it {r['window_ratio']:.2f}x nominal")
+        if "window_ok" in r:
+            notes.append("goal " + ("met" if r["window_ok"] else "NOT met"))
+        if "controller_starved_spells" in r:
+            notes.append(f"starved spells {r['controller_starved_spells']} (worst delay "
+                         f"{r.get('controller_delay_worst_ms', '-')} ms)")
         if "memory_growth" in r:
             notes.append(f"RSS growth {100 * r['memory_growth']:.1f} %")
         if "controller_late_ticks" in r:
@@ -366,7 +440,9 @@ def format_table(results, h):
                  f"noise); control back within {GOALS['restart_recovery_s']:g} s of a restart "
                  f"or of /clock resuming, tracking within 3x nominal {GOALS['settle_s']:g} s "
                  "after it; "
-                 f"no gap > {GOALS['gap_periods'] * h * 1e3:g} ms")
+                 f"no gap > {GOALS['gap_periods'] * h * 1e3:g} ms; hostile flood: no safe "
+                 "effort and no gap beyond the plain loop's + 2 periods; starved: tracking "
+                 f"<= {GOALS['starved_ratio']:g}x nominal while loaded")
     return "\n".join(lines)
 
 
@@ -399,7 +475,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
         cases, duration = ("nominal",), soak_minutes * 60.0
     for case in cases:
         if verbose:
-            print(f"rcac bench --faults: {case} ({duration:g} s)", flush=True)
+            print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
                                 verbose=verbose))
         if verbose:

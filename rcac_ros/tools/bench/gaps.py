@@ -1,6 +1,6 @@
 """Where the gaps between efforts come from (``python -m rcac_ros.tools.bench.gaps``).
 
-Runs ``rcac bench --ros`` in timer mode beside a *sentinel*: a third process with no ROS
+Runs ``rcac bench ros`` in timer mode beside a *sentinel*: a third process with no ROS
 and no numpy that sleeps to absolute deadlines every 2 ms and notes each wake-up more than
 1 ms late. Then, for every gap between two efforts longer than two periods (the sender's
 stamps, so the DDS transport is not in it), it looks at the same instant (+-2 periods) for

@@ -1,4 +1,4 @@
-"""``rcac bench --noise``: are the estimates bounded with noisy sensors? (10-minute runs)
+"""``rcac bench noise``: are the estimates bounded with noisy sensors? (10-minute runs)
 
 The paper's experiment (CSS arm, paper gains, ``theta_hat(0) = 0``, the velocity reading
 repeated for the whole run) with white Gaussian measurement noise on what the controller
@@ -275,7 +275,7 @@ def table(report):
 
 def plot(report, laws, path):
     """Per law (columns): ``||theta_hat - theta||`` and the deviation from the clean run."""
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     fig, axes = plt.subplots(2, len(laws), figsize=(4.5 * len(laws), 7), squeeze=False,
                              sharex=True)
     styles = {"clean": ("k", "-"), "plain": ("C3", "-"), "dead zone": ("C0", "--"),
@@ -300,12 +300,10 @@ def plot(report, laws, path):
             ax.legend(fontsize=7)
     fig.suptitle(f"Estimates under measurement noise (q: {SIGMA_Q:g} rad, qd: "
                  f"{SIGMA_QD:g} rad/s); tracking RMS in rad")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    save(fig, path, 80)
 
 
-#: ``--noise-sources``: label -> (sigma_q scale, sigma_qd scale, gamma, seed), paper law
+#: ``rcac bench noise --sources``: label -> (sigma_q scale, sigma_qd scale, gamma, seed), paper law
 SOURCES = {"both": (1.0, 1.0, None, 2), "both, seed 3": (1.0, 1.0, None, 3),
            "both, half": (0.5, 0.5, None, 2), "q only": (1.0, 0.0, None, 2),
            "qd only": (0.0, 1.0, None, 2), "both, gamma = 0": (1.0, 1.0, 0.0, 2)}
@@ -359,7 +357,7 @@ def run_noise_sources(duration=600.0, out_dir="results/noise"):
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "sources.json"), "w", encoding="utf-8") as f:
         json.dump(dict(report, settings=dict(duration=duration)), f, separators=(",", ":"))
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     fig, ax = plt.subplots(figsize=(8, 4))
     for label, r in report.items():
         ax.plot(np.arange(1, len(r["deviation"]) + 1) / 60.0, r["deviation"], lw=1.0,
@@ -369,8 +367,6 @@ def run_noise_sources(duration=600.0, out_dir="results/noise"):
     ax.set_title("Paper law: which noise and which term drive the drift")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "sources.png"), dpi=80)
-    plt.close(fig)
+    save(fig, os.path.join(out_dir, "sources.png"), 80)
     print(f"wrote {out_dir}/sources.json, sources.png")
     return report

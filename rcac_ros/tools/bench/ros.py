@@ -1,4 +1,4 @@
-"""The ROS 2 loop benchmark behind ``rcac bench --ros``.
+"""The ROS 2 loop benchmark behind ``rcac bench ros``.
 
 The simulator (``mode: realtime``, stepping every dt on absolute deadlines of the steady
 clock) and the controller (``mode: timer`` at ``rate``, the same kind of loop) run free as
@@ -48,19 +48,30 @@ BENCH_CONTROLLER = {"K_D": 1000.0, "monitor_decimation": 10}
 #: the bench's names of the controller's timing: its own timer, or one answer per state
 CONTROLLER_MODES = {"timer": "timer", "on_state": "lockstep", "lockstep": "lockstep"}
 
-#: goals on the 2-core machine (issue 3, section 7); the ratio is what the controller adds
-#: to the jitter of its input (the simulator's states as received), whatever the load
+#: goals on the 2-core machine (doc/tools.md, "rcac bench ros"); the ratio is what the
+#: controller adds to the jitter of its input (the simulator's states as received), whatever
+#: the load
 GOALS = {"rate_hz": 499.0, "period_p99_ms": 2.5, "latency_p50_ms": 1.0, "period_ratio": 1.1}
 
 #: seconds between two pings of the plain DDS echo
 PING_PERIOD = 0.02
 
 
+def subscribe_diagnostics(node, latest, qos):
+    """Subscribe ``node`` to the diagnostics; each status's values land in
+    ``latest[status name]`` (a dict of key -> value, the latest of each status)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            latest[status.name] = {kv.key: kv.value for kv in status.values}
+    return node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, qos)
+
+
 class Probe:
     """Raw subscriptions that keep (source, receive) stamps of states and efforts."""
 
     def __init__(self, context, depth=1000):
-        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.node import Node
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
@@ -80,12 +91,12 @@ class Probe:
         self._ping = self.node.create_publisher(JointState, PING, topics.qos(10))
         self.node.create_timer(PING_PERIOD, self._send_ping)
         self._subs = [
-            self.node.create_subscription(JointState, "/" + topics.JOINT_STATES,
+            self.node.create_subscription(JointState, topics.resolve(topics.JOINT_STATES),
                                           self._on_state, qos, raw=True),
-            self.node.create_subscription(Float64MultiArray, "/" + topics.EFFORT_COMMANDS,
+            self.node.create_subscription(Float64MultiArray,
+                                          topics.resolve(topics.EFFORT_COMMANDS),
                                           self._on_effort, qos, raw=True),
-            self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
-                                          self._on_diag, qos),
+            subscribe_diagnostics(self.node, self.diagnostics, qos),
             self.node.create_subscription(JointState, PONG, self._on_pong, topics.qos(10)),
         ]
 
@@ -108,13 +119,9 @@ class Probe:
     def _on_effort(self, data, info):
         if not self.recording:
             return
-        watchdog = b"watchdog" in bytes(data[:96])
+        watchdog = topics.is_watchdog_effort(data)
         recv = info["received_timestamp"]
         self.efforts.append((info["source_timestamp"], recv, watchdog))
-
-    def _on_diag(self, msg):
-        for status in msg.status:
-            self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
     def matched(self):
         return all(s.get_publisher_count() > 0 for s in self._subs[:2] + self._subs[3:]) \
@@ -329,14 +336,14 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
                     executor.spin_once(timeout_sec=0.01)
 
             if verbose:
-                print(f"rcac bench --ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
+                print(f"rcac bench ros: starting the nodes (ROS_DOMAIN_ID={domain}, "
                       f"logs {log_dir})", flush=True)
             spin_until(lambda: probe.matched() and probe.latest_state_recv is not None,
                        start_timeout, "while starting")
             t_warm = time.monotonic() + warmup
             spin_until(lambda: time.monotonic() >= t_warm, warmup + 10.0, "during warm-up")
             if verbose:
-                print(f"rcac bench --ros: measuring for {duration:g} s", flush=True)
+                print(f"rcac bench ros: measuring for {duration:g} s", flush=True)
             probe.recording = True
             t0 = time.monotonic()
             spin_until(lambda: time.monotonic() - t0 >= duration, duration + 10.0,

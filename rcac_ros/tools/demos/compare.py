@@ -36,8 +36,7 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.identifiability import Excitation, summary
@@ -47,7 +46,7 @@ from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.demos.friction import P_FRICTION
-from rcac_ros.tools.demos.payload import FIXED_P
+from rcac_ros.tools.scenarios import controller, FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -145,8 +144,8 @@ def paper_scenario():
 
 
 def payload_scenario():
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                              load_panda, with_payload)
+    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                          load_panda, with_payload)
     model = load_panda()
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
     q0, qd0, _ = traj(0.0)
@@ -156,8 +155,8 @@ def payload_scenario():
 
 def joint_scenario(name):
     """The panda on MuJoCo with the joint terms of :data:`JOINT_PLANTS` ``[name]``."""
-    from rcac_ros.tools.demos.payload import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                              load_panda)
+    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                          load_panda)
     model = load_panda()
     damping, friction, armature = JOINT_PLANTS[name]
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
@@ -198,9 +197,7 @@ def make_controller(scenario, law, laws=None):
     kwargs = dict(scenario.gains, **extra)
     if isinstance(kwargs.get("P_friction"), str):              # INERTIA_SCALED
         kwargs["P_friction"] = friction_gain_for(scenario.model, scenario.q0)
-    if kind == "slotine_li":
-        return SlotineLiCompositeController(scenario.model, **kwargs)
-    return RecursiveCompositeController(scenario.model, **kwargs)
+    return controller(kind, scenario.model, kwargs)
 
 
 def run_law(scenario, controller, duration, progress=None, engine=None):
@@ -344,7 +341,7 @@ def markdown(report, n_links=None):
 
 def plot(series, report, out_dir):
     """One figure per scenario: |q - q_d|, ||theta_tilde||, last link's mass, max |E_c|."""
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     paths = []
     for name, runs in series.items():
         fig, axes = plt.subplots(1, 4, figsize=(24, 5))
@@ -373,10 +370,8 @@ def plot(series, report, out_dir):
         axes[3].set_ylim(bottom=1e-12)
         axes[0].legend(fontsize=7, ncol=2)
         fig.suptitle(f"rcac compare: {name} scenario")
-        fig.tight_layout()
         path = os.path.join(out_dir, f"compare_{name}.png")
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        save(fig, path, 110)
         paths.append(path)
     return paths
 

@@ -142,8 +142,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             wall = time.monotonic() - t_start
             # drain what is still in flight: the last states (the simulator publishes states
             # 0..steps) and the controller's answers to them
-            states = "/" + topics.JOINT_STATES
-            answers = f"/{topics.CONTROLLER_NODE}/{topics.DESIRED_STATE[2:]}"
+            states = topics.resolve(topics.JOINT_STATES)
+            answers = topics.resolve(topics.DESIRED_STATE)
             last_state = int(round(duration / dt)) * int(round(dt * 1e9))
             drain_end = time.monotonic() + 2.0
             while time.monotonic() < drain_end and not stop \
@@ -215,6 +215,11 @@ def run(args):
               f"{start:.3f} s; the controller's topics, and the metrics, cover the whole run")
     print("Metrics (as rcac experiment):")
     print(format_metrics(result["metrics"]))
+    watchdog = result["metrics"].get("watchdog_efforts")
+    if watchdog:
+        print(f"rcac demo: note: watchdog_efforts {watchdog}: the controller's safe effort while "
+              "it had no valid state (before the simulator's first state, or in a silence), "
+              "tagged: the simulator ignores them and the metrics leave them out")
     for line in result["notes"]:
         print(f"rcac demo: note: {line}")
     print("Wrote:")

@@ -29,97 +29,12 @@ import time
 import numpy as np
 
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
-from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, finite_float,
                                  non_negative_float, positive_float)
 from rcac_ros.tools.closed_loop import closed_loop
-from rcac_ros.tools.robots import example_robot_urdf
-
-#: The Panda's "ready" posture (rad), the centre of the desired motion.
-READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
-#: Per-joint amplitude (rad) and frequency (Hz) of the desired sinusoids.
-AMPLITUDE = (0.3, 0.25, 0.3, 0.3, 0.4, 0.3, 0.5)
-FREQUENCY = (0.2, 0.25, 0.3, 0.22, 0.35, 0.28, 0.4)
-#: The flange (``panda_link8``) in link 7's frame: ``panda_joint8``'s origin, m.
-FLANGE = (0.0, 0.0, 0.107)
-#: Expected size of each of the 13 parameters of link 7 (kg, kg m, then kg m^2).
-PARAMETER_SCALE = (2.0,) + (0.4,) * 3 + (0.08,) * 9
-#: Default gains (see the module docstring).
-GAINS = dict(kappa=100.0, Lambda=10.0, rho=30.0, gamma=1.0, lam=10.0, h=0.002)
-#: The law with adaptation off.
-FIXED_P = 1e-12
-
-
-def find_panda_urdf():
-    """example-robot-data's ``panda.urdf``, or None."""
-    return example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
-
-
-def load_panda(urdf=None, joint_terms=False):
-    """The Panda arm ``panda_link0 -> panda_link8`` with gravity ``(0, 0, -9.81)``.
-
-    Rigid unless ``joint_terms``: the URDF's ``<dynamics damping="0.003">`` is dropped, so
-    the payload experiments isolate the payload (joint terms: doc/design.md §7).
-    """
-    path = urdf or find_panda_urdf()
-    if path is None:
-        raise ConfigError("urdf: example-robot-data's panda.urdf not found; pass --urdf")
-    model = model_from_urdf(path, tip_link="panda_link8")
-    return model if joint_terms else model.replace(damping=0.0, friction=0.0)
-
-
-def _skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def spatial_inertia(mass, com, inertia):
-    """A link's 6x6 spatial inertia about its frame origin, ``[v; w]`` order (doc/design.md §2)."""
-    P = _skew(com)
-    return np.block([[mass * np.eye(3), -mass * P], [mass * P, inertia - mass * P @ P]])
-
-
-def with_payload(model, mass=2.0, com_flange=(0.03, -0.02, 0.08), radius=0.05, link=None):
-    """``model`` with a solid-sphere payload rigidly attached to its last link.
-
-    Parameters
-    ----------
-    mass : float
-        Payload mass, kg.
-    com_flange : array_like (3,)
-        Payload centre of mass in the flange frame (:data:`FLANGE` in link 7's axes), m.
-    radius : float
-        Sphere radius (inertia ``2/5 m r^2``), m.
-    link : int, optional
-        Index of the link that carries it (default: the last).
-    """
-    i = model.n - 1 if link is None else int(link)
-    c_p = np.asarray(FLANGE, float) + np.asarray(com_flange, float)
-    m0, c0, i0 = model.mass[i], model.com[i], model.inertia[i]
-    m = m0 + mass
-    c = (m0 * c0 + mass * c_p) / m
-
-    def shift(mk, d):
-        return mk * (d @ d * np.eye(3) - np.outer(d, d))
-
-    inertia = i0 + shift(m0, c0 - c) + 0.4 * mass * radius ** 2 * np.eye(3) + shift(mass, c_p - c)
-    masses, coms, inertias = model.mass.copy(), model.com.copy(), model.inertia.copy()
-    masses[i], coms[i], inertias[i] = m, c, inertia
-    return model.replace(mass=masses, com=coms, inertia=inertias)
-
-
-def gains_for(model, kappa, Lambda, rho, gamma, lam, h, adapt_all=False, law="composite"):
-    """Controller keyword arguments of one law (see the module docstring)."""
-    K_D = np.array([kappa * spatial_inertia(model.mass[i], model.com[i], model.inertia[i])
-                    for i in range(model.n)])
-    P = np.array([np.eye(13) * FIXED_P] * model.n)
-    if law != "fixed":
-        scaled = rho * np.diag(np.square(PARAMETER_SCALE))
-        P[-1] = scaled
-        if adapt_all:
-            P[:] = scaled
-    return dict(K_D=K_D, Lambda=Lambda, P=P, gamma=gamma if law == "composite" else 0.0,
-                lam=lam, h=h, theta_hat0=model.theta())
+from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
+                                      READY, with_payload)
 
 
 def window_rms(run, start, stop):
@@ -188,8 +103,7 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
 
 def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
     """metrics.json and the three figures into ``out_dir``."""
-    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors
-    import matplotlib.pyplot as plt     # rcac_ros.tools.plots selected the Agg backend
+    from rcac_ros.tools.plots import plot_parameter_estimates, plot_tracking_errors, plt, save
 
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "metrics.json"), "w", encoding="utf-8") as f:
@@ -218,9 +132,7 @@ def write_outputs(model, loaded, runs, report, out_dir, settings, jump):
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, "payload_summary.png"), dpi=110)
-    plt.close(fig)
+    save(fig, os.path.join(out_dir, "payload_summary.png"), 110)
 
 
 def add_arguments(parser):

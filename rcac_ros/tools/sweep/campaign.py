@@ -34,13 +34,14 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           SinusoidTrajectory, SlotineLiCompositeController, css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.plants import check_engine, ENGINES
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
                                         run_metrics)
-from rcac_ros.tools.demos.payload import GAINS as PANDA_GAINS
+from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_for, load_panda,
+                                      READY)
+from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
@@ -223,7 +224,6 @@ def check_trajectory(value, model):
                                     f"{key}.amplitude"),
                    period=number(value.get("period", 20.0), f"{key}.period", 0.0, True))
         return out
-    from rcac_ros.tools.demos.payload import AMPLITUDE, FREQUENCY, READY
     defaults = dict(offset=READY, amplitude=AMPLITUDE, frequency=FREQUENCY) \
         if model == "panda" else {}
     for k in ("offset", "amplitude", "frequency"):
@@ -377,7 +377,6 @@ def nominal_model(name):
     """The controller's model of a scenario (loaded once per process)."""
     if name == "css_arm":
         return css_arm()
-    from rcac_ros.tools.demos.payload import load_panda
     return load_panda()
 
 
@@ -390,18 +389,17 @@ def controller_for(campaign, inputs, model):
     friction = dict(joint_friction=True, P_friction=inputs["P_friction"]) \
         if law == "composite_friction" else {}
     if sc["model"] == "panda":
-        from rcac_ros.tools.demos.payload import gains_for
         gamma = g["gamma"]
         g = gains_for(model, kappa=g["K_D"], Lambda=g["Lambda"], rho=g["P"], gamma=gamma,
                       lam=g["lam"], h=g["h"])
         g["gamma"] = gamma
         g.pop("theta_hat0")
     if law == "slotine_li":
-        return SlotineLiCompositeController(model, **g)
+        return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
         g["channels"] = inputs["channels"]
     try:
-        return RecursiveCompositeController(model, **g, **friction)
+        return controller("rcac", model, dict(g, **friction))
     except TypeError as err:
         if "channels" in g:
             raise ConfigError(f"channels: this controller does not take channels ({err})") \

@@ -61,11 +61,12 @@ def scheduler_address(text):
     return text
 
 
-def add_arguments(parser):
-    """The run form, or (``rcac sweep report|rerun ...``) the two result subcommands."""
+def add_arguments(parser, argv=()):
+    """The run form, or (``rcac sweep report|rerun ...``: ``argv``, the words after
+    ``sweep``, starts with one) the two result subcommands."""
     parser.epilog = ("also: 'rcac sweep report RESULTS' (summary and plot) and "
                      "'rcac sweep rerun RESULTS INDEX' (one run again, alone)")
-    if sys.argv[2:3] and sys.argv[2] in ACTIONS:
+    if argv[:1] and argv[0] in ACTIONS:
         sub = parser.add_subparsers(dest="action", metavar="ACTION")
         sub.required = True
         rep = sub.add_parser("report", help="failure rate, worst cases, distributions, "
@@ -476,7 +477,7 @@ def report(path, worst=10, plot=None):
 
 def plot_report(df, div, laws, sens, path):
     """Four panels: RMS per law, failure rate per law, sensitivity, RMS vs the top input."""
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     fig, axes = plt.subplots(1, 4, figsize=(22, 4.5))
     ok = df[~div]
     data = [np.clip(ok.loc[ok["law"] == law, "rms_tracking_error"].to_numpy(), 1e-12, None)
@@ -503,9 +504,7 @@ def plot_report(df, div, laws, sens, path):
         axes[3].legend(fontsize=8)
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, 100)
 
 
 # --------------------------------------------------------------------------- rerun
@@ -531,7 +530,7 @@ def rerun(path, index, plot=None):
               f"metric difference {max(diffs, default=0.0):.3g}")
     else:
         print("stored row: none (run not in the results yet)")
-    from rcac_ros.tools.plots import plt
+    from rcac_ros.tools.plots import plt, save
     plot = plot or os.path.join(store.out, f"rerun_{index}.png")
     fig, axes = plt.subplots(1, 3, figsize=(18, 4))
     t = result["t"]
@@ -549,9 +548,7 @@ def rerun(path, index, plot=None):
     for ax in axes:
         ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(plot, dpi=100)
-    plt.close(fig)
+    save(fig, plot, 100)
     print(f"wrote {plot}")
     return 0
 

@@ -1,0 +1,138 @@
+"""Take serialised messages without holding the interpreter lock (doc/failsafe.md).
+
+rclpy's take (``Subscription.take_message``, also with ``raw=True``) copies the sample out of
+DDS while it holds the interpreter lock: a 24 MB JointState stalled every other thread of the
+process for 80-110 ms (doc/failsafe.md, "Where the time of a flood goes"). Fast DDS cannot
+drop such a sample by size for a type with unbounded sequences (its reader limit is the
+type's bound). :class:`RawReader` therefore waits and takes through ``rcl`` with
+:mod:`ctypes`, which releases the lock for the length of each foreign call: the copy out of
+DDS runs beside the control thread, and the size is checked on the taken buffer before any
+Python object is built from it.
+"""
+
+import ctypes
+import threading
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+RCL_RET_OK = 0
+RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
+
+
+class _Allocator(ctypes.Structure):
+    _fields_ = [("allocate", ctypes.c_void_p), ("deallocate", ctypes.c_void_p),
+                ("reallocate", ctypes.c_void_p), ("zero_allocate", ctypes.c_void_p),
+                ("state", ctypes.c_void_p)]
+
+
+class _Uint8Array(ctypes.Structure):        # rcl_serialized_message_t
+    _fields_ = [("buffer", ctypes.POINTER(ctypes.c_uint8)), ("buffer_length", ctypes.c_size_t),
+                ("buffer_capacity", ctypes.c_size_t), ("allocator", _Allocator)]
+
+
+class _Gid(ctypes.Structure):
+    _fields_ = [("implementation_identifier", ctypes.c_char_p), ("data", ctypes.c_uint8 * 16)]
+
+
+class _MessageInfo(ctypes.Structure):       # rmw_message_info_t (Jazzy)
+    _fields_ = [("source_timestamp", ctypes.c_int64), ("received_timestamp", ctypes.c_int64),
+                ("publication_sequence_number", ctypes.c_uint64),
+                ("reception_sequence_number", ctypes.c_uint64), ("publisher_gid", _Gid),
+                ("from_intra_process", ctypes.c_bool), ("_spare", ctypes.c_uint8 * 64)]
+
+
+_lib = {}
+
+
+def _libraries():
+    """``(rcl, rcutils)`` loaded once (already mapped by rclpy: resolved by name)."""
+    if not _lib:
+        rcl = ctypes.CDLL("librcl.so")
+        rcutils = ctypes.CDLL("librcutils.so")
+        rcl.rcl_take_serialized_message.argtypes = [
+            ctypes.c_void_p, ctypes.POINTER(_Uint8Array), ctypes.POINTER(_MessageInfo),
+            ctypes.c_void_p]
+        rcl.rcl_take_serialized_message.restype = ctypes.c_int
+        rcutils.rcutils_get_default_allocator.restype = _Allocator
+        rcutils.rcutils_uint8_array_init.argtypes = [
+            ctypes.POINTER(_Uint8Array), ctypes.c_size_t, ctypes.POINTER(_Allocator)]
+        rcutils.rcutils_uint8_array_fini.argtypes = [ctypes.POINTER(_Uint8Array)]
+        _lib.update(rcl=rcl, rcutils=rcutils)
+    return _lib["rcl"], _lib["rcutils"]
+
+
+class RawReader:
+    """Serve one ``raw=True`` subscription in its own thread, lock-free while waiting/taking.
+
+    Parameters
+    ----------
+    subscription : rclpy.subscription.Subscription
+        Created with ``raw=True`` on a node that no executor spins (its callback is not
+        used).
+    context : rclpy.context.Context
+    on_bytes : callable
+        ``on_bytes(data)``: called in the thread with each sample of at most ``cap`` bytes.
+    on_oversize : callable
+        ``on_oversize(size)``: called instead for a larger sample (no bytes are built).
+    cap : int
+        Bytes (0: no cap).
+    name : str
+        The thread's name.
+    """
+
+    #: the buffer kept between takes is shrunk back to this after a large sample, bytes
+    KEEP = 65_536
+
+    def __init__(self, subscription, context, on_bytes, on_oversize, cap, name):
+        self._rcl, self._rcutils = _libraries()
+        self._sub = subscription
+        self._context = context
+        self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
+        self._msg = _Uint8Array()
+        self._info = _MessageInfo()
+        self._alloc = self._rcutils.rcutils_get_default_allocator()
+        self._init_buffer()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _init_buffer(self):
+        if self._rcutils.rcutils_uint8_array_init(ctypes.byref(self._msg), self.KEEP,
+                                                  ctypes.byref(self._alloc)) != RCL_RET_OK:
+            raise MemoryError("rcutils_uint8_array_init failed")
+
+    def _take_all(self):
+        """Take every sample waiting; hand over the small ones."""
+        with self._sub.handle:
+            pointer = self._sub.handle.pointer
+            while not self._stop.is_set():
+                ret = self._rcl.rcl_take_serialized_message(
+                    pointer, ctypes.byref(self._msg), ctypes.byref(self._info), None)
+                if ret != RCL_RET_OK:       # TAKE_FAILED: nothing left (or shutting down)
+                    return
+                size = self._msg.buffer_length
+                if self._cap and size > self._cap:
+                    self._on_oversize(size)
+                    continue
+                self._on_bytes(ctypes.string_at(self._msg.buffer, size))
+
+    def _run(self):
+        try:
+            wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, self._context.handle)
+            while not self._stop.is_set() and self._context.ok():
+                with self._sub.handle, self._context.handle:
+                    wait_set.clear_entities()
+                    wait_set.add_subscription(self._sub.handle)
+                    wait_set.wait(50_000_000)               # 50 ms, without the lock
+                if self._sub.handle.pointer in wait_set.get_ready_entities("subscription"):
+                    self._take_all()
+        except Exception:               # noqa: BLE001 -- the context or the handle went down
+            if not self._stop.is_set() and self._context.ok():
+                raise
+
+    def close(self):
+        """Stop the thread (the subscription is the caller's to destroy)."""
+        self._stop.set()
+        self._thread.join(2.0)
+        if not self._thread.is_alive():
+            self._rcutils.rcutils_uint8_array_fini(ctypes.byref(self._msg))

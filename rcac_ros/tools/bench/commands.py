@@ -1,0 +1,200 @@
+"""``rcac bench BENCHMARK``: one subcommand per benchmark, each with its own options.
+
+=============  ===========================================================  ================
+core           the recursive controller against Pinocchio, the Slotine-Li   :mod:`.core`
+               baseline and itself, offline (µs per step, operation count)
+ros            the two nodes over ROS 2 at 500 Hz: rate, jitter, latency    :mod:`.ros`
+faults         the closed loop over ROS under faults, one case at a time    :mod:`.faults`
+soak           the nominal fault case for minutes: memory growth, late      :mod:`.faults`
+               ticks
+delay-margin   offline, tracking RMS against K_D with the effort 0-2        :mod:`.delay_margin`
+               periods late (the stable range of timer mode)
+noise          10-minute closed loops with sensor noise: are the estimates  :mod:`.noise`
+               bounded? (``--sources``: where the paper law's drift comes
+               from)
+=============  ===========================================================  ================
+
+Only the chosen benchmark's module is imported, when it runs; the ROS ones need rclpy
+(``tools/extras.py`` says so in one line where it is missing).
+"""
+
+import argparse
+
+from rcac_ros.tools.args import non_negative_float, positive_float
+from rcac_ros.tools.extras import require
+
+
+def add_core(p):
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--budget", type=positive_float, default=0.3,
+                   help="seconds of timing per cell (default 0.3)")
+
+
+#: the controller's real-time options of ``--rt``
+RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
+              "realtime.cpu_dma_latency": 0}
+
+
+def add_controller(p):
+    """The controller's options of the benchmarks over ROS (ros, faults, soak)."""
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--rt", action="store_true",
+                   help="the controller with its real-time options (SCHED_FIFO 80, mlockall, "
+                        "cpu_dma_latency 0; best effort)")
+    p.add_argument("--K_D", type=positive_float, default=None,
+                   help="the controller's K_D (default: the bench's)")
+    p.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
+                   help="the controller's timer.lookahead (state prediction; default: none)")
+    p.add_argument("--phase-offset", type=non_negative_float, default=None, metavar="SECONDS",
+                   help="the controller's timer.phase_offset (ticks locked to the states' "
+                        "arrival plus this; default: not locked)")
+
+
+def controller_overrides(args):
+    """The controller parameters the options of :func:`add_controller` set."""
+    over = dict(RT_OPTIONS) if args.rt else {}
+    if args.K_D is not None:
+        over["K_D"] = float(args.K_D)
+    if args.lookahead is not None:
+        over["timer.lookahead"] = float(args.lookahead)
+    if args.phase_offset is not None:
+        over["timer.phase_offset"] = float(args.phase_offset)
+    return over
+
+
+def add_ros(p):
+    p.add_argument("--duration", type=positive_float, default=60.0,
+                   help="seconds of the run (default 60)")
+    p.add_argument("--mode", choices=("timer", "on_state"), default="on_state",
+                   help="the controller answering each joint state (default, the node's "
+                        "default mode) or on its 500 Hz timer")
+    add_controller(p)
+
+
+def add_faults(p):
+    p.add_argument("--duration", type=positive_float, default=60.0,
+                   help="seconds per case (default 60)")
+    p.add_argument("--cases", default=None, help="comma-separated cases (default: all)")
+    p.add_argument("--plot", metavar="FILE", help="tracking errors per case (PNG)")
+    add_controller(p)
+
+
+def add_soak(p):
+    p.add_argument("minutes", type=positive_float, metavar="MINUTES",
+                   help="minutes of the nominal case")
+    p.add_argument("--plot", metavar="FILE", help="the tracking error (PNG)")
+    add_controller(p)
+
+
+def add_delay_margin(p):
+    p.add_argument("--plot", metavar="FILE", help="tracking RMS against K_D (PNG)")
+
+
+def _choices(text, sep, known):
+    items = [v.strip() for v in text.split(sep)]
+    bad = [v for v in items if v not in known]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown {', '.join(bad)} (known: "
+                                         f"{sep.join(known)})")
+    return items
+
+
+def noise_laws(text):
+    """``--laws``: ';'-separated names of :data:`rcac_ros.tools.bench.noise.LAWS`."""
+    from rcac_ros.tools.bench.noise import LAWS
+    return _choices(text, ";", tuple(LAWS))
+
+
+def noise_variants(text):
+    """``--variants``: comma-separated names of :data:`rcac_ros.tools.bench.noise.VARIANTS`."""
+    from rcac_ros.tools.bench.noise import VARIANTS
+    return tuple(_choices(text, ",", VARIANTS))
+
+
+def add_noise(p):
+    p.add_argument("--duration", type=positive_float, default=600.0,
+                   help="seconds of each run (default 600)")
+    p.add_argument("--sources", action="store_true",
+                   help="instead, where the paper law's drift comes from (noise on q only, qd "
+                        "only, another seed, half, gamma = 0)")
+    p.add_argument("--laws", type=noise_laws, default=None,
+                   help="laws, ';'-separated, among paper; 4,6; all (default: all three)")
+    p.add_argument("--variants", type=noise_variants, default=None,
+                   help="variants, comma-separated, among plain, dead zone, sigma, switching "
+                        "(default: all; the clean run always)")
+    p.add_argument("--out", default="results/noise", help="output directory")
+
+
+def run_core(args):
+    from rcac_ros.tools.bench.core import main
+    return main(budget=args.budget, json_path=args.json)
+
+
+def run_ros(args):
+    from rcac_ros.tools.bench.ros import run_ros_bench
+    result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.mode,
+                           controller_overrides=controller_overrides(args))
+    return 0 if result else 1
+
+
+def run_faults(args, cases=None, soak_minutes=None):
+    from rcac_ros.tools.bench.faults import CASES, run_faults
+    from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
+    if cases is None:
+        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+    run_faults(getattr(args, "duration", 60.0), cases,
+               dict(BENCH_CONTROLLER, **controller_overrides(args)), json_path=args.json,
+               plot_path=args.plot, soak_minutes=soak_minutes)
+    return 0
+
+
+def run_soak(args):
+    return run_faults(args, cases=("nominal",), soak_minutes=args.minutes)
+
+
+def run_delay_margin(args):
+    from rcac_ros.tools.bench.delay_margin import run_delay_margin
+    run_delay_margin(plot_path=args.plot)
+    return 0
+
+
+def run_noise(args):
+    from rcac_ros.tools.bench.noise import run_noise_bench, run_noise_sources, VARIANTS
+    if args.sources:
+        run_noise_sources(args.duration, args.out)
+    else:
+        run_noise_bench(args.duration, args.out, laws=args.laws,
+                        variants=args.variants or VARIANTS)
+    return 0
+
+
+#: benchmark -> (one-line help, its options, its run, what it needs)
+BENCHMARKS = {
+    "core": ("the controller against Pinocchio, the Slotine-Li baseline and itself, offline",
+             add_core, run_core, ()),
+    "ros": ("the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)",
+            add_ros, run_ros, ("ros",)),
+    "faults": ("the closed loop over ROS under faults (drops, jitter, noise, simulator "
+               "restart, frozen /clock, flood, hostile flood, starved machine)",
+               add_faults, run_faults, ("ros",)),
+    "soak": ("the nominal fault case for MINUTES (memory growth, late ticks)",
+             add_soak, run_soak, ("ros",)),
+    "delay-margin": ("offline, tracking RMS against K_D with the effort 0-2 periods late",
+                     add_delay_margin, run_delay_margin, ()),
+    "noise": ("10-minute closed loops with sensor noise (are the estimates bounded?)",
+              add_noise, run_noise, ()),
+}
+
+
+def add_arguments(parser):
+    sub = parser.add_subparsers(dest="benchmark", metavar="BENCHMARK")
+    sub.required = True
+    for name, (help_text, add, _, _) in BENCHMARKS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        add(p)
+
+
+def run(args):
+    _, _, run_benchmark, needs = BENCHMARKS[args.benchmark]
+    require(*needs)
+    return run_benchmark(args)

@@ -1,0 +1,58 @@
+"""The starvation guard in the node (doc/failsafe.md, "Starved machine"): a controller process
+stopped for 15 ms every 30 ms (SIGSTOP/SIGCONT: what a starved machine does to it) says once
+that it is starved, scales K_D down, keeps controlling, and returns to nominal afterwards."""
+
+import os
+import signal
+import threading
+import time
+
+from failsafe_harness import controller, PAPER_Q0, session, wait
+
+H = 0.002
+DIAG = "rcac_controller: control loop"
+
+
+def over_lines(probe):
+    with probe.lock:
+        return [m for m in probe.logs if m.msg.startswith("starvation over")]
+
+
+def test_a_starved_controller_degrades_once_and_recovers():
+    with session() as probe, controller(probe, "mode:=timer") as proc:
+        stop = threading.Event()
+
+        def states():                   # a driver at 500 Hz, stamps on the steady clock
+            nxt = time.monotonic()
+            while not stop.is_set():
+                probe.state(time.monotonic_ns(), PAPER_Q0)
+                nxt += H
+                time.sleep(max(0.0, nxt - time.monotonic()))
+        feeder = threading.Thread(target=states, daemon=True)
+        feeder.start()
+        try:
+            assert wait(lambda: len(probe.efforts) > 1000)
+            # a machine loaded by other jobs may starve it already: start from nominal
+            assert wait(lambda: probe.diagnostics.get(DIAG, {}).get("starved") == "no",
+                        timeout=30.0)
+            before = int(probe.diagnostics[DIAG]["starved_spells"])
+            overs = len(over_lines(probe))
+            end = time.monotonic() + 1.5
+            while time.monotonic() < end:   # starve it
+                os.kill(proc.pid, signal.SIGSTOP)
+                time.sleep(0.015)
+                os.kill(proc.pid, signal.SIGCONT)
+                time.sleep(0.015)
+            assert wait(lambda: int(probe.diagnostics[DIAG]["starved_spells"]) > before,
+                        timeout=5.0)
+            n = len(probe.efforts)
+            assert wait(lambda: len(over_lines(probe)) > overs, timeout=20.0)
+            assert len(probe.efforts) > n + 500         # it kept controlling
+        finally:
+            os.kill(proc.pid, signal.SIGCONT)
+            stop.set()
+            feeder.join(5.0)
+        spells = int(probe.diagnostics[DIAG]["starved_spells"])
+        with probe.lock:
+            starved = [m for m in probe.logs if m.msg.startswith("starved:")]
+        assert len(starved) == spells and len(over_lines(probe)) >= spells - 1  # once a spell
