@@ -42,6 +42,7 @@ import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.core.channels import parse_channels
+from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.core.pseudo_inertia import default_start, lambda_min
 from rcac_ros.errors import RcacError
@@ -59,8 +60,13 @@ LS_FORGETTING = 1.0
 #: where the scenario gives none.
 NATURAL_START = "natural_default"
 
-#: P_friction of the friction-aware direct and paper laws (doc/tools.md, joint friction).
-P_FRICTION_TRACKING = (30.0, 30.0, 30.0)
+#: ``rho_f`` of the friction-aware direct and paper laws: ``P_f,i = rho_f H_ii(q0)`` on each
+#: joint's three terms (:func:`friction_gain_for`, doc/design.md §7 "Gain and step").
+RHO_FRICTION = 1000.0
+
+#: The value of ``P_friction`` in :data:`LAWS` that :func:`make_controller` replaces by
+#: :func:`friction_gain_for` of the scenario's model and start.
+INERTIA_SCALED = "rho_f H_ii(q0)"
 
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
 #: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
@@ -91,11 +97,11 @@ LAWS = {
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
-    # direct and paper laws, adapting them mostly from the tracking term (an explicit step),
-    # with P_friction = 30 (100 diverges on the rigid panda, doc/tools.md)
+    # direct and paper laws, adapting them mostly from the tracking term (an explicit step,
+    # stable only below a gain set by the joint's inertia), with the inertia-scaled gain
     "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True,
-                                     P_friction=P_FRICTION_TRACKING)),
-    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=P_FRICTION_TRACKING)),
+                                     P_friction=INERTIA_SCALED)),
+    "paper_friction": ("rcac", dict(joint_friction=True, P_friction=INERTIA_SCALED)),
     "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
 }
 
@@ -191,12 +197,26 @@ def scenario_names(names):
     return out
 
 
+def friction_gain_for(model, q, rho=RHO_FRICTION):
+    """``P_friction`` (n, 3): ``rho H_ii(q)`` on joint i's three terms (doc/design.md §7).
+
+    The explicit step of the tracking term is stable on joint i while
+    ``h P_f,i |Y_f,i|^2 / H_ii`` stays below the feedback's rate ``kappa``; a gain
+    proportional to the joint's inertia (the model's, which a plant's armature only raises)
+    keeps that ratio the same on every joint.
+    """
+    H = mass_matrix(model, np.asarray(q, dtype=float))
+    return rho * np.repeat(np.diag(H)[:, None], 3, axis=1)
+
+
 def make_controller(scenario, law, laws=None):
     kind, extra = (laws or LAWS)[law]
     kwargs = dict(scenario.gains, **extra)
     if isinstance(kwargs.get("theta_hat0"), str):
         start = scenario.gains.get("theta_hat0")
         kwargs["theta_hat0"] = default_start(scenario.model.theta()) if start is None else start
+    if isinstance(kwargs.get("P_friction"), str):              # INERTIA_SCALED
+        kwargs["P_friction"] = friction_gain_for(scenario.model, scenario.q0)
     return controller(kind, scenario.model, kwargs)
 
 
