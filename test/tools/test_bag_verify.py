@@ -13,7 +13,9 @@ import yaml
 from bagtest_support import bag_file, cli_module, read_mcap_ros2, read_rosbags
 
 from rcac_ros.errors import BagError, ConfigError, CutBagError
-from rcac_ros.tools.bags.writer import BagWriter, recover, verify
+from rcac_ros.tools.bags.recover import recover
+from rcac_ros.tools.bags.verify import verify
+from rcac_ros.tools.bags.writer import BagWriter
 
 N_MSG = 2000
 

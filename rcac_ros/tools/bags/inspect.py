@@ -1,8 +1,8 @@
 """``rcac inspect``: verify and summarise a bag of the package's topics, compute metrics, plot.
 
-The bag (or the single bag in a folder) is first verified (:func:`bag_io.verify`: CRCs, counts,
+The bag (or the single bag in a folder) is first verified (:func:`.verify.verify`: CRCs, counts,
 sqlite's integrity check); a damaged or cut bag is one line and exit 2, and ``--recover``
-salvages it (:func:`bag_io.recover`). The summary starts with the header ``ros2 bag info``
+salvages it (:func:`.recover.recover`). The summary starts with the header ``ros2 bag info``
 prints, then lists every topic (type, count, rate from the message stamps) and the bag's
 duration. The metrics are those of ``rcac experiment`` that the bag allows (tracking errors,
 estimate errors against the model's true parameters, prediction error, torques) plus the loop
@@ -24,8 +24,8 @@ from rcac_ros import topics
 from rcac_ros.errors import BagError, ConfigError
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import positive_int
-from rcac_ros.tools.bags.writer import (bag_info, default_recovered_path, find_bag,
-                                        format_recovery, recover, Report, verify)
+from rcac_ros.tools.bags.recover import default_recovered_path, format_recovery, recover
+from rcac_ros.tools.bags.verify import bag_info, find_bag, Report, verify
 
 #: diagnostics values shown in the summary (all are kept in metrics.json)
 DIAG_KEYS = ("mode", "steps", "real_time_factor", "lockstep_misses", "late_efforts",
@@ -79,9 +79,9 @@ def _stamp(header):
 def read_bag(path, report=None):
     """Verify, then read a bag into :class:`TopicData` per topic.
 
-    The bag is first checked with what its format offers (:func:`bag_io.verify`: chunk
+    The bag is first checked with what its format offers (:func:`.verify.verify`: chunk
     CRCs, counts against metadata.yaml, sqlite's integrity check); a cut or corrupt bag
-    raises :class:`rcac_ros.tools.bags.writer.BagError` with one line naming the problem. The
+    raises :class:`rcac_ros.errors.BagError` with one line naming the problem. The
     messages are then read with rosbags. For mcap, the publishers' send stamps and sequence
     numbers (``publish_time``, ``sequence``, stored by ``rcac record``) come from the
     ``mcap`` library's scan.
@@ -90,7 +90,7 @@ def read_bag(path, report=None):
     ----------
     path : str
         rosbag2 directory (mcap or sqlite3), or a folder holding exactly one.
-    report : bag_io.Report, optional
+    report : verify.Report, optional
         Filled with what the verification found.
 
     Returns

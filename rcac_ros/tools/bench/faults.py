@@ -23,6 +23,9 @@ hostile_flood a third process (niced) publishes every 100 ms a JointState of 1e6
 starved       busy processes (two per core) beside the nodes for a third of the run
 ============  ===================================================================
 
+Each case is one entry of :data:`CASES` (a :class:`Case`: the fault, its window, its
+figures and its checks).
+
 Per case it reports the tracking RMS (the controller's ``~/tracking_error``, norm over
 the joints) against nominal, the longest gap between efforts (sender's stamps), whether
 the estimates stayed finite and bounded, and whether control recovered: the last fifth
@@ -42,14 +45,14 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 
-CASES = ("nominal", "drops", "jitter", "noise", "restart", "frozen_clock", "flood",
-         "hostile_flood", "starved")
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
          "memory_growth": 0.05, "settle_s": 5.0, "starved_ratio": 10.0}
 #: the hostile flood (doc/failsafe.md): 1e6 joint names, a pair of messages every 100 ms
@@ -186,6 +189,135 @@ def rss_kb(pid):
     return None
 
 
+def _freeze_clock(run):
+    run.relay.freeze_clock = True
+
+
+def _thaw_clock(run):
+    run.relay.freeze_clock = False
+
+
+def _starve(run):
+    run.busy = [subprocess.Popen([sys.executable, "-c", BUSY])
+                for _ in range(2 * (os.cpu_count() or 1))]
+
+
+def _stop_busy(run):
+    for p in run.busy:
+        p.kill()
+        p.wait()
+    run.busy = []
+
+
+def _flood(run, extra=(), prefix=()):
+    cmd = list(prefix) + [sys.executable, FLOOD, str(run.third)] + list(extra)
+    run.flood = subprocess.Popen(cmd, env=run.env, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+
+
+def _hostile_flood(run):
+    _flood(run, HOSTILE, ("nice", "-n", "10"))
+
+
+def _restart_figures(run, out):
+    first = run.relay.first_state_after[1]
+    resumed = [e[1] for e in run.probe.efforts if not e[2] and first is not None
+               and e[1] > first]
+    out["restart_recovery_s"] = (resumed[0] - first) * 1e-9 if resumed else None
+    out["restart_at_s"] = (run.t_restart - run.t0) * 1e-9
+
+
+def _resume_figures(run, out):
+    resumed = [e[1] for e in run.probe.efforts if not e[2] and e[1] > run.t_resume]
+    out["control_back_s"] = (resumed[0] - run.t_resume) * 1e-9 if resumed else None
+    out["resume_at_s"] = (run.t_resume - run.t0) * 1e-9
+
+
+def _window_and_machine_figures(run, out):
+    out.update(window_figures(run.probe, run.track, run.window, run.h))
+    ticks = run.plain.communicate(timeout=60.0)[0].split() if run.plain is not None else []
+    machine = np.diff(np.array(ticks, dtype=np.int64)) * 1e-6
+    out["plain_loop_gap_ms"] = float(machine.max()) if machine.size else None
+
+
+def _judge_restart(r, ref):
+    rec = r.get("restart_recovery_s")
+    r["recovered"] &= rec is not None and rec <= GOALS["restart_recovery_s"]
+
+
+def _judge_resume(r, ref):
+    if not ref:
+        return
+    r["settle_s"] = settle_time(r["tracking_t_s"], r["tracking"], r["resume_at_s"],
+                                GOALS["tracking_ratio"] * ref)
+    back = r.get("control_back_s")
+    r["recovered"] = back is not None and back <= GOALS["restart_recovery_s"] \
+        and r["settle_s"] is not None and r["settle_s"] <= GOALS["settle_s"]
+
+
+def _judge_hostile(r, ref):
+    if r.get("plain_loop_gap_ms") is not None:
+        # no safe effort, and no gap beyond the machine's own plus two periods
+        r["window_ok"] = r["window_safe"] == 0 and r["window_gap_ms"] <= \
+            r["plain_loop_gap_ms"] + GOALS["gap_periods"] * 1e3 / r["rate"]
+
+
+def _judge_starved(r, ref):
+    if ref and r.get("window_tracking_rms") is not None:
+        r["window_ratio"] = r["window_tracking_rms"] / ref
+        r["window_ok"] = r["window_ratio"] <= GOALS["starved_ratio"] and r["theta_bounded"]
+
+
+@dataclass(frozen=True)
+class Case:
+    """One fault case (the table in the module docstring): what to inject, when, what to check.
+
+    ``window`` is ``"run"`` (the fault, if any, for the whole run: the relay's ``drop`` and
+    ``jitter``, the nodes' overrides), ``"restart"`` (the simulator restarted at mid-run) or
+    ``"third"`` (``inject`` called after a third of the run, ``clear`` after two thirds).
+    ``figures(run, out)`` adds the case's own figures, ``check(result, nominal RMS)`` its
+    verdicts (:func:`judge`).
+    """
+
+    controller: dict = field(default_factory=dict)
+    simulator: dict = field(default_factory=dict)
+    drop: float = 0.0
+    jitter: float = 0.0
+    window: str = "run"
+    inject: Callable = None
+    clear: Callable = None
+    plain_loop: bool = False        # measure the machine's own stalls in the window
+    figures: Callable = None
+    check: Callable = None
+
+
+CASES = {
+    "nominal": Case(),
+    "drops": Case(drop=0.1),
+    "jitter": Case(jitter=0.002),
+    "noise": Case(simulator={"position_noise": 1e-4, "velocity_noise": 1e-3}),
+    "restart": Case(window="restart", figures=_restart_figures, check=_judge_restart),
+    "frozen_clock": Case(controller={"use_sim_time": True}, window="third",
+                         inject=_freeze_clock, clear=_thaw_clock, figures=_resume_figures,
+                         check=_judge_resume),
+    "flood": Case(window="third", inject=_flood),
+    "hostile_flood": Case(window="third", inject=_hostile_flood, plain_loop=True,
+                          figures=_window_and_machine_figures, check=_judge_hostile),
+    "starved": Case(window="third", inject=_starve, clear=_stop_busy, plain_loop=True,
+                    figures=_window_and_machine_figures, check=_judge_starved),
+}
+
+
+class _Run:
+    """What a case's functions reach: the relay, the probe, the processes and the times."""
+
+    def __init__(self, h, env):
+        self.h, self.env = h, env
+        self.relay = self.probe = self.flood = self.plain = self.window = None
+        self.busy = []
+        self.third = self.t0 = self.t_restart = self.t_resume = self.track = None
+
+
 def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
              verbose=True):
     """Run one case; return its figures (see the module docstring)."""
@@ -196,30 +328,29 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     from rcac_ros.tools.launch import init_context
     from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed, shut_down
 
+    spec = CASES[case]
     h = 1.0 / rate
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
     os.makedirs(log_dir, exist_ok=True)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     ctrl_over = dict(controller, mode="timer", rate=float(rate), monitor_decimation=10)
-    if case == "frozen_clock":
-        ctrl_over["use_sim_time"] = True
+    ctrl_over.update(spec.controller)
     sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
-    if case == "noise":
-        sim_over.update(position_noise=1e-4, velocity_noise=1e-3)
+    sim_over.update(spec.simulator)
     remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
              "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
-    children, ctx, executor, flood, relay = [], None, None, None, None
-    plain, busy, window = None, [], None
+    children, ctx, executor = [], None, None
     out = {"case": case, "rate": float(rate)}
     with domain_coordinator.domain_id() as domain:
         env = child_env(domain)
+        run = _Run(h, env)
         try:
             ctx = init_context(domain)
             executor = SingleThreadedExecutor(context=ctx)
             node = Node("rcac_fault_bench", context=ctx)
             executor.add_node(node)
-            relay = Relay(node, h)
-            probe = Probe(node)
+            relay = run.relay = Relay(node, h)
+            probe = run.probe = Probe(node)
 
             def sim_child(tag=""):
                 return Child("simulator", node_command("simulator", overrides=sim_over) + remap,
@@ -244,44 +375,32 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
                 raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
             spin_for(warmup)
             probe.recording = True
-            t0 = time.monotonic_ns()
-            relay.drop = 0.1 if case == "drops" else 0.0
-            relay.jitter = 0.002 if case == "jitter" else 0.0
-            third = duration / 3.0
+            t0 = run.t0 = time.monotonic_ns()
+            relay.drop = spec.drop
+            relay.jitter = spec.jitter
+            third = run.third = duration / 3.0
             rss = [(0.0, rss_kb(ctrl.proc.pid))]
-            if case == "restart":
+            if spec.window == "restart":
                 spin_for(duration / 2.0)
                 children[1].stop()
                 spin_for(0.5)
                 relay.first_state_after = (time.monotonic_ns(), None)
-                t_restart = time.monotonic_ns()
+                run.t_restart = time.monotonic_ns()
                 children[1] = sim_child("_restarted")
                 spin_for(duration / 2.0 - 0.5)
-            elif case in ("frozen_clock", "flood", "hostile_flood", "starved"):
+            elif spec.window == "third":
                 spin_for(third)
-                if case == "frozen_clock":
-                    relay.freeze_clock = True
-                elif case == "starved":
-                    busy = [subprocess.Popen([sys.executable, "-c", BUSY])
-                            for _ in range(2 * (os.cpu_count() or 1))]
-                else:
-                    cmd = [sys.executable, FLOOD, str(third)]
-                    if case == "hostile_flood":
-                        cmd = ["nice", "-n", "10"] + cmd + HOSTILE
-                    flood = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
-                                             stderr=subprocess.DEVNULL)
-                if case in ("hostile_flood", "starved"):
-                    plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
-                                              str(third)], stdout=subprocess.PIPE, text=True)
-                window = (time.time_ns(), time.monotonic_ns())
+                spec.inject(run)
+                if spec.plain_loop:
+                    run.plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
+                                                  str(third)], stdout=subprocess.PIPE,
+                                                 text=True)
+                run.window = (time.time_ns(), time.monotonic_ns())
                 spin_for(third)
-                window += (time.time_ns(), time.monotonic_ns())
-                t_resume = time.monotonic_ns()
-                relay.freeze_clock = False
-                for p in busy:
-                    p.kill()
-                    p.wait()
-                busy = []
+                run.window += (time.time_ns(), time.monotonic_ns())
+                run.t_resume = time.monotonic_ns()
+                if spec.clear is not None:
+                    spec.clear(run)
                 spin_for(duration - 2 * third)
             else:
                 step = 10.0 if soak else duration
@@ -295,15 +414,15 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
             t1 = time.monotonic_ns()
             spin_for(1.2)           # one more diagnostics message
         finally:
-            for p in busy + [p for p in (flood,) if p is not None]:
+            for p in run.busy + [p for p in (run.flood,) if p is not None]:
                 p.kill()
                 p.wait()
-            if relay is not None:
-                relay.close()
+            if run.relay is not None:
+                run.relay.close()
             shut_down(children, executor, ctx)
     src = np.array([e[0] for e in probe.efforts], dtype=np.int64)
     gaps = np.diff(src) * 1e-6 if src.size > 1 else np.array([np.inf])
-    track = np.array([e for e in probe.tracking]).reshape(-1, 2)
+    track = run.track = np.array([e for e in probe.tracking]).reshape(-1, 2)
     out.update(window_s=(t1 - t0) * 1e-9, efforts=int(src.size),
                watchdog_efforts=int(sum(e[2] for e in probe.efforts)),
                longest_gap_ms=float(gaps.max()), gaps_over_2h=int(np.sum(gaps > 2e3 * h)),
@@ -315,21 +434,8 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         if tail.size else None
     out["tracking_t_s"] = ((track[:, 0] - t0) * 1e-9).tolist() if track.size else []
     out["tracking"] = track[:, 1].tolist() if track.size else []
-    if window is not None and case in ("hostile_flood", "starved"):
-        out.update(window_figures(probe, track, window, h))
-        ticks = plain.communicate(timeout=60.0)[0].split() if plain is not None else []
-        machine = np.diff(np.array(ticks, dtype=np.int64)) * 1e-6
-        out["plain_loop_gap_ms"] = float(machine.max()) if machine.size else None
-    if case == "restart":
-        first = relay.first_state_after[1]
-        resumed = [e[1] for e in probe.efforts if not e[2] and first is not None
-                   and e[1] > first]
-        out["restart_recovery_s"] = (resumed[0] - first) * 1e-9 if resumed else None
-        out["restart_at_s"] = (t_restart - t0) * 1e-9
-    if case == "frozen_clock":
-        resumed = [e[1] for e in probe.efforts if not e[2] and e[1] > t_resume]
-        out["control_back_s"] = (resumed[0] - t_resume) * 1e-9 if resumed else None
-        out["resume_at_s"] = (t_resume - t0) * 1e-9
+    if spec.figures is not None:
+        spec.figures(run, out)
     diag = probe.diagnostics.get("rcac_controller: control loop", {})
     for key in ("starved_spells", "delay_worst_ms", "late_ticks", "skipped_ticks",
                 "watchdog_trips", "rejected_messages",
@@ -367,22 +473,9 @@ def judge(results):
         r["tracking_ratio"] = r["tracking_rms"] / ref if ref and r["tracking_rms"] else None
         last = r["tracking_rms_last_fifth"]
         r["recovered"] = bool(ref and last is not None and last <= GOALS["tracking_ratio"] * ref)
-        if r["case"] == "restart":
-            rec = r.get("restart_recovery_s")
-            r["recovered"] &= rec is not None and rec <= GOALS["restart_recovery_s"]
-        if r["case"] == "frozen_clock" and ref:
-            r["settle_s"] = settle_time(r["tracking_t_s"], r["tracking"], r["resume_at_s"],
-                                        GOALS["tracking_ratio"] * ref)
-            back = r.get("control_back_s")
-            r["recovered"] = back is not None and back <= GOALS["restart_recovery_s"] \
-                and r["settle_s"] is not None and r["settle_s"] <= GOALS["settle_s"]
-        if r["case"] == "hostile_flood" and r.get("plain_loop_gap_ms") is not None:
-            # no safe effort, and no gap beyond the machine's own plus two periods
-            r["window_ok"] = r["window_safe"] == 0 and r["window_gap_ms"] <= \
-                r["plain_loop_gap_ms"] + GOALS["gap_periods"] * 1e3 / r["rate"]
-        if r["case"] == "starved" and ref and r.get("window_tracking_rms") is not None:
-            r["window_ratio"] = r["window_tracking_rms"] / ref
-            r["window_ok"] = r["window_ratio"] <= GOALS["starved_ratio"] and r["theta_bounded"]
+        check = CASES[r["case"]].check
+        if check is not None:
+            check(r, ref)
     return results
 
 
