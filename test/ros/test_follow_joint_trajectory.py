@@ -560,11 +560,12 @@ def test_controller_topic_trajectory_replaces_the_goal_in_the_executor_thread():
         result = handle.get_result_async()
         goal_motion = node._motion.active
         threads = []
-        for name in ("follow", "hold_position"):
-            def spy(*args, _f=getattr(node, name)):
+        # the inputs hold the node's follow/hold as callbacks: spy on what both reach
+        for name in ("follow", "hold"):
+            def spy(*args, _f=getattr(node._motion, name)):
                 threads.append(threading.current_thread())
                 return _f(*args)
-            setattr(node, name, spy)
+            setattr(node._motion, name, spy)
         replacement = _arm_goal(PAPER_Q0 + AMPLITUDE, 0).trajectory
         for _ in range(20):
             pub.publish(replacement)
