@@ -41,9 +41,10 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
-from rcac_ros.errors import GainError
-from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, friction_step_kernel, paper_friction_step)
+from rcac_ros.errors import GainError, InputError
+from .joint_friction import (F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, friction_natural_gain, friction_step_kernel,
+                             natural_friction_start, paper_friction_step)
 from .least_squares import initial_factor
 from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
@@ -183,9 +184,6 @@ class RecursiveCompositeController:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
-        if geometry == "natural" and self.joint_friction:
-            raise GainError("geometry: 'natural' with joint_friction is not built yet "
-                            "(doc/design.md §8)")
         if geometry == "natural" and self.adaptation != "gradient":
             raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
                             f"{self.adaptation!r} (doc/design.md §8)")
@@ -203,6 +201,11 @@ class RecursiveCompositeController:
         self.natural_gain = k
         self._const[:, NAT_K] = k
         self._const[:, NAT_P_NU:NAT_P_NU + 9] = nu_gain(self.P).reshape(self.n, 9)
+        if self.joint_friction:                     # the joint terms: k_f x^2, x > 0
+            self.friction_hat0 = natural_friction_start(self._friction_hat0_given,
+                                                        self.model.joint_terms(), InputError)
+            self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
+                                                               self.friction_hat0)
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 
@@ -218,8 +221,10 @@ class RecursiveCompositeController:
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
         n = self.n
         self.P_friction = friction_gain(P_friction, n)
-        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+        self._friction_hat0_given = None if friction_hat0 is None else \
             as_array(friction_hat0, (n, 3), "friction_hat0")
+        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+            self._friction_hat0_given
         self._jdata = np.zeros((n, JOINT_COLS))
         self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
         self._jdata[:, F_VC] = self.model.friction_velocity
@@ -321,6 +326,8 @@ class RecursiveCompositeController:
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
+            if self.geometry == "natural":
+                fh = natural_friction_start(fh, None, InputError)
             self._jdata[:, F_HAT:F_HAT + 3] = fh
             self._jfilt[:] = 0.0
         self._state[:] = 0.0
@@ -445,7 +452,10 @@ class RecursiveCompositeController:
         if not self.joint_friction:
             raise GainError("friction_hat: the controller has no joint terms "
                             "(joint_friction=False)")
-        self._jdata[:, F_HAT:F_HAT + 3] = as_array(friction_hat, (self.n, 3), "friction_hat")
+        fh = as_array(friction_hat, (self.n, 3), "friction_hat")
+        if self.geometry == "natural":
+            fh = natural_friction_start(fh, None, InputError)
+        self._jdata[:, F_HAT:F_HAT + 3] = fh
 
     @property
     def E(self):
