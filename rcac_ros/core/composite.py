@@ -205,7 +205,7 @@ class RecursiveCompositeController:
             self.friction_hat0 = natural_friction_start(self._friction_hat0_given,
                                                         self.model.joint_terms(), InputError)
             self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
-                                                               self.friction_hat0)
+                                                                self.friction_hat0)
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 

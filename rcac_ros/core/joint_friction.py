@@ -40,8 +40,8 @@ from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_P_DIAG,
-                       I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, S_LINK,
-                       TAU, THETA_HAT, U_ROW, W_ROW)
+                       I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F,
+                       PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, project, retract_links, tracking_active,
                          update_least_squares)
 from .channels import (axis_terms, channel_start, close_channels, filtered_output, predict_link,

@@ -68,16 +68,18 @@ def test_natural_start_of_the_joint_terms():
     np.testing.assert_array_equal(ctrl.friction_hat, plant.joint_terms())
     for cls in (RecursiveCompositeController, SlotineLiCompositeController):
         with pytest.raises(InputError, match="friction_hat0: every joint term must be > 0"):
-            cls(model, geometry="natural", joint_friction=True, friction_hat0=np.zeros((model.n, 3)))
+            cls(model, geometry="natural", joint_friction=True,
+                friction_hat0=np.zeros((model.n, 3)))
     with pytest.raises(InputError, match="must be > 0"):
         ctrl.reset(friction_hat0=-np.ones((model.n, 3)))
 
 
 @pytest.mark.parametrize("update", ["implicit"])
 def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
-    """Both laws natural + joint terms (implicit; with the explicit update the two parted
-    by 8e-2 after 500 steps, measured: rounding grown as the gain k_f x^2 grew 20-fold) on a frictional random chain: efforts, link and joint
-    estimates and E equal to 1e-9 at every step, and the joint terms did move. (Started at
+    """Both laws natural + joint terms on a frictional random chain: efforts, link and joint
+    estimates and E equal to 1e-9 at every step, and the joint terms did move. (Implicit
+    only: with the explicit update the two parted by 8e-2 after 500 steps, measured, the
+    rounding grown as the gain k_f x^2 grew 20-fold. Started at
     half the true terms: from a start 100 x too small, the gain k_f x^2 grows 1e4-fold and the
     two laws' rounding then parts them by 2e-7, measured.)"""
     rng = np.random.default_rng(3)
