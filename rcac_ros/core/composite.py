@@ -102,7 +102,9 @@ class RecursiveCompositeController:
         stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8).
+        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8). With
+        ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``k_f x^2``,
+        ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
@@ -113,7 +115,8 @@ class RecursiveCompositeController:
         (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).
         False (default): the paper's law, to the last bit.
     friction_hat0 : array_like (n, 3), optional
-        Initial joint estimates (armature, damping, friction); default the model's.
+        Initial joint estimates (armature, damping, friction); default the model's (natural
+        geometry: every term > 0, default the model's floored at 1e-3, doc/design.md §8).
     P_friction : float, (3,) or (n, 3)
         Diagonal adaptation gains of the joint terms, positive (default
         :data:`~rcac_ros.core.joint_friction.P_FRICTION`).
