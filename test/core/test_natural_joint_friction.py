@@ -115,7 +115,8 @@ def test_tracks_a_plant_with_joint_friction():
     joint estimates from 0.1 x the true terms: the natural law's RMS error over the last 5 s
     is within 1.5 x the Euclidean joint-friction law's (measured: 5.8e-4 vs 1.67e-3 rad) and
     every joint term stays > 0. (The Euclidean law is the reference; on a random 5-link chain
-    with the gains of the test above the natural law diverged, doc/design.md §8.)"""
+    with the gains of the test above, from 0.1 x the true terms, the natural law diverged:
+    doc/design.md §8.)"""
     rigid = css_arm()
     plant = frictional(rigid)
     q0 = np.array(PAPER_Q0)
