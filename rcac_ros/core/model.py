@@ -412,8 +412,8 @@ def css_arm(gravity=(0.0, 0.0, 0.0)):
                       check_triangle=False)
 
 
-#: Joint torque limits of the CSS arm preset of the nodes, N m. The paper gives none; these
-#: are chosen (issue 9): about twice the largest torque of the paper's Section 4 run
+#: Joint torque limits of the CSS arm preset of the nodes, N m (doc/failsafe.md, "goals"). The
+#: paper gives none; these are chosen: about twice the largest torque of its Section 4 run
 #: (velocity reading, paper gains, 60 s: peaks 376, 988, 532, 127, 26, 18, 10 N m) for the
 #: four arm joints, and 500 N m for the three wrist joints.
 CSS_EFFORT_LIMIT = (2000.0, 2000.0, 2000.0, 2000.0, 500.0, 500.0, 500.0)

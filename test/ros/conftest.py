@@ -7,7 +7,7 @@ control_msgs is not a PyPI wheel. Where it does not import, the subset the packa
 workspace on ``PYTHONPATH``) always wins: nothing is built then. See doc/testing.md.
 
 A conftest runs before the test modules of its folder are imported, so
-``rcac_ros.nodes.follow_joint_trajectory`` sees the built package when it first imports.
+``rcac_ros.nodes.fjt.server`` sees the built package when it first imports.
 """
 
 import os

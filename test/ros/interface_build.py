@@ -202,7 +202,9 @@ def use_in_tests():
 
     Called by ``test/ros/conftest.py``: first on ``sys.path``, and on ``PYTHONPATH`` for the
     processes the tests start. A failed build is kept in :data:`BUILD_ERROR` (the skip
-    reason of the tests that need control_msgs), not raised.
+    reason of the tests that need control_msgs), not raised, unless the environment sets
+    ``RCAC_REQUIRE_TEST_INTERFACES=1`` (``.ci/run`` does): there a failed build fails the run
+    instead of turning the action server's tests into skips.
     """
     global BUILD_ERROR
     if importlib.util.find_spec(PACKAGE) is not None:
@@ -210,6 +212,8 @@ def use_in_tests():
     try:
         out = build(HERE.parent.parent / "build" / "test-interfaces")
     except Exception as err:                              # noqa: BLE001 (the skip reason)
+        if os.environ.get("RCAC_REQUIRE_TEST_INTERFACES") == "1":
+            raise
         BUILD_ERROR = f"the test build of {PACKAGE} failed: {err}"
         return
     python = str(out / "python")

@@ -47,6 +47,7 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
                 time.sleep(max(0.0, nxt - time.monotonic()))
         feeder = threading.Thread(target=states, daemon=True)
         feeder.start()
+        flood = sleeper = None
         try:
             assert wait(lambda: len(probe.answers()) > 200 or len(probe.efforts) > 1000)
             time.sleep(1.0)
@@ -63,6 +64,10 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
         finally:
             stop.set()
             feeder.join(5.0)
+            for proc in (flood, sleeper):
+                if proc is not None and proc.poll() is None:     # a failed step: no flood
+                    proc.kill()                                  # left for the next tests
+                    proc.wait()
         assert "flood: sent" in out, out
         sent = int(out.split("flood: sent")[1].split()[0])
         with probe.lock:
@@ -77,7 +82,6 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
     # efforts kept coming: over half the nominal count (on main, one 2 s gap of the 3 s
     # left a third; a loaded machine alone costs the free-running loop up to ~20 %)
     assert gaps.size > 0.5 * (t_end - t_start) * 1e-9 / H
-    # main: one gap of ~2 s. The goal (<= 2 periods beyond the machine's own stalls)
-    # is not met: rclpy's raw take of an 8 MB message holds the interpreter lock ~30 ms
-    # (measured: a thread of the same process stalls 36 ms, one of another process 2 ms)
+    # a liveness bound, not the goal of doc/failsafe.md (<= 2 periods beyond the machine's
+    # own stalls, not met): the DDS copy of each 8 MB sample still delays the valid states
     assert gaps.max() <= machine.max() + 500.0, (gaps.max(), machine.max())

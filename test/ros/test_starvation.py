@@ -2,7 +2,7 @@
 
 The reference is the divergence itself: the paper's closed loop (core simulator and
 controller, the CSS arm, K_D = 1e4) with each effort computed from a state ``d`` periods old,
-as ``rcac bench --delay-margin`` runs it; a delay past the margin diverges without the guard.
+as ``rcac bench delay-margin`` runs it; a delay past the margin diverges without the guard.
 """
 
 import numpy as np

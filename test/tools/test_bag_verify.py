@@ -248,7 +248,7 @@ def test_figures_legend_log_error_and_timing_caption(tmp_path, monkeypatch):
 
 
 def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
-    """The issue's case: a recorder (rosbags) killed mid-run leaves complete 1 MiB chunks, no
+    """A recorder (rosbags) killed mid-run leaves complete 1 MiB chunks, no
     footer and no metadata.yaml; inspect says to recover, recover salvages the chunks."""
     import shutil
 
@@ -282,6 +282,6 @@ def test_bag_of_a_killed_rosbags_writer_is_recovered(tmp_path, capsys):
 
 
 def test_garbled_record_length_is_one_line(tmp_path, capsys):
-    """A damaged length field (the OverflowError traceback of the issue) is one line too."""
+    """A damaged length field (an OverflowError traceback before) is one line too."""
     _inspect_fails_then_recover(tmp_path, capsys, 5, _garble_length,      # the 6th chunk
                                 "bag_0.mcap", "corrupt")

@@ -1,8 +1,8 @@
 """Timer mode's compensation of the state's age: predict it to when the effort acts.
 
 In timer mode the effort answers the latest state, received up to a period before the
-tick, and acts until the next tick: with the paper's K_D = 1e4 that delay matters (issue
-9, section 8). :class:`StatePredictor` integrates the model's forward dynamics (the
+tick, and acts until the next tick: with the paper's K_D = 1e4 that delay matters
+(doc/nodes.md, "Timing"). :class:`StatePredictor` integrates the model's forward dynamics (the
 articulated-body algorithm, RK4: :func:`rcac_ros.core.simulator.rk4_kernel`, the
 simulator's integrator) from the state over its age plus a fixed lookahead, holding the
 effort being applied.

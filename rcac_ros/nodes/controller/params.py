@@ -79,7 +79,8 @@ def read_parameters(node, v):
 
 
 def adaptation_options(v, channels):
-    """The core controller's issue-8 options from the checked parameters ``v``."""
+    """The core controller's adaptation options from the checked parameters ``v``
+    (doc/nodes.md, "Parameters")."""
     return dict(channels=channels, update=v["update"], adaptation=v["adaptation"],
                 forgetting=v["forgetting"], P_max=v["P_max"], dead_zone_s=v["dead_zone_s"],
                 dead_zone_E=v["dead_zone_E"],

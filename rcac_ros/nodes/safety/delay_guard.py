@@ -5,7 +5,7 @@ of the state the step uses (doc/failsafe.md, "Starved machine").
 
 The delay of a step is the age of its state plus the time the previous effort was held
 beyond one period. A delay that lasts diverges once it passes the delay margin of ``K_D``:
-offline (``rcac bench --delay-margin``, the CSS arm, the paper's motion) the margin falls as
+offline (``rcac bench delay-margin``, the CSS arm, the paper's motion) the margin falls as
 1/K_D, the product staying at about :data:`MARGIN_PRODUCT`. The guard smooths the delay over
 :data:`TAU` s of steady time (one late tick is a kick, not a lasting delay) and, while the
 smoothed delay is past the margin divided by :data:`SAFETY`, asks for ``K_D`` scaled by
@@ -17,7 +17,7 @@ stayed within that limit for ``recover_after`` s.
 import math
 
 #: K_D (N m s/rad, the scalar of K_Di = K_D I6) times the largest effort delay (s) that still
-#: tracked, measured offline with ``rcac bench --delay-margin``'s loop: K_D = 1e4 tracked 4
+#: tracked, measured offline with ``rcac bench delay-margin``'s loop: K_D = 1e4 tracked 4
 #: periods late (8 ms) and diverged at 5; 3e3 tracked at 20 ms and diverged at 40 ms; 1e3
 #: tracked at 80 ms (doc/failsafe.md, "Starved machine")
 MARGIN_PRODUCT = 80.0

@@ -278,7 +278,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
     controller_overrides : dict, optional
         Controller parameters on top of :data:`BENCH_CONTROLLER`.
     controller_mode : {"timer", "on_state"}
-        ``timer``: the controller's own ``rate`` Hz loop (the issue's configuration);
+        ``timer``: the controller's own ``rate`` Hz loop (doc/nodes.md, "Timing");
         ``on_state`` (alias ``lockstep``, the controller mode it uses): it answers every
         joint state as it arrives (event-driven), which removes the phase between the two
         loops from the latency.
