@@ -41,9 +41,10 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
-from rcac_ros.errors import GainError
-from .joint_friction import (F_GAIN, F_HAT, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, friction_step_kernel, paper_friction_step)
+from rcac_ros.errors import GainError, InputError
+from .joint_friction import (F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, friction_natural_gain, friction_step_kernel,
+                             natural_friction_start, paper_friction_step)
 from .least_squares import initial_factor
 from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
@@ -101,7 +102,9 @@ class RecursiveCompositeController:
         stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8).
+        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8). With
+        ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``k_f x^2``,
+        ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
@@ -112,7 +115,8 @@ class RecursiveCompositeController:
         (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).
         False (default): the paper's law, to the last bit.
     friction_hat0 : array_like (n, 3), optional
-        Initial joint estimates (armature, damping, friction); default the model's.
+        Initial joint estimates (armature, damping, friction); default the model's (natural
+        geometry: every term > 0, default the model's floored at 1e-3, doc/design.md §8).
     P_friction : float, (3,) or (n, 3)
         Diagonal adaptation gains of the joint terms, positive (default
         :data:`~rcac_ros.core.joint_friction.P_FRICTION`).
@@ -183,9 +187,6 @@ class RecursiveCompositeController:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
-        if geometry == "natural" and self.joint_friction:
-            raise GainError("geometry: 'natural' with joint_friction is not built yet "
-                            "(doc/design.md §8)")
         if geometry == "natural" and self.adaptation != "gradient":
             raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
                             f"{self.adaptation!r} (doc/design.md §8)")
@@ -203,6 +204,11 @@ class RecursiveCompositeController:
         self.natural_gain = k
         self._const[:, NAT_K] = k
         self._const[:, NAT_P_NU:NAT_P_NU + 9] = nu_gain(self.P).reshape(self.n, 9)
+        if self.joint_friction:                     # the joint terms: k_f x^2, x > 0
+            self.friction_hat0 = natural_friction_start(self._friction_hat0_given,
+                                                        self.model.joint_terms(), InputError)
+            self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
+                                                                self.friction_hat0)
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 
@@ -218,8 +224,10 @@ class RecursiveCompositeController:
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
         n = self.n
         self.P_friction = friction_gain(P_friction, n)
-        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+        self._friction_hat0_given = None if friction_hat0 is None else \
             as_array(friction_hat0, (n, 3), "friction_hat0")
+        self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
+            self._friction_hat0_given
         self._jdata = np.zeros((n, JOINT_COLS))
         self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
         self._jdata[:, F_VC] = self.model.friction_velocity
@@ -321,6 +329,8 @@ class RecursiveCompositeController:
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
+            if self.geometry == "natural":
+                fh = natural_friction_start(fh, None, InputError)
             self._jdata[:, F_HAT:F_HAT + 3] = fh
             self._jfilt[:] = 0.0
         self._state[:] = 0.0
@@ -445,7 +455,10 @@ class RecursiveCompositeController:
         if not self.joint_friction:
             raise GainError("friction_hat: the controller has no joint terms "
                             "(joint_friction=False)")
-        self._jdata[:, F_HAT:F_HAT + 3] = as_array(friction_hat, (self.n, 3), "friction_hat")
+        fh = as_array(friction_hat, (self.n, 3), "friction_hat")
+        if self.geometry == "natural":
+            fh = natural_friction_start(fh, None, InputError)
+        self._jdata[:, F_HAT:F_HAT + 3] = fh
 
     @property
     def E(self):

@@ -23,7 +23,9 @@ as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 
 Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
 terms use least squares); the leakage acts on the link terms only; the projection keeps
-the joint terms >= 0. Discretisation as the link terms' (explicit Euler on the tracking
+the joint terms >= 0. Natural geometry (doc/design.md §8): each term adapts in the positive
+orthant's geometry (gain ``k_f x^2`` at the step's start, then :func:`retract_term`), so it
+stays > 0. Discretisation as the link terms' (explicit Euler on the tracking
 term, implicit or explicit on the prediction term, one joint solve over all parameters).
 """
 
@@ -37,10 +39,11 @@ from rcac_ros.errors import GainError
 from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
-                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_PROJECT, I_P_DIAG, I_TRACKING,
-                       I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, S_LINK,
-                       TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import adapt_link, project, tracking_active, update_least_squares
+                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_P_DIAG,
+                       I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F,
+                       PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+from .adaptation import (adapt_link, project, retract_links, tracking_active,
+                         update_least_squares)
 from .channels import (axis_terms, channel_start, close_channels, filtered_output, predict_link,
                        start_channels)
 from .regressor import reference_wrench, regressor_row, regressor_terms
@@ -53,7 +56,9 @@ F_R = 6             #: R_f,j = theta_f_hat_j - h P_f,j (...), eq 24 step 1 (3)
 F_Y = 9             #: Y_f,j = [qdd_rj, qd_rj, sigma(qd_j)] (3)
 F_SQ = 12           #: s_qj = qd_j - qd_rj
 F_VC = 13           #: v_c of sigma
-JOINT_COLS = 14
+F_K = 14            #: natural geometry: k_f,j, the natural gain (3) (doc/design.md §8)
+F_PREV = 17         #: natural geometry: theta_f_hat_j before the step (3)
+JOINT_COLS = 20
 
 # ---- channel c, joint j: jfilt[c, j, :] ----------------------------------------------------
 JPHI_F = 0          #: phi_f^f (3)
@@ -66,6 +71,10 @@ JFILT_COLS = 18
 
 #: Default diagonal gain of the joint terms (armature, damping, friction).
 P_FRICTION = (1.0, 10.0, 10.0)
+#: natural geometry: the default start floors each model term at this value (SI units)
+START_FLOOR = 1e-3
+#: natural geometry: no joint term goes below this (rounding never reaches 0)
+TERM_FLOOR = 1e-12
 
 FRICTION_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
                       f"float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
@@ -120,6 +129,24 @@ def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
 def sees(code, i):
     """Whether a channel of code ``code`` has joint i's friction terms (W_f,ci != 0)."""
     return code == POWER or code == i
+
+
+@njit(cache=True, inline="always")
+def retract_term(v, op, on):
+    """The 1-D retraction of :func:`~rcac_ros.core.pseudo_inertia.retract` (doc/design.md
+    §8): the step ``x = v[op] -> v[on]`` of a term > 0 becomes ``x (1 + r + r^2/2)``,
+    ``r = a z``, ``z = (v[on] - x) / x``, ``a = min(1, 1/|z|)``: so ``x+ >= x / 2 > 0`` for
+    any gain and error. A step that is not finite is not taken; ``x+`` is kept >= FLOOR.
+    Returns ``a``."""
+    x = v[op]
+    z = (v[on] - x) / x
+    if not math.isfinite(z):
+        v[on] = x
+        return 0.0
+    a = 1.0 if abs(z) <= 1.0 else 1.0 / abs(z)
+    r = a * z
+    v[on] = max(x * (1.0 + r + 0.5 * r * r), TERM_FLOOR)
+    return a
 
 
 @njit(cache=True, inline="always")
@@ -316,6 +343,11 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
                          + jrow[F_Y + 2] * jrow[F_HAT + 2])                        # eq 20
         if not frozen:
             adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
+            if scal[I_NATURAL] != 0.0:                # doc/design.md §8: P_f = k_f x^2
+                for k in range(3):
+                    x = jrow[F_HAT + k]
+                    jrow[F_PREV + k] = x
+                    jrow[F_GAIN + k] = jrow[F_K + k] * x * x
             adapt_joint(chan, jfilt, i, jrow, scal, tracking)
     if frozen:
         pass
@@ -334,6 +366,13 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
         for i in range(n):
             for k in range(3):
                 jdata[i, F_HAT + k] = max(jdata[i, F_HAT + k], 0.0)
+    if not frozen and scal[I_NATURAL] != 0.0:
+        retract_links(state, scal, M4)                # doc/design.md §8
+        a_min = scal[I_RETRACT_MIN]
+        for i in range(n):
+            for k in range(3):
+                a_min = min(a_min, retract_term(jdata[i], F_PREV + k, F_HAT + k))
+        scal[I_RETRACT_MIN] = a_min
     for i in range(n):
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
@@ -514,6 +553,37 @@ def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
         state[i, Q_PREV] = q[i]
     scal[I_K] += 1.0
     return tau
+
+
+@njit(cache=True)
+def retract_terms(prev, theta):
+    """:func:`retract_term` of every joint term's step ``prev[i] -> theta[i]`` ((n, 3) each),
+    in place; the smallest step length (the non-recursive law's, doc/design.md §8)."""
+    v = np.empty(2)
+    a_min = 1.0
+    for i in range(theta.shape[0]):
+        for k in range(theta.shape[1]):
+            v[0], v[1] = prev[i, k], theta[i, k]
+            a_min = min(a_min, retract_term(v, 0, 1))
+            theta[i, k] = v[1]
+    return a_min
+
+
+def natural_friction_start(friction_hat0, model_terms, exc):
+    """The natural geometry's joint start (doc/design.md §8): ``friction_hat0`` (every
+    term must be > 0), default the model's terms floored at :data:`START_FLOOR`."""
+    if friction_hat0 is None:
+        return np.maximum(model_terms, START_FLOOR)
+    if np.any(friction_hat0 <= 0.0):
+        raise exc("friction_hat0: every joint term must be > 0 with geometry='natural' "
+                  "(doc/design.md §8)")
+    return friction_hat0
+
+
+def friction_natural_gain(P_friction, start):
+    """Default natural gain of the joint terms, ``k_f = P_f / x0^2``: the natural law's gain
+    ``k_f x^2`` equals ``P_friction`` at the start (doc/design.md §8)."""
+    return P_friction / start ** 2
 
 
 def friction_gain(value, n):

@@ -35,10 +35,11 @@ from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_erro
 from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
 from ._validate import as_array, joint_values
-from rcac_ros.errors import GainError
+from rcac_ros.errors import GainError, InputError
 from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
                              natural_gains_into, nu_gain, retract_rows)
-from .joint_friction import P_FRICTION, friction_gain
+from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
+                             natural_friction_start, retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
@@ -284,9 +285,6 @@ class SlotineLiCompositeController:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
-        if geometry == "natural" and self.joint_friction:
-            raise GainError("geometry: 'natural' with joint_friction is not built yet "
-                            "(doc/design.md §8)")
         if geometry == "natural":
             k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
                 joint_values(natural_gain, n, "natural_gain", GainError)
@@ -304,6 +302,11 @@ class SlotineLiCompositeController:
                 as_array(friction_hat0, (n, 3), "friction_hat0")
             self._joint[:, :3] = self.P_friction
             self._joint[:, 3] = model.friction_velocity
+            if geometry == "natural":                   # doc/design.md §8: k_f x^2, x > 0
+                self.friction_hat0 = natural_friction_start(
+                    None if friction_hat0 is None else self.friction_hat0,
+                    model.joint_terms(), InputError)
+                self._friction_k = friction_natural_gain(self.P_friction, self.friction_hat0)
         self._p = (16 if self.joint_friction else 13) * n     # number of parameters
         self._theta = np.zeros(self._p)
         self._filt = np.zeros((4, n, self._p + 1))
@@ -328,8 +331,11 @@ class SlotineLiCompositeController:
         nl = 13 * self.n
         self._theta[:nl] = self._start(theta_hat0).ravel()
         if self.joint_friction:
-            self._theta[nl:] = (self.friction_hat0 if friction_hat0 is None else
-                                as_array(friction_hat0, (self.n, 3), "friction_hat0")).ravel()
+            fh = self.friction_hat0 if friction_hat0 is None else \
+                as_array(friction_hat0, (self.n, 3), "friction_hat0")
+            if self.geometry == "natural":
+                fh = natural_friction_start(fh, None, InputError)
+            self._theta[nl:] = fh.ravel()
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
@@ -340,6 +346,10 @@ class SlotineLiCompositeController:
             self._prev[:] = th
             natural_gains_into(th, self.natural_gain, self._nu_gain,
                                self._data[:self.n, GAIN_P:GAIN_P + 169])
+            if self.joint_friction:
+                fh = self._theta[13 * self.n:].reshape(self.n, 3)
+                self._prev_f = fh.copy()
+                self._joint[:, :3] = self._friction_k * fh * fh
         try:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint, q, qd,
                                          q_d, qd_d, qdd_d)
@@ -353,6 +363,9 @@ class SlotineLiCompositeController:
         if self.geometry == "natural":
             self.retraction_length = retract_rows(self._prev,
                                                   self._theta[:13 * self.n].reshape(self.n, 13))
+            if self.joint_friction:
+                self.retraction_length = min(self.retraction_length, retract_terms(
+                    self._prev_f, self._theta[13 * self.n:].reshape(self.n, 3)))
         return tau
 
     @property
