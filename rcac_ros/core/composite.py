@@ -15,7 +15,6 @@ The paper predicts one channel, the filtered torque of joint 1 (``channels=[1]``
 default). More channels (:mod:`rcac_ros.core.channels`) predict more filtered torques;
 ``channels="all"`` is the Slotine-Li composite law, computed recursively.
 
-Discretisation (the paper leaves it open): filters exact (zero-order hold on the applied
 Where each part lives (doc/design.md §3-4):
 
 - :mod:`rcac_ros.core.channels`: the prediction channels, eqs 21-23 (``W_cj``, ``y_c``,
