@@ -36,7 +36,7 @@ from numba import njit
 
 from ._validate import numeric
 from rcac_ros.errors import GainError
-from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
+from ._blocks import VEC, check_vectors, cholesky_solve, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_P_DIAG,
@@ -218,7 +218,7 @@ def implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal):
             Aa[b, a] = hg * acc
         Aa[a, a] += 1.0
     zz = z[:na]
-    cholesky(Aa, zz)
+    cholesky_solve(Aa, zz)
     for a in range(na):
         ca = int(idx[a])
         zc = hg * zz[a]
@@ -228,33 +228,6 @@ def implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal):
             if sees(chan[ca, CH_JOINT], i):
                 for k in range(3):
                     jdata[i, F_HAT + k] -= zc * jfilt[ca, i, JU + k]
-
-
-@njit(cache=True, inline="always")
-def cholesky(A, b):
-    """Solve ``A x = b`` in place for symmetric positive definite A (lower triangle read)."""
-    n = A.shape[0]
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= A[j, k] * A[j, k]
-        d = math.sqrt(d)
-        A[j, j] = d
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= A[i, k] * A[j, k]
-            A[i, j] = v / d
-    for i in range(n):
-        v = b[i]
-        for k in range(i):
-            v -= A[i, k] * b[k]
-        b[i] = v / A[i, i]
-    for i in range(n - 1, -1, -1):
-        v = b[i]
-        for k in range(i + 1, n):
-            v -= A[k, i] * b[k]
-        b[i] = v / A[i, i]
 
 
 @njit(FRICTION_SIGNATURE, cache=True)
