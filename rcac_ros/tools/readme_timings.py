@@ -40,7 +40,7 @@ PYTEST_SUMMARY = re.compile(r"^=*\s*(\d+ passed[^=]*?) in [\d.]+s", re.MULTILINE
 
 
 class BlockError(ValueError):
-    """README.md has no well-formed timings block."""
+    """README.md has no well-formed generated block (timings, or bench-ros)."""
 
 
 def render(fields):
@@ -158,17 +158,28 @@ def main(argv=None):
                         help="the file whose timings block is rewritten (default README.md)")
     parser.add_argument("--dry-run", action="store_true", help="print the block, write nothing")
     args = parser.parse_args(argv)
+    return rewrite_readme(args.readme, "readme_timings", read_block,
+                          lambda: render(measure(root, args.clean)),
+                          lambda text, block: replace_block(text, read_block(block)),
+                          args.dry_run)
+
+
+def rewrite_readme(readme, prog, check, produce, replace, dry_run):
+    """A README generator's run: ``check(text)`` refuses a malformed block before the long
+    ``produce()``, whose block is printed and, unless ``dry_run``, written back by
+    ``replace(text, block)`` into the file as it is then (edits made meanwhile are kept).
+    Returns the exit code: 2 with one line on a :class:`BlockError`."""
     try:
-        read_block(_read(args.readme))        # refuse before a long run, not after it
-        block = render(measure(root, args.clean))
+        check(_read(readme))                  # refuse before a long run, not after it
+        block = produce()
         print(block)
-        if not args.dry_run:
-            text = replace_block(_read(args.readme), read_block(block))   # edits meanwhile kept
-            with open(args.readme, "w", encoding="utf-8") as f:
+        if not dry_run:
+            text = replace(_read(readme), block)
+            with open(readme, "w", encoding="utf-8") as f:
                 f.write(text)
-            print(f"readme-timings: wrote {args.readme}")
+            print(f"{prog.replace('_', '-')}: wrote {readme}")
     except BlockError as err:
-        print(f"readme_timings: error: {err}", file=sys.stderr)
+        print(f"{prog}: error: {err}", file=sys.stderr)
         return 2
     return 0
 
