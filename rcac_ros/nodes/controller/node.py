@@ -22,6 +22,7 @@ from rclpy.clock import Clock, ClockType
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
 from rcac_ros.nodes.controller.diagnostics import diagnostics
 from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
@@ -63,6 +64,7 @@ class ControllerNode(ManagedNode):
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
         read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
                                          self.get_logger().warning)
         self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \

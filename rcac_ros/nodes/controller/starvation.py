@@ -5,16 +5,18 @@ Timer mode only. At each control step :class:`Starvation` feeds the age of the s
 smoothed delay is past the delay margin of ``K_D`` the core's feedback gain is scaled down
 (:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`) and the adaptation
 of eq 24 is frozen (the estimates do not learn from errors that the delay made); once the
-delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains and
-the adaptation return. One log line each way; diagnostics ``starved``, ``starved_spells``,
-``K_D_scale``, ``delay_ms``, ``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md,
-"Starved machine").
+delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains
+return, and the adaptation unless the operator froze it (the guard holds its own reason,
+:class:`~rcac_ros.nodes.controller.adaptation.AdaptationFreeze`). One log line each way;
+diagnostics ``starved``, ``starved_spells``, ``K_D_scale``, ``delay_ms``,
+``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md, "Starved machine").
 """
 
 import time
 
 import numpy as np
 
+from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
 from rcac_ros.nodes.safety.delay_guard import DelayGuard, default_margin
 
 
@@ -29,7 +31,8 @@ class Starvation:
     Parameters
     ----------
     node : ControllerNode
-        Its ``ctrl``, ``h``, ``states.received`` and logger are used.
+        Its ``ctrl``, ``adaptation`` (:class:`AdaptationFreeze`), ``h``, ``states.received``
+        and logger are used.
     values : dict
         The checked parameters (``starvation.*``).
     """
@@ -41,7 +44,6 @@ class Starvation:
             margin = default_margin(largest_K_D(node.ctrl))
         self.guard = DelayGuard(margin, node.h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
-        self._resume_adaptation = False
 
     def reset(self):
         """A fresh start (activation): nominal gains."""
@@ -61,8 +63,7 @@ class Starvation:
         now = time.monotonic_ns()
         event = self.guard.step(now, now - self.node.states.received)
         if event == "starved":
-            self._resume_adaptation = ctrl.adapting
-            ctrl.set_adaptation(False)
+            self.node.adaptation.freeze(AdaptationFreeze.STARVED, True)
             self.node.get_logger().warning(
                 f"starved: the control loop's delay {self.guard.delay * 1e3:.1f} ms is past "
                 f"the delay margin of K_D ({self.guard.margin * 1e3:.1f} ms): K_D scaled by "
@@ -70,18 +71,17 @@ class Starvation:
                 f"the margin for {self.guard.recover_after:g} s")
         elif event == "recovered":
             self._leave()
+            user = AdaptationFreeze.USER in self.node.adaptation.reasons
             self.node.get_logger().info(
-                f"starvation over: nominal K_D and adaptation again (worst delay "
-                f"{self.guard.worst * 1e3:.1f} ms)")
+                f"starvation over: nominal K_D and "
+                f"{'adaptation still frozen (by set_adaptation)' if user else 'adaptation again'}"
+                f" (worst delay {self.guard.worst * 1e3:.1f} ms)")
         if self.guard.scale != ctrl.K_D_scale:
             ctrl.scale_K_D(self.guard.scale)
 
     def _leave(self):
-        ctrl = self.node.ctrl
-        ctrl.scale_K_D(1.0)
-        if self._resume_adaptation:
-            ctrl.set_adaptation(True)
-        self._resume_adaptation = False
+        self.node.ctrl.scale_K_D(1.0)
+        self.node.adaptation.freeze(AdaptationFreeze.STARVED, False)
 
     def diagnostics(self):
         """Key-value pairs for the node's diagnostics."""
