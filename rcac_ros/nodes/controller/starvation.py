@@ -12,17 +12,56 @@ diagnostics ``starved``, ``starved_spells``, ``K_D_scale``, ``delay_ms``,
 ``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md, "Starved machine").
 """
 
+import math
 import time
 
 import numpy as np
 
+from rcac_ros.core.composite import RecursiveCompositeController
+from rcac_ros.core.crba import mass_matrix
 from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
-from rcac_ros.nodes.safety.delay_guard import DelayGuard, default_margin
+from rcac_ros.nodes.safety.delay_guard import DelayGuard
 
 
-def largest_K_D(ctrl):
-    """The largest eigenvalue of the core controller's ``K_Di`` (N m s/rad)."""
-    return float(np.max(np.linalg.eigvalsh(ctrl.K_D)))
+def feedback_bandwidth(ctrl, q, eps=1e-4):
+    """``omega = lambda_max(M(q)^-1 D)``, 1/s: how fast the law's velocity feedback acts at ``q``.
+
+    ``D = -d tau / d qd`` of eqs 19-20 at rest on the desired state (``qd_d = qdd_d = 0``,
+    ``q_d = q``): ``sum_i J_i^T K_Di J_i`` plus ``Lambda M`` through ``qdd_r`` (with the
+    estimates ``theta_hat``), by central differences on a new controller with ``ctrl``'s
+    gains and estimates and its adaptation frozen (``ctrl`` itself is not stepped);
+    ``M(q)`` is the model's joint-space inertia (the joint terms are left out).
+    """
+    probe = RecursiveCompositeController(
+        ctrl.model, K_D=ctrl.K_D, Lambda=ctrl.Lambda, P=ctrl.P, gamma=ctrl.gamma,
+        lam=ctrl.lam, h=ctrl.h, theta_hat0=ctrl.theta_hat)
+    probe.set_adaptation(False)
+    q = np.asarray(q, float)
+    n, zero = q.shape[0], np.zeros(q.shape[0])
+    D = np.empty((n, n))
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = eps
+        probe.restart_filters()
+        plus = probe.step(q, e, q, zero, zero)
+        probe.restart_filters()
+        minus = probe.step(q, -e, q, zero, zero)
+        D[:, j] = (minus - plus) / (2.0 * eps)
+    D = 0.5 * (D + D.T)
+    return float(np.max(np.linalg.eigvals(np.linalg.solve(mass_matrix(ctrl.model, q), D)).real))
+
+
+def feedback_margin(ctrl, q):
+    """The delay margin of the law's feedback at ``q``: ``(pi / 2) / omega``, s.
+
+    A velocity loop ``M qdd = -D qd(t - d)`` loses its phase margin at ``d = pi / (2 omega)``
+    (:func:`feedback_bandwidth`). Against the closed loop with the effort ``d`` periods late
+    (``rcac bench delay-margin``, adaptation frozen; doc/failsafe.md "Starved machine"): the
+    CSS arm at K_D = 1e4 gives 8.8-9.0 ms and tracked at 8 ms, diverged at 10 ms; the
+    Panda of the payload demo (kappa = 100) gives 14.3 ms and tracked at 10 ms, not at
+    20 ms.
+    """
+    return (math.pi / 2.0) / feedback_bandwidth(ctrl, q)
 
 
 class Starvation:
@@ -40,8 +79,9 @@ class Starvation:
     def __init__(self, node, values):
         self.node = node
         margin = values["starvation.delay_margin"]
-        if margin is None:
-            margin = default_margin(largest_K_D(node.ctrl))
+        if margin is None:                  # at the motion's start, or the zero position
+            q = getattr(node, "paper_q0", None)
+            margin = feedback_margin(node.ctrl, np.zeros(node.ctrl.model.n) if q is None else q)
         self.guard = DelayGuard(margin, node.h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
 
