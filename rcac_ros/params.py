@@ -300,7 +300,8 @@ CONTROLLER = _robot("controller") + (
           "timer mode: past this smoothed delay (state age plus the previous effort held "
           "beyond a period) K_D is scaled down by margin/delay and adaptation frozen until "
           "the delay has stayed within it for starvation.recover_after, s; unset: "
-          "80 / (largest K_D), the measured margin (doc/failsafe.md); 0: no guard",
+          "(pi/2) / lambda_max(M^-1 D) of the law's velocity feedback D at paper.q0 (or "
+          "the zero position), the measured margin (doc/failsafe.md); 0: no guard",
           lo=0.0, hi=1.0),
     Param("starvation.recover_after", "double", 1.0,
           "the smoothed delay stays within the margin this long before the nominal gains "

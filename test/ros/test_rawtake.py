@@ -1,16 +1,88 @@
 """The lock-free take of the side inputs (``nodes/runtime/rawtake.py``, doc/failsafe.md "Where the
 time of a flood goes"): what ``rcl`` hands over is the message as published, a sample above
-the cap never reaches the callback, and the thread stops cleanly."""
+the cap never reaches the callback, the buffer does not keep a large sample's size, errors
+are counted and logged once without stopping the thread, and the thread stops cleanly."""
 
+import contextlib
 import threading
 import time
 
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
 from test_nodes_support import QOS, ros_context
+from rcac_ros.nodes.runtime import rawtake
 from rcac_ros.nodes.runtime.inputs import SideInput
+from rcac_ros.nodes.runtime.rawtake import RawReader
+
+SMALL = JointState(name=["a", "b"], position=[1.5, -2.0])
+#: about 290 kB serialised: above RawReader.KEEP
+LARGE = JointState(name=[f"joint_{i}" for i in range(20_000)], position=[0.25] * 20_000)
+
+
+class Log:
+    """A logger that keeps its error lines."""
+
+    def __init__(self):
+        self.lines = []
+
+    def error(self, text):
+        self.lines.append(text)
+
+
+class Inbox:
+    """What a reader's callbacks got, thread-safe; ``raise_on`` makes ``on_bytes`` raise."""
+
+    def __init__(self, raise_on=()):
+        self.lock = threading.Lock()
+        self.data, self.oversize, self.calls = [], [], 0
+        self.raise_on = set(raise_on)
+
+    def on_bytes(self, data):
+        with self.lock:
+            self.calls += 1
+            if self.calls in self.raise_on:
+                raise ValueError(f"callback failure {self.calls}")
+            self.data.append(data)
+
+    def on_oversize(self, size):
+        with self.lock:
+            self.oversize.append(size)
+
+    def wait(self, done, timeout=10.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self.lock:
+                if done(self):
+                    return True
+            time.sleep(0.01)
+        return False
+
+
+@contextlib.contextmanager
+def raw_reader(inbox, cap, log):
+    """A RawReader on ``/rawtake_test`` and a publisher to it; yields ``(reader, publish)``."""
+    with ros_context() as (ctx, _):
+        node = Node("rawtake_reader", context=ctx)
+        sub = node.create_subscription(JointState, "/rawtake_test", lambda _: None, QOS,
+                                       raw=True)
+        reader = RawReader(sub, ctx, inbox.on_bytes, inbox.on_oversize, cap, "test input", log)
+        pub = node.create_publisher(JointState, "/rawtake_test", QOS)
+        try:
+            end = time.monotonic() + 20.0
+            while pub.get_subscription_count() == 0 and time.monotonic() < end:
+                time.sleep(0.01)
+
+            def publish(*msgs):
+                for msg in msgs:
+                    pub.publish(msg)
+                    time.sleep(0.02)
+            yield reader, publish
+        finally:
+            reader.close()
+            node.destroy_node()
+        assert not reader._thread.is_alive()
 
 
 def test_side_input_delivers_within_the_cap_and_refuses_above_it():
@@ -53,3 +125,63 @@ def test_side_input_delivers_within_the_cap_and_refuses_above_it():
         assert all(abs(int(t.split(": ")[1].split()[0]) - size) <= 8 for _, t in refused), \
             (refused, size)
         assert not side._reader._thread.is_alive()
+
+
+def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
+    small = len(serialize_message(SMALL))
+    for cap, delivered in ((small + 16, 0), (0, 1)):    # LARGE above the cap / no cap
+        inbox, log = Inbox(), Log()
+        with raw_reader(inbox, cap, log) as (reader, publish):
+            assert reader.capacity == RawReader.KEEP
+            publish(LARGE, SMALL)
+            assert inbox.wait(lambda b: len(b.data) + len(b.oversize) == 2), \
+                (len(inbox.data), inbox.oversize)
+            assert len(inbox.oversize) == 1 - delivered
+            got = [deserialize_message(d, JointState) for d in inbox.data]
+            if delivered:       # taken whole into the grown buffer before it was freed
+                assert len(inbox.data[0]) > RawReader.KEEP
+                assert got[0].name == LARGE.name and list(got[0].position) == [0.25] * 20_000
+            assert got[-1].name == SMALL.name and list(got[-1].position) == [1.5, -2.0]
+            # LARGE grew the buffer past the bound; it was freed back to KEEP after it
+            assert reader.capacity <= max(cap, RawReader.KEEP), reader.capacity
+        assert reader.errors == {"take": 0, "callback": 0} and log.lines == []
+
+
+def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing():
+    inbox, log = Inbox(raise_on={1, 3}), Log()
+    with raw_reader(inbox, 0, log) as (reader, publish):
+        publish(SMALL, SMALL, SMALL, SMALL)
+        assert inbox.wait(lambda b: b.calls == 4)
+        assert reader._thread.is_alive()
+        assert len(inbox.data) == 2                     # the 2nd and the 4th
+        assert reader.errors == {"take": 0, "callback": 2}
+    assert len(log.lines) == 1, log.lines               # one line for one exception type
+    assert log.lines[0].startswith("test input: the callback raised")
+    assert "Traceback" in log.lines[0] and "ValueError: callback failure 1" in log.lines[0]
+
+
+class FailingRcl:
+    """rcl whose ``rcl_take_serialized_message`` returns ``code`` ``count`` times first
+    (the sample stays in the reader: the next take gets it)."""
+
+    def __init__(self, rcl, code, count):
+        self._rcl, self.code, self.left = rcl, code, count
+
+    def rcl_take_serialized_message(self, *args):
+        if self.left:
+            self.left -= 1
+            return self.code
+        return self._rcl.rcl_take_serialized_message(*args)
+
+
+def test_an_rcl_error_is_counted_logged_once_and_the_input_keeps_flowing(monkeypatch):
+    rcl, rcutils = rawtake._libraries()
+    monkeypatch.setattr(rawtake, "_libraries",
+                        lambda: (FailingRcl(rcl, 1, 3), rcutils))     # RCL_RET_ERROR
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log) as (reader, publish):
+        publish(SMALL, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 2)
+        assert reader.errors == {"take": 3, "callback": 0}
+    assert len(log.lines) == 1, log.lines
+    assert log.lines[0].startswith("test input: rcl_take_serialized_message returned 1 (")

@@ -10,7 +10,10 @@ import pytest
 
 from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core.model import PAPER_GAINS, PAPER_Q0
+from rcac_ros.nodes.controller.starvation import feedback_margin
 from rcac_ros.nodes.safety.delay_guard import DelayGuard, default_margin, TAU
+from rcac_ros.tools.bench.delay_margin import closed_loop, tracking_rms
+from rcac_ros.tools.scenarios import find_panda_urdf
 
 H = PAPER_GAINS["h"]
 NS = 1_000_000_000
@@ -96,3 +99,21 @@ def test_one_late_tick_is_not_starvation_but_a_lasting_delay_is_and_it_recovers(
     fall = TAU * np.log(0.058 / guard.limit)
     assert 1.0 + 0.8 * fall <= recovered_at * H <= 1.0 + 1.2 * fall
     assert guard.spells == 1
+
+
+@pytest.mark.parametrize("arm, gain, adapt", [("css_arm", 1e4, True), ("css_arm", 3e3, True),
+                                              ("panda", 100.0, False)])
+def test_the_default_margin_lies_at_the_edge_of_the_delayed_loop(arm, gain, adapt):
+    """``feedback_margin`` (the guard's default) against ``rcac bench delay-margin``'s loop on
+    two arms whose K_D differ by two orders of magnitude: the loop tracks with the effort
+    0.7 margin late and diverges, or tracks 100x worse, 1.5 margin late. (With the Panda's
+    adaptation on, the loop diverges from 2 periods whatever the margin: doc/failsafe.md.)"""
+    if arm == "panda" and find_panda_urdf() is None:
+        pytest.skip("example-robot-data's panda.urdf is not installed")
+    _, ctrl, _, q0 = closed_loop(arm, gain)
+    periods = feedback_margin(ctrl, q0) / ctrl.h
+    nominal = tracking_rms(gain, 0, model_name=arm, adapt=adapt)
+    within = tracking_rms(gain, int(0.7 * periods), model_name=arm, adapt=adapt)
+    beyond = tracking_rms(gain, int(np.ceil(1.5 * periods)), model_name=arm, adapt=adapt)
+    assert within < 10.0 * nominal, (periods, nominal, within)
+    assert not beyond < 100.0 * nominal, (periods, nominal, beyond)

@@ -3,7 +3,9 @@
 * ``~/reset_estimates`` (Trigger): ``theta_hat`` back to the ``initial_estimates``, the
   filters restarted;
 * ``~/set_adaptation`` (SetBool): ``false`` freezes the adaptation of eq 24 (the estimates
-  are held and still used), ``true`` resumes it;
+  are held and still used), ``true`` resumes it, unless the starvation guard holds it
+  frozen too (then it resumes when the machine recovers:
+  :class:`~rcac_ros.nodes.controller.adaptation.AdaptationFreeze`);
 * ``~/save_estimates`` (Trigger): writes the estimates to the parameter ``estimates_file``
   (YAML; with ``joint_friction`` the joint terms too) and the physically consistent links
   as URDF ``<inertial>`` blocks next to it (the joint terms as ``<dynamics>``)
@@ -16,6 +18,7 @@ They exist while the node is configured (inactive or active).
 from std_srvs.srv import SetBool, Trigger
 
 from rcac_ros.nodes.controller import estimates
+from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
 
 
 class EstimateServices:
@@ -24,7 +27,8 @@ class EstimateServices:
     Parameters
     ----------
     node : rclpy.node.Node
-        The controller: ``node.ctrl`` (the core controller), ``node.model``,
+        The controller: ``node.ctrl`` (the core controller), ``node.adaptation``
+        (:class:`AdaptationFreeze`), ``node.model``,
         ``node.theta0`` (the initial estimates, model order), ``node.urdf_links`` (or
         ``None``), and the parameter ``estimates_file``.
     """
@@ -53,10 +57,15 @@ class EstimateServices:
 
     def _set_adaptation(self, request, response):
         node = self.node
-        node.ctrl.set_adaptation(bool(request.data))
+        node.adaptation.freeze(AdaptationFreeze.USER, not request.data)
         response.success = True
-        response.message = "adaptation resumed" if request.data else \
-            "adaptation frozen: the estimates are held (and still used)"
+        if not request.data:
+            response.message = "adaptation frozen: the estimates are held (and still used)"
+        elif node.ctrl.adapting:
+            response.message = "adaptation resumed"
+        else:
+            response.message = "adaptation: the freeze of set_adaptation is lifted; still " \
+                "frozen by the starvation guard until the control loop's delay recovers"
         node.get_logger().info(response.message)
         return response
 

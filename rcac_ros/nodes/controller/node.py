@@ -22,6 +22,7 @@ from rclpy.clock import Clock, ClockType
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
 from rcac_ros.nodes.controller.diagnostics import diagnostics
 from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
@@ -63,6 +64,7 @@ class ControllerNode(ManagedNode):
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
         read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
                                          self.get_logger().warning)
         self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
@@ -221,7 +223,8 @@ class ControllerNode(ManagedNode):
 
     # ------------------------------------------------------------------ control
     def _control(self, t_ns, stamp=None):
-        q, qd = self.states.latest          # one snapshot (timer mode: set by another thread)
+        state = self.states.take()          # one snapshot (timer mode: set by another thread)
+        q, qd = state.q, state.qd
         spell = self.failsafe.stop.active
         self.watchdog.resume()              # a spell of safe effort ends here
         if self._starvation is not None:    # timer mode: K_D within the delay margin
@@ -232,7 +235,7 @@ class ControllerNode(ManagedNode):
             self.filters_stale = False
             self.ctrl.restart_filters()
         if self._lookahead is not None:     # timer mode: the state when the effort acts
-            q, qd = self._lookahead(q, qd, time.monotonic_ns() - self.states.received)
+            q, qd = self._lookahead(q, qd, time.monotonic_ns() - state.received)
         q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
@@ -263,7 +266,7 @@ class ControllerNode(ManagedNode):
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
         if self._fjt is not None:
-            self._fjt.update(t_ns, self.states.q, self.states.qd, q_d, qd_d, qdd_d)
+            self._fjt.update(t_ns, state.q, state.qd, q_d, qd_d, qdd_d)
 
     def _on_tick(self):
         """Timer mode: one control step on the latest valid state."""

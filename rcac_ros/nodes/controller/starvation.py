@@ -5,22 +5,63 @@ Timer mode only. At each control step :class:`Starvation` feeds the age of the s
 smoothed delay is past the delay margin of ``K_D`` the core's feedback gain is scaled down
 (:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`) and the adaptation
 of eq 24 is frozen (the estimates do not learn from errors that the delay made); once the
-delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains and
-the adaptation return. One log line each way; diagnostics ``starved``, ``starved_spells``,
-``K_D_scale``, ``delay_ms``, ``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md,
-"Starved machine").
+delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains
+return, and the adaptation unless the operator froze it (the guard holds its own reason,
+:class:`~rcac_ros.nodes.controller.adaptation.AdaptationFreeze`). One log line each way;
+diagnostics ``starved``, ``starved_spells``, ``K_D_scale``, ``delay_ms``,
+``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md, "Starved machine").
 """
 
+import math
 import time
 
 import numpy as np
 
-from rcac_ros.nodes.safety.delay_guard import DelayGuard, default_margin
+from rcac_ros.core.composite import RecursiveCompositeController
+from rcac_ros.core.crba import mass_matrix
+from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
+from rcac_ros.nodes.safety.delay_guard import DelayGuard
 
 
-def largest_K_D(ctrl):
-    """The largest eigenvalue of the core controller's ``K_Di`` (N m s/rad)."""
-    return float(np.max(np.linalg.eigvalsh(ctrl.K_D)))
+def feedback_bandwidth(ctrl, q, eps=1e-4):
+    """``omega = lambda_max(M(q)^-1 D)``, 1/s: how fast the law's velocity feedback acts at ``q``.
+
+    ``D = -d tau / d qd`` of eqs 19-20 at rest on the desired state (``qd_d = qdd_d = 0``,
+    ``q_d = q``): ``sum_i J_i^T K_Di J_i`` plus ``Lambda M`` through ``qdd_r`` (with the
+    estimates ``theta_hat``), by central differences on a new controller with ``ctrl``'s
+    gains and estimates and its adaptation frozen (``ctrl`` itself is not stepped);
+    ``M(q)`` is the model's joint-space inertia (the joint terms are left out).
+    """
+    probe = RecursiveCompositeController(
+        ctrl.model, K_D=ctrl.K_D, Lambda=ctrl.Lambda, P=ctrl.P, gamma=ctrl.gamma,
+        lam=ctrl.lam, h=ctrl.h, theta_hat0=ctrl.theta_hat)
+    probe.set_adaptation(False)
+    q = np.asarray(q, float)
+    n, zero = q.shape[0], np.zeros(q.shape[0])
+    D = np.empty((n, n))
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = eps
+        probe.restart_filters()
+        plus = probe.step(q, e, q, zero, zero)
+        probe.restart_filters()
+        minus = probe.step(q, -e, q, zero, zero)
+        D[:, j] = (minus - plus) / (2.0 * eps)
+    D = 0.5 * (D + D.T)
+    return float(np.max(np.linalg.eigvals(np.linalg.solve(mass_matrix(ctrl.model, q), D)).real))
+
+
+def feedback_margin(ctrl, q):
+    """The delay margin of the law's feedback at ``q``: ``(pi / 2) / omega``, s.
+
+    A velocity loop ``M qdd = -D qd(t - d)`` loses its phase margin at ``d = pi / (2 omega)``
+    (:func:`feedback_bandwidth`). Against the closed loop with the effort ``d`` periods late
+    (``rcac bench delay-margin``, adaptation frozen; doc/failsafe.md "Starved machine"): the
+    CSS arm at K_D = 1e4 gives 8.8-9.0 ms and tracked at 8 ms, diverged at 10 ms; the
+    Panda of the payload demo (kappa = 100) gives 14.3 ms and tracked at 10 ms, not at
+    20 ms.
+    """
+    return (math.pi / 2.0) / feedback_bandwidth(ctrl, q)
 
 
 class Starvation:
@@ -29,7 +70,8 @@ class Starvation:
     Parameters
     ----------
     node : ControllerNode
-        Its ``ctrl``, ``h``, ``states.received`` and logger are used.
+        Its ``ctrl``, ``adaptation`` (:class:`AdaptationFreeze`), ``h``, ``states.received``
+        and logger are used.
     values : dict
         The checked parameters (``starvation.*``).
     """
@@ -37,11 +79,11 @@ class Starvation:
     def __init__(self, node, values):
         self.node = node
         margin = values["starvation.delay_margin"]
-        if margin is None:
-            margin = default_margin(largest_K_D(node.ctrl))
+        if margin is None:                  # at the motion's start, or the zero position
+            q = getattr(node, "paper_q0", None)
+            margin = feedback_margin(node.ctrl, np.zeros(node.ctrl.model.n) if q is None else q)
         self.guard = DelayGuard(margin, node.h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
-        self._resume_adaptation = False
 
     def reset(self):
         """A fresh start (activation): nominal gains."""
@@ -61,8 +103,7 @@ class Starvation:
         now = time.monotonic_ns()
         event = self.guard.step(now, now - self.node.states.received)
         if event == "starved":
-            self._resume_adaptation = ctrl.adapting
-            ctrl.set_adaptation(False)
+            self.node.adaptation.freeze(AdaptationFreeze.STARVED, True)
             self.node.get_logger().warning(
                 f"starved: the control loop's delay {self.guard.delay * 1e3:.1f} ms is past "
                 f"the delay margin of K_D ({self.guard.margin * 1e3:.1f} ms): K_D scaled by "
@@ -70,18 +111,17 @@ class Starvation:
                 f"the margin for {self.guard.recover_after:g} s")
         elif event == "recovered":
             self._leave()
+            user = AdaptationFreeze.USER in self.node.adaptation.reasons
             self.node.get_logger().info(
-                f"starvation over: nominal K_D and adaptation again (worst delay "
-                f"{self.guard.worst * 1e3:.1f} ms)")
+                f"starvation over: nominal K_D and "
+                f"{'adaptation still frozen (by set_adaptation)' if user else 'adaptation again'}"
+                f" (worst delay {self.guard.worst * 1e3:.1f} ms)")
         if self.guard.scale != ctrl.K_D_scale:
             ctrl.scale_K_D(self.guard.scale)
 
     def _leave(self):
-        ctrl = self.node.ctrl
-        ctrl.scale_K_D(1.0)
-        if self._resume_adaptation:
-            ctrl.set_adaptation(True)
-        self._resume_adaptation = False
+        self.node.ctrl.scale_K_D(1.0)
+        self.node.adaptation.freeze(AdaptationFreeze.STARVED, False)
 
     def diagnostics(self):
         """Key-value pairs for the node's diagnostics."""

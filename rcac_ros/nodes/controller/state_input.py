@@ -8,9 +8,28 @@ thread only ticks), reads each message into model order
 stamp in the future refused), estimates the velocity when none is given and tells the
 watchdog that a valid state came. In lockstep mode the control step is the answer to the
 state, run in its callback.
+
+Threads (timer mode: the states come in the side thread, the control loop runs in its own):
+
+* The side thread owns the reading: the stamp gate, the velocity estimate and the previous
+  state. It hands over each valid state as one immutable :class:`Sample` (``q``, ``qd``,
+  ``stamp``, ``received``, the count of stream restarts), assigned in one statement
+  (atomic under the interpreter lock): the control thread never sees a ``q`` of one state
+  with the arrival time of another, and takes no lock on its 500 Hz path.
+* Everything else happens in the control thread, in :meth:`StateInput.take` at the start
+  of its step: the watchdog is told of the valid state, and a restart of the stream
+  restarts the motion and the filters. The side thread never writes to the watchdog or
+  to the node.
+* A lock is held by the side thread while it reads a state and by :meth:`StateInput.reset`
+  (the activation), never by the control step: a reset waits for a state being read, so
+  no state from before it survives it and the gate is never reset halfway through a check.
+
+In lockstep mode all of it runs in the executor's thread; the lock is then never contended.
 """
 
+import threading
 import time
+from collections import namedtuple
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -21,6 +40,11 @@ from rcac_ros.nodes.runtime.inputs import capped, SideInput
 from rcac_ros.nodes.msgs.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                              VelocityEstimate)
 from rcac_ros.nodes.safety.state_guards import StampGate
+
+#: a valid state as handed over: positions, velocities (model order), its stamp (ns), the
+#: steady-clock ns at which it came, the number of stream restarts so far, and (lockstep)
+#: whether it follows the last one answered by one period
+Sample = namedtuple("Sample", "q qd stamp received restarts unbroken")
 
 
 class StateInput:
@@ -57,10 +81,10 @@ class StateInput:
 
     Attributes
     ----------
+    latest : Sample or None
+        The latest valid state as one object (set by the side thread of timer mode).
     q, qd : ndarray (n,) or None
-        The latest valid state (model order); ``qd`` measured or estimated.
-    latest : tuple or None
-        ``(q, qd)`` as one object (read by the loop thread of timer mode).
+        Its positions and velocities (model order); ``qd`` measured or estimated.
     stamp : int or None
         Its stamp, ns.
     received : int or None
@@ -76,6 +100,7 @@ class StateInput:
         self.restarted, self.control = restarted, control
         self._reader = JointStateReader(joint_names)
         self._rate_warned = False
+        self._lock = threading.Lock()       # the side thread's reading against reset()
         cap = guards.max_state_bytes
         if not lockstep:                    # states in their own thread: the loop only ticks
             self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS, self._on_state,
@@ -89,13 +114,36 @@ class StateInput:
         self.reset()
 
     def reset(self):
-        """A fresh start: no state yet, a new velocity estimate, the stamp gate reset."""
-        self.velocity = VelocityEstimate(self.velocity_cutoff)
-        self.q = self.qd = None
-        self.latest = None
-        self.stamp = None
-        self.received = None
-        self.gate.reset()
+        """A fresh start: no state yet, a new velocity estimate, the stamp gate reset (after
+        a state being read, if any)."""
+        with self._lock:
+            self.velocity = VelocityEstimate(self.velocity_cutoff)
+            self.latest = None
+            self._restarts = self._taken_restarts = 0
+            self._taken = None
+            self.gate.reset()
+
+    # the latest valid state, each read from one Sample
+    q = property(lambda self: None if self.latest is None else self.latest.q)
+    qd = property(lambda self: None if self.latest is None else self.latest.qd)
+    stamp = property(lambda self: None if self.latest is None else self.latest.stamp)
+    received = property(lambda self: None if self.latest is None else self.latest.received)
+
+    def take(self):
+        """The control thread, before a step: the latest valid state (a :class:`Sample`).
+
+        The watchdog is told of a state not taken before, and a restart of the stream since
+        the last step restarts the motion and the filters (``restarted``), here in the
+        control thread.
+        """
+        sample = self.latest
+        if sample.restarts != self._taken_restarts:
+            self._taken_restarts = sample.restarts
+            self.restarted()
+        if sample is not self._taken:
+            self._taken = sample
+            self.watchdog.valid_state(sample.unbroken)
+        return sample
 
     def close(self):
         """Stop the side thread or destroy the subscription (cleanup)."""
@@ -105,13 +153,14 @@ class StateInput:
             self.node.destroy_subscription(self._sub)
 
     def _restart(self, stamp):
-        """The stream restarted (a simulator or driver restart): start over from it."""
+        """The stream restarted (a simulator or driver restart): start over from it (the
+        motion and the filters at the next :meth:`take`)."""
         self.node.get_logger().warning(
             f"joint state stamps restarted ({self.stamp * 1e-9:.6f} s -> "
             f"{stamp * 1e-9:.6f} s): filters, velocity estimate and desired motion restart "
             "from the new state; the estimates are kept")
         self.velocity.reset()
-        self.restarted()
+        self._restarts += 1
 
     def _warn_rate(self, stamp):
         """Lockstep: once, if the state period is not the control period ``h``."""
@@ -130,39 +179,47 @@ class StateInput:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
+        with self._lock:
+            answer = self._hand_over(msg, q, qd)
+        if answer is not None:              # lockstep: the step, out of the lock
+            self.control(*answer)
+
+    def _hand_over(self, msg, q, qd):
+        """Judge a read state and hand it over (under the lock); lockstep: returns the
+        arguments of ``control``, or ``None``."""
         stamp = stamp_ns(msg.header.stamp)
         now = time.monotonic_ns()           # state silence: on the steady clock, always
         lockstep = self.lockstep
-        if lockstep and self.outputs.last_answer is not None \
-                and stamp == self.stamp and np.array_equal(q, self.q):
+        last = self.latest
+        if lockstep and self.outputs.last_answer is not None and last is not None \
+                and stamp == last.stamp and np.array_equal(q, last.q):
             # the same state again (a simulator re-sending after a lost message at start-up):
             # answer it again, do not step twice
             self.outputs.answer_again()
-            self.received = now
-            return
+            self.latest = last._replace(received=now)
+            self._taken = self.latest
+            return None
         verdict = self.gate.check(stamp, now, stale=self.watchdog.tripped)
         if verdict in (StampGate.BACKWARDS, StampGate.FUTURE):
-            return self.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
-                             f"after {self.stamp * 1e-9:.6f} s")
-        if verdict == StampGate.RESTART and self.stamp is not None:
+            self.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
+                      f"after {self.stamp * 1e-9:.6f} s")
+            return None
+        if verdict == StampGate.RESTART and last is not None:
             self._restart(stamp)
         # velocity: given, or estimated from positions (finite difference, low-pass)
         if qd is None:
             qd = self.velocity.update(q, stamp if stamp > 0 else now)
         else:
             self.velocity.reset()
-        if lockstep and verdict == StampGate.OK and self.stamp is not None and stamp > 0 \
+        if lockstep and verdict == StampGate.OK and last is not None and stamp > 0 \
                 and not self._rate_warned:
             self._warn_rate(stamp)
         # lockstep: the state right after the last one answered means no step was lost (the
         # watchdog's tagged safe effort is not applied by a lockstep simulator): keep the filters
-        unbroken = lockstep and self.stamp is not None \
-            and 0 < stamp - self.stamp <= 1.5 * self.h * 1e9
-        self.latest = (q, qd)
-        self.q, self.qd = q, qd
-        self.stamp = stamp
-        self.received = now
-        self.watchdog.valid_state(unbroken)
+        unbroken = lockstep and last is not None \
+            and 0 < stamp - last.stamp <= 1.5 * self.h * 1e9
+        self.latest = Sample(q, qd, stamp, now, self._restarts, unbroken)  # the hand-over
         if lockstep:
             t_ns = stamp if stamp > 0 else self.steps() * round(self.h * 1e9)
-            self.control(t_ns, msg.header.stamp)
+            return t_ns, msg.header.stamp
+        return None

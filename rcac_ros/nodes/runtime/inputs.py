@@ -60,6 +60,11 @@ class SideInput:
         Size cap in bytes (0: none); above it ``reject(kind, text)`` is called instead.
     what : str
         Name of the input in the rejection text (``max_<what>_bytes`` is the parameter).
+    reject : callable
+        ``reject(kind, text)``: a message above the cap or that does not deserialise.
+
+    A failed take or an exception of ``callback`` is counted (:attr:`errors`), the first of
+    each kind logged with ``owner``'s logger, and the thread goes on.
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
@@ -88,7 +93,12 @@ class SideInput:
 
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,
-                                 f"{what} input")
+                                 f"{what} input", owner.get_logger())
+
+    @property
+    def errors(self):
+        """Failed takes and callback exceptions of the thread, by kind (``RawReader.errors``)."""
+        return self._reader.errors
 
     def close(self):
         """Stop the thread and destroy the helper node."""

@@ -8,15 +8,28 @@ type's bound). :class:`RawReader` therefore waits and takes through ``rcl`` with
 :mod:`ctypes`, which releases the lock for the length of each foreign call: the copy out of
 DDS runs beside the control thread, and the size is checked on the taken buffer before any
 Python object is built from it.
+
+The serialised-message buffer is reused between takes; ``rcl`` grows it to the size of the
+sample taken, so after a sample larger than ``max(cap, RawReader.KEEP)`` (a flood sample
+above the cap) it is freed and allocated again at ``KEEP`` bytes: between takes the reader
+holds at most that much, not the largest sample it ever saw.
+
+Errors do not stop the reader: a return code of ``rcl`` other than "taken" and "nothing to
+take", and an exception raised by a callback, are counted (:attr:`RawReader.errors`) and the
+first of each kind is logged (the exception with its traceback); the thread then goes on
+with the next sample.
 """
 
 import ctypes
 import threading
+import traceback
 
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 RCL_RET_OK = 0
 RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
+#: s to wait after a failed take before the next (a lasting error must not spin the thread)
+ERROR_BACKOFF = 0.001
 
 
 class _Allocator(ctypes.Structure):
@@ -28,6 +41,10 @@ class _Allocator(ctypes.Structure):
 class _Uint8Array(ctypes.Structure):        # rcl_serialized_message_t
     _fields_ = [("buffer", ctypes.POINTER(ctypes.c_uint8)), ("buffer_length", ctypes.c_size_t),
                 ("buffer_capacity", ctypes.c_size_t), ("allocator", _Allocator)]
+
+
+class _ErrorString(ctypes.Structure):     # rcutils_error_string_t
+    _fields_ = [("str", ctypes.c_char * 1024)]
 
 
 class _Gid(ctypes.Structure):
@@ -57,6 +74,8 @@ def _libraries():
         rcutils.rcutils_uint8_array_init.argtypes = [
             ctypes.POINTER(_Uint8Array), ctypes.c_size_t, ctypes.POINTER(_Allocator)]
         rcutils.rcutils_uint8_array_fini.argtypes = [ctypes.POINTER(_Uint8Array)]
+        rcutils.rcutils_get_error_string.restype = _ErrorString
+        rcutils.rcutils_reset_error.restype = None
         _lib.update(rcl=rcl, rcutils=rcutils)
     return _lib["rcl"], _lib["rcutils"]
 
@@ -77,17 +96,31 @@ class RawReader:
     cap : int
         Bytes (0: no cap).
     name : str
-        The thread's name.
+        The thread's name (and the prefix of its log lines).
+    log : logger
+        ``log.error(text)``: the first error of each kind (see :attr:`errors`).
+
+    Attributes
+    ----------
+    errors : dict
+        Counts by kind: ``"take"`` (``rcl_take_serialized_message`` returned an error; the
+        sample, if any, is lost) and ``"callback"`` (``on_bytes`` or ``on_oversize`` raised;
+        the reader goes on with the next sample).
     """
 
-    #: the buffer kept between takes is shrunk back to this after a large sample, bytes
+    #: bytes the buffer is allocated with, and freed back to after a sample larger than
+    #: ``max(cap, KEEP)`` (a bound on what the reader holds between takes)
     KEEP = 65_536
 
-    def __init__(self, subscription, context, on_bytes, on_oversize, cap, name):
+    def __init__(self, subscription, context, on_bytes, on_oversize, cap, name, log):
         self._rcl, self._rcutils = _libraries()
         self._sub = subscription
         self._context = context
         self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
+        self._bound = max(cap, self.KEEP)
+        self._name, self._log = name, log
+        self.errors = {"take": 0, "callback": 0}
+        self._logged = set()
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
         self._alloc = self._rcutils.rcutils_get_default_allocator()
@@ -101,6 +134,35 @@ class RawReader:
                                                   ctypes.byref(self._alloc)) != RCL_RET_OK:
             raise MemoryError("rcutils_uint8_array_init failed")
 
+    @property
+    def capacity(self):
+        """Bytes of the serialised-message buffer held now."""
+        return self._msg.buffer_capacity
+
+    def _shrink(self):
+        """Free a buffer grown past the bound and allocate it again at :attr:`KEEP` bytes."""
+        self._rcutils.rcutils_uint8_array_fini(ctypes.byref(self._msg))
+        self._init_buffer()
+
+    def _error(self, kind, text, key=None):
+        """Count an error of ``kind``; log the first of each ``(kind, key)``."""
+        self.errors[kind] += 1
+        key = (kind, key)
+        if key not in self._logged:
+            self._logged.add(key)
+            self._log.error(f"{self._name}: {text}\n(counted; further ones of this kind are "
+                            "not logged)")
+
+    def _take_failed(self, ret):
+        """``rcl_take_serialized_message`` returned ``ret``, neither taken nor nothing to take."""
+        message = self._rcutils.rcutils_get_error_string().str.decode(errors="replace")
+        self._rcutils.rcutils_reset_error()
+        if self._stop.is_set() or not self._context.ok():
+            return                          # shutting down: the handle is going away
+        self._error("take", f"rcl_take_serialized_message returned {ret} ({message}): the "
+                    "sample, if any, is lost")
+        self._stop.wait(ERROR_BACKOFF)
+
     def _take_all(self):
         """Take every sample waiting; hand over the small ones."""
         with self._sub.handle:
@@ -108,13 +170,22 @@ class RawReader:
             while not self._stop.is_set():
                 ret = self._rcl.rcl_take_serialized_message(
                     pointer, ctypes.byref(self._msg), ctypes.byref(self._info), None)
-                if ret != RCL_RET_OK:       # TAKE_FAILED: nothing left (or shutting down)
+                if ret == RCL_RET_SUBSCRIPTION_TAKE_FAILED:     # nothing left
                     return
+                if ret != RCL_RET_OK:
+                    return self._take_failed(ret)
                 size = self._msg.buffer_length
-                if self._cap and size > self._cap:
-                    self._on_oversize(size)
-                    continue
-                self._on_bytes(ctypes.string_at(self._msg.buffer, size))
+                try:
+                    if self._cap and size > self._cap:
+                        self._on_oversize(size)
+                    else:
+                        self._on_bytes(ctypes.string_at(self._msg.buffer, size))
+                except Exception as err:    # noqa: BLE001 -- the input must keep flowing
+                    self._error("callback", "the callback raised; the reader goes on:\n"
+                                + traceback.format_exc().rstrip(), type(err))
+                finally:
+                    if self._msg.buffer_capacity > self._bound:
+                        self._shrink()
 
     def _run(self):
         try:

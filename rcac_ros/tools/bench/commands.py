@@ -88,6 +88,36 @@ def add_soak(p):
 
 def add_delay_margin(p):
     p.add_argument("--plot", metavar="FILE", help="tracking RMS against K_D (PNG)")
+    p.add_argument("--model", choices=("css_arm", "panda"), default="css_arm",
+                   help="the CSS arm (gain K_D, the paper's) or the Panda of payload-demo "
+                        "(gain kappa, K_Di = kappa M_i)")
+    p.add_argument("--gains", metavar="LIST", type=_floats,
+                   help="comma-separated gains (default: a grid for the model)")
+    p.add_argument("--delays", metavar="LIST", type=_periods, default=(0, 1, 2),
+                   help="comma-separated effort delays, periods (default 0,1,2)")
+    p.add_argument("--frozen", action="store_true",
+                   help="adaptation frozen (what the starvation guard does)")
+    p.add_argument("--no-predict", action="store_true", help="no runs with the prediction")
+
+
+def _floats(text):
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a list of numbers: {text!r}") from None
+    if not all(v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"gains must be > 0: {text!r}")
+    return values
+
+
+def _periods(text):
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a list of integers: {text!r}") from None
+    if not all(v >= 0 for v in values):
+        raise argparse.ArgumentTypeError(f"delays must be >= 0 periods: {text!r}")
+    return values
 
 
 def _choices(text, sep, known):
@@ -154,7 +184,8 @@ def run_soak(args):
 
 def run_delay_margin(args):
     from rcac_ros.tools.bench.delay_margin import run_delay_margin
-    run_delay_margin(plot_path=args.plot)
+    run_delay_margin(gains=args.gains, delays=args.delays, plot_path=args.plot,
+                     model_name=args.model, adapt=not args.frozen, predict=not args.no_predict)
     return 0
 
 
