@@ -39,7 +39,7 @@ class Starvation:
         margin = values["starvation.delay_margin"]
         if margin is None:
             margin = default_margin(largest_K_D(node.ctrl))
-        self.guard = DelayGuard(margin, node.h, values["starvation.recover_after"],
+        self.guard = DelayGuard(margin, node.config.h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
         self._resume_adaptation = False
 
