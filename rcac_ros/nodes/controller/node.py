@@ -1,8 +1,8 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
 A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`): configure reads the
-parameters (:mod:`.params`) and warms the kernels, activate starts the efforts, deactivate
-sends one zero effort. Thin: message -> arrays ->
+parameters into a frozen config (:mod:`.params`) and warms the kernels, activate starts
+the efforts, deactivate sends one zero effort. Thin: message -> arrays ->
 :class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
 (one step per valid JointState, time from its stamp) or ``timer`` mode (``rate`` Hz on
 the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop` or
