@@ -137,6 +137,11 @@ def _constraint(name, default, text):
                  lo=0.0, hi=BIG)
 
 
+def _zero_or_more(name, text):
+    """A double >= 0 of the adaptation law, 0 by default (what 0 means: in ``text``)."""
+    return Param(name, "double", 0.0, text, lo=0.0, hi=BIG)
+
+
 def _diagnostics_period():
     return Param("diagnostics_period", "double", 1.0, "diagnostics period, s (steady clock)",
                  lo=0.0, hi=3600.0, strict=True)
@@ -182,28 +187,23 @@ CONTROLLER = _robot("controller") + (
           "adaptation gain: 'gradient' (P_i fixed, the paper's), 'least_squares' (bounded-"
           "gain forgetting) or 'least_squares_prediction' (least squares on E only)",
           choices=("gradient", "least_squares", "least_squares_prediction")),
-    Param("forgetting", "double", 0.0,
-          "least squares: forgetting rate lambda_0 of the bounded-gain forgetting, 1/s",
-          lo=0.0, hi=BIG),
+    _zero_or_more("forgetting",
+                  "least squares: forgetting rate lambda_0 of the bounded-gain forgetting, 1/s"),
     Param("P_max", "double", None,
           "least squares: bound k_0 on every trace(P_i) (unset: each link's trace(P_i(0)))",
           lo=0.0, hi=BIG, strict=True),
-    Param("dead_zone_s", "double", 0.0,
-          "no adaptation from the tracking term while max_j |qd_j - qd_rj| <= this, rad/s "
-          "(0: no dead zone)", lo=0.0, hi=BIG),
-    Param("dead_zone_E", "double", 0.0,
-          "no adaptation from channel c while |E_c| <= this (N m; W for 'power'; 0: no dead "
-          "zone)", lo=0.0, hi=BIG),
+    _zero_or_more("dead_zone_s", "no adaptation from the tracking term while max_j |qd_j - "
+                  "qd_rj| <= this, rad/s (0: no dead zone)"),
+    _zero_or_more("dead_zone_E", "no adaptation from channel c while |E_c| <= this (N m; W "
+                  "for 'power'; 0: no dead zone)"),
     Param("theta_bounds", "string", "none",
           "projection of theta_hat after each step: 'none' or 'mass' (every link mass >= 0)",
           choices=("none", "mass")),
-    Param("leakage", "double", 0.0,
-          "sigma_0 of the leakage -P_i sigma_i (theta_hat_i - theta_0i) toward the initial "
-          "estimates (sigma-modification; bounds the estimates under sensor noise; needs "
-          "h * leakage * lambda_max(P) < 1; 0: none)", lo=0.0, hi=BIG),
-    Param("leakage_bound", "double", 0.0,
-          "M_0 of the switching leakage (every link): none while ||theta_hat_i - theta_0i|| "
-          "<= M_0, full beyond 2 M_0 (0: leak always)", lo=0.0, hi=BIG),
+    _zero_or_more("leakage", "sigma_0 of the leakage -P_i sigma_i (theta_hat_i - theta_0i) "
+                  "toward the initial estimates (sigma-modification; bounds the estimates "
+                  "under sensor noise; needs h * leakage * lambda_max(P) < 1; 0: none)"),
+    _zero_or_more("leakage_bound", "M_0 of the switching leakage (every link): none while "
+                  "||theta_hat_i - theta_0i|| <= M_0, full beyond 2 M_0 (0: leak always)"),
     Param("geometry", "string", "euclidean",
           "adaptation geometry: 'euclidean' (eq 24 as written) or 'natural' (every link's "
           "estimates stay a physical body at every step, pseudo-inertia J > 0; "

@@ -154,6 +154,7 @@ class RecursiveCompositeController:
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
         self.K_D_scale = 1.0
+        self.fused = True                   # use_general_kernel() turns the fused bodies off
         self.joint_friction = bool(joint_friction)
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
@@ -237,14 +238,20 @@ class RecursiveCompositeController:
         through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
         :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
         :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
+        fused = self.fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:
-            kernel = paper_friction_step if is_paper_law(self._chan, self._scal) else \
-                friction_step_kernel
+            kernel = paper_friction_step if fused else friction_step_kernel
             jdata, jfilt = self._jdata, self._jfilt
             self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
             return
-        self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
-            rcac_step_kernel
+        self._kernel = paper_step if fused else rcac_step_kernel
+
+    def use_general_kernel(self):
+        """Run every step through the general kernel, the paper's law too (its fused body
+        otherwise): the same results bit for bit, at the general kernel's cost; the
+        reference a benchmark sets the fused body or another law against."""
+        self.fused = False
+        self._choose_kernel()
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                    theta_bounds):

@@ -62,9 +62,8 @@ def build_parser(argv=()):
         "offline, over ROS 2, and its bags.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name, (module, help_text, needs) in SUBCOMMANDS.items():
+    for name, (module, help_text, _) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
-        p.set_defaults(_module=module, _needs=needs)
         if list(argv[:1]) == [name]:  # only the chosen subcommand imports its module
             add_module_arguments(p, module, list(argv[1:]))
     return parser
@@ -75,9 +74,10 @@ def main(argv=None):
     args = build_parser(argv).parse_args(argv)
     from rcac_ros.errors import RcacError
     from rcac_ros.tools.extras import require
+    module, _, needs = SUBCOMMANDS[args.command]
     try:
-        require(*args._needs)
-        return importlib.import_module(args._module).run(args) or 0
+        require(*needs)
+        return importlib.import_module(module).run(args) or 0
     except RcacError as err:
         print(f"rcac {args.command}: error: {err}", file=sys.stderr)
         return 2

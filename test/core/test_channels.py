@@ -150,20 +150,24 @@ def test_default_is_the_paper_law_and_joint_one_channel():
 
 def test_fused_paper_step_equals_the_general_kernel():
     """The paper's law runs a fused body (``paper_step``); a dead zone on s too small to act
-    sends the same law through the general channel kernel: the two runs are bit-identical."""
+    sends the same law through the general channel kernel, and so does
+    ``use_general_kernel()``: the three runs are bit-identical."""
     model = css_arm()
     traj = PaperTrajectory(Q0, reading="position")       # a 2 rad error: s never near 0
     runs = []
-    for kwargs in ({}, dict(dead_zone_s=1e-300)):
-        ctrl = RecursiveCompositeController(model, **kwargs)
+    for kwargs in ({}, dict(dead_zone_s=1e-300), None):
+        ctrl = RecursiveCompositeController(model, **(kwargs or {}))
+        if kwargs is None:
+            ctrl.use_general_kernel()
         sim = Simulator(model, q0=Q0)
         taus = []
         for k in range(500):
             taus.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
             sim.step(taus[-1])
         runs.append((np.array(taus), ctrl.theta_hat, ctrl.E))
-    for a, b in zip(*runs):
-        assert np.array_equal(a, b)
+    for run in runs[1:]:
+        for a, b in zip(runs[0], run):
+            assert np.array_equal(a, b)
 
 
 def test_joint_channels_are_independent_of_their_order():

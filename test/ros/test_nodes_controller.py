@@ -177,7 +177,8 @@ def test_lockstep_watchdog_trip_restarts_the_filters_only_after_a_lost_state():
             if k in restarts:
                 ctrl.restart_filters()
             tau = ctrl.step(*states[k], *traj(k * H_NS * 1e-9))
-            taus[k] = np.clip(tau, -node.effort_limit, node.effort_limit)  # the preset's
+            limit = node.config.effort_limit                # the preset's
+            taus[k] = np.clip(tau, -limit, limit)
             ctrl.set_applied_torque(taus[k])
         return np.array([taus[k] for k in answers])
 
@@ -214,8 +215,8 @@ def test_timer_ticks_lock_to_the_state_arrival_plus_the_phase_offset(offset):
         assert spin_until(ex, lambda: any(lab == "joint" for lab, _ in probe.efforts))
         arrived = node.states.received      # no state after this one
         phase = (node.loop.next_ns - arrived) % H_NS
-        ticks = node._steps
-        assert spin_until(ex, lambda: node._steps > ticks + 40)
+        ticks = node.counts.steps
+        assert spin_until(ex, lambda: node.counts.steps > ticks + 40)
         if offset is None:
             assert node.phase_error_ns == 0 and (node.loop.next_ns - arrived) % H_NS == phase
         else:

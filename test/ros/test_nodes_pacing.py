@@ -164,7 +164,7 @@ def test_controller_timer_mode_with_sim_time_ticks_on_clock():
         spin_until(ex, lambda: False, timeout=0.1)
         control = [d for lab, d in probe.efforts if lab == "joint"]
         assert 1 <= len(control) <= steps
-        assert node._steps == len(control)
+        assert node.counts.steps == len(control)
 
 
 def test_simulator_realtime_mode_steps_on_the_deadline_loop():

@@ -1,5 +1,8 @@
 """The nodes declare exactly the table's parameters; run-time changes go through its checks."""
 
+import dataclasses
+
+import numpy as np
 import pytest
 
 from test_nodes_support import ros_context
@@ -46,14 +49,40 @@ def test_controller_applies_a_valid_change_and_refuses_an_invalid_one():
         n = ControllerNode(context=ctx)
         try:
             ok = n.set_parameters([Parameter("state_timeout", value=0.5)])[0]
-            assert ok.successful and n.state_timeout == 0.5
+            assert ok.successful and n.config.state_timeout == 0.5
+            assert n.watchdog.state_timeout == 0.5
             bad = n.set_parameters([Parameter("state_timeout", value=0.0)])[0]
             assert not bad.successful and bad.reason.startswith("state_timeout:")
-            assert n.state_timeout == 0.5
+            assert n.config.state_timeout == 0.5
             ok = n.set_parameters([Parameter("monitor_decimation", value=10)])[0]
-            assert ok.successful and n.publish_every == 10
+            assert ok.successful and n.config.publish_every == 10
             frozen = n.set_parameters([Parameter("K_D", value=5.0)])[0]
             assert not frozen.successful                       # read-only
             assert n.get_parameter("K_D").value == params.row("controller", "K_D").default
+        finally:
+            n.destroy_node()
+
+
+def test_controller_config_is_frozen_and_read_only():
+    """The parameters come out as one frozen config: no field can be set, no array or
+    mapping of it written, and the node keeps no copy of its fields beside it."""
+    with ros_context() as (ctx, _):
+        n = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("joints", value=[f"joint{k}" for k in range(7, 0, -1)])])
+        try:
+            cfg = n.config
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                cfg.h = 1.0
+            for name in ("out", "order", "effort_limit", "safe_effort", "theta0", "paper_q0"):
+                value = getattr(cfg, name)
+                assert value is None or not value.flags.writeable, name
+            with pytest.raises(ValueError):
+                cfg.effort_limit[0] = 0.0
+            with pytest.raises(TypeError):
+                cfg.paper["period"] = 1.0
+            assert list(cfg.out) == list(range(6, -1, -1))      # joints given reversed
+            np.testing.assert_array_equal(cfg.order, cfg.out)   # a reversal is its own inverse
+            assert not any(hasattr(n, name) for name in ("h", "publish_every", "theta0",
+                                                         "channel_names", "_out", "_order"))
         finally:
             n.destroy_node()

@@ -41,7 +41,8 @@ class Machine:
         ctrl = RecursiveCompositeController(model, h=H, **gains)
         self.log = Logger()
         self.node = types.SimpleNamespace(
-            ctrl=ctrl, adaptation=AdaptationFreeze(ctrl), h=H,
+            ctrl=ctrl, adaptation=AdaptationFreeze(ctrl),
+            config=types.SimpleNamespace(h=H, paper_q0=None),
             states=types.SimpleNamespace(received=0), get_logger=lambda: self.log)
         self.now = 10 ** 12
         monkeypatch.setattr(starvation, "time",

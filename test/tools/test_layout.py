@@ -185,6 +185,46 @@ def test_node_files_are_short():
     assert not long, f"node modules of {NODE_FILE_LINES} lines or more: {long}"
 
 
+#: the one module that may read another object's private attributes: rclpy's, that have no
+#: public API (each with its reason in its docstring)
+PRIVATE_ADAPTER = os.path.join("nodes", "runtime", "rclpy_private.py")
+#: namedtuple's public methods, underscored so as not to clash with field names
+NAMEDTUPLE_API = {"_replace", "_asdict", "_fields", "_make", "_field_defaults"}
+
+
+def private_touches(path):
+    """``obj._name`` in the source at ``path`` where ``obj`` is not ``self``/``cls`` (a
+    dunder aside), and ``setattr``/``getattr``/``hasattr``/``delattr`` with a string
+    naming a private attribute: ``["line: text", ...]``."""
+    tree = ast.parse(open(path, encoding="utf-8").read(), path)
+    found = []
+    for node in ast.walk(tree):
+        name = None
+        if isinstance(node, ast.Attribute) and not (
+                isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+            name = node.attr
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in ("setattr", "getattr", "hasattr", "delattr") \
+                and len(node.args) > 1 and isinstance(node.args[1], ast.Constant) \
+                and isinstance(node.args[1].value, str):
+            name = node.args[1].value
+        if name and name.startswith("_") and not name.startswith("__") \
+                and name not in NAMEDTUPLE_API:
+            found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_module_touches_another_objects_private_attributes():
+    """A module reads and writes its own objects' private attributes only; what it needs
+    of another object is public. The one exception, rclpy's internals:
+    ``nodes/runtime/rclpy_private.py``."""
+    bad = {os.path.relpath(path, PACKAGE): hits for path in modules().values()
+           if (hits := private_touches(path))}
+    assert set(bad) == {PRIVATE_ADAPTER}, "private attributes of other objects:\n" + \
+        "\n".join(f"{m}:{h}" for m, hits in sorted(bad.items()) if m != PRIVATE_ADAPTER
+                  for h in hits)
+
+
 def test_core_never_imports_rclpy():
     mods = modules()
     bad = [f"{m} imports {t}" for m in mods if part(m) == "core"

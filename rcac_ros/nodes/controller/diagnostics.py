@@ -2,12 +2,34 @@
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from rcac_ros.nodes.runtime.stats import Percentiles
 
-def diagnostics(node):
-    """The controller ``node``'s current status (and restart its timing window)."""
-    count, p50, p99, worst = node._stats.pop()
+
+class LoopCounts:
+    """What the controller's loop counts since configure: the node adds, :func:`diagnostics`
+    reads."""
+
+    def __init__(self):
+        self.steps = 0                  # control steps
+        self.compute = Percentiles()    # the compute time of each step
+        self.compute_overruns = 0       # steps whose computation took longer than h
+        self.late_ticks = 0             # late ticks of the ROS-time timer (timer mode, /clock)
+        self.non_finite = 0             # NaN/Inf efforts (the safe effort went out instead)
+
+
+def diagnostics(node, counts, rejected, starvation):
+    """The controller ``node``'s current status (and restart its timing window).
+
+    From the node's public parts (``config``, ``ctrl``, ``watchdog``, ``failsafe``,
+    ``loop``, ``running``, ``phase_error_ns``, ``status``), what its loop counted
+    (``counts``, :class:`LoopCounts`), its rejected inputs (``rejected``, a
+    :class:`~rcac_ros.nodes.runtime.stats.Throttle`) and timer mode's starvation guard
+    (``starvation``, :class:`~rcac_ros.nodes.controller.starvation.Starvation`, or ``None``).
+    """
+    count, p50, p99, worst = counts.compute.pop()
     skipped = 0 if node.loop is None else node.loop.skipped
     E = node.ctrl.E
+    cfg = node.config
     level = DiagnosticStatus.OK
     message = "running" if node.running else "inactive: no effort published"
     tripped = node.watchdog.tripped or node.failsafe.stop.active
@@ -15,35 +37,35 @@ def diagnostics(node):
         level, message = DiagnosticStatus.WARN, \
             "watchdog: safe effort (no valid state, or no tick of /clock)"
     values = {
-        "mode": node.mode, "steps": node._steps, "steps_in_window": count,
+        "mode": cfg.mode, "steps": counts.steps, "steps_in_window": count,
         "compute_time_p50_us": f"{p50:.1f}", "compute_time_p99_us": f"{p99:.1f}",
         "compute_time_max_us": f"{worst:.1f}",
-        "compute_time_max_all_us": f"{node._stats.max_all * 1e6:.1f}",
-        "deadline_us": f"{node.h * 1e6:.1f}",
-        "deadline_misses": node._deadline_misses + skipped,
-        "compute_overruns": node._deadline_misses,
-        "late_ticks": node._late_ticks if node.loop is None else node.loop.late,
+        "compute_time_max_all_us": f"{counts.compute.max_all * 1e6:.1f}",
+        "deadline_us": f"{cfg.h * 1e6:.1f}",
+        "deadline_misses": counts.compute_overruns + skipped,
+        "compute_overruns": counts.compute_overruns,
+        "late_ticks": counts.late_ticks if node.loop is None else node.loop.late,
         "skipped_ticks": skipped,
         "phase_error_us": f"{node.phase_error_ns * 1e-3:.1f}",   # timer.phase_offset's lock
         "watchdog": "tripped" if tripped else "ok",
         "watchdog_trips": node.watchdog.trips,
         "watchdog_replans": node.failsafe.stop.replans,
-        "rejected_messages": node._throttle.total,
+        "rejected_messages": rejected.total,
         "stamp_restarts": node.failsafe.gate.restarts,
         "desired_limited": node.failsafe.limiter.limited,
-        "non_finite_efforts": node._nonfinite,
+        "non_finite_efforts": counts.non_finite,
         "prediction_error": f"{E[0]:.6g}",        # the first channel's (joint 1 by default)
-        "channels": ",".join(node.channel_names),
+        "channels": ",".join(cfg.channel_names),
         "adaptation": "on" if node.ctrl.adapting else "frozen",
     }
-    if node._starvation is not None:    # timer mode's starvation guard (doc/failsafe.md)
-        values.update(node._starvation.diagnostics())
-        if node.running and node._starvation.guard.starved and level == DiagnosticStatus.OK:
+    if starvation is not None:          # timer mode's starvation guard (doc/failsafe.md)
+        values.update(starvation.diagnostics())
+        if node.running and starvation.guard.starved and level == DiagnosticStatus.OK:
             level, message = DiagnosticStatus.WARN, \
                 "starved: K_D scaled down and adaptation frozen (the loop's delay is past " \
                 "the delay margin)"
-    for name, e in zip(node.channel_names, E):     # every channel's E_c
+    for name, e in zip(cfg.channel_names, E):     # every channel's E_c
         values[f"prediction_error_{name}"] = f"{e:.6g}"
-    for kind, c in sorted(node._throttle.counts.items()):
+    for kind, c in sorted(rejected.counts.items()):
         values[f"rejected_{kind.replace(' ', '_')}"] = c
     return node.status(level, "control loop", message, values)

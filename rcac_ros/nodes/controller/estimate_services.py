@@ -22,15 +22,15 @@ from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
 
 
 class EstimateServices:
-    """The three services on ``node`` (which has ``ctrl``, ``model``, ``theta0``).
+    """The three services on ``node`` (which has ``ctrl``, ``model``, ``config``).
 
     Parameters
     ----------
     node : rclpy.node.Node
         The controller: ``node.ctrl`` (the core controller), ``node.adaptation``
-        (:class:`AdaptationFreeze`), ``node.model``,
-        ``node.theta0`` (the initial estimates, model order), ``node.urdf_links`` (or
-        ``None``), and the parameter ``estimates_file``.
+        (:class:`AdaptationFreeze`), ``node.model``, ``node.config.theta0`` and ``.friction0``
+        (the initial estimates, model order), ``node.config.urdf_links`` (or ``None``), and the
+        parameter ``estimates_file``.
     """
 
     def __init__(self, node):
@@ -48,7 +48,7 @@ class EstimateServices:
 
     def _reset(self, request, response):
         node = self.node
-        node.ctrl.reset(node.theta0, node.friction0)
+        node.ctrl.reset(node.config.theta0, node.config.friction0)
         response.success = True
         response.message = f"estimates reset to the initial estimates " \
                            f"({node.get_parameter('initial_estimates').value})"
@@ -79,7 +79,7 @@ class EstimateServices:
         try:
             yaml_path, urdf, problems = estimates.save(
                 path, node.ctrl.theta_hat, node.model.joint_names, node.model.name,
-                node.urdf_links, friction=node.ctrl.friction_hat)
+                node.config.urdf_links, friction=node.ctrl.friction_hat)
         except OSError as err:
             response.success = False
             response.message = f"estimates_file: cannot write {path!r} ({err.strerror})"

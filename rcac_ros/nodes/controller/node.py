@@ -1,8 +1,8 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
 A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`): configure reads the
-parameters (:mod:`.params`) and warms the kernels, activate starts the efforts, deactivate
-sends one zero effort. Thin: message -> arrays ->
+parameters into a frozen config (:mod:`.params`) and warms the kernels, activate starts
+the efforts, deactivate sends one zero effort. Thin: message -> arrays ->
 :class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
 (one step per valid JointState, time from its stamp) or ``timer`` mode (``rate`` Hz on
 the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop` or
@@ -20,10 +20,10 @@ import numpy as np
 from rclpy.clock import Clock, ClockType
 
 from rcac_ros import params, topics
-from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.errors import RcacError
 from rcac_ros.nodes.runtime.base import run
 from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
-from rcac_ros.nodes.controller.diagnostics import diagnostics
+from rcac_ros.nodes.controller.diagnostics import diagnostics, LoopCounts
 from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
 from rcac_ros.nodes.controller.outputs import ControllerOutputs
@@ -36,7 +36,6 @@ from rcac_ros.nodes.fjt.server import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.controller.lookahead import StatePredictor
 from rcac_ros.nodes.runtime.managed import ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
-from rcac_ros.nodes.runtime.stats import Percentiles
 from rcac_ros.nodes.msgs.trajectory import DesiredMotion
 
 
@@ -47,9 +46,10 @@ class ControllerNode(ManagedNode):
     :class:`rclpy.node.Node`): with ``autostart`` and no ``description_topic``, an invalid
     parameter raises :class:`ConfigError` naming it; otherwise configure fails and says so.
 
-    Attributes: ``ctrl`` (the core controller), ``states`` (:class:`StateInput`, the latest
-    valid state), ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the filters of
-    eqs 21-24 missed states: the next control step restarts them).
+    Attributes: ``config`` (:class:`~.params.ControllerConfig`, frozen), ``ctrl`` (the core
+    controller), ``counts`` (what its loop counted), ``states`` (:class:`StateInput`, the
+    latest valid state), ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the
+    filters of eqs 21-24 missed states: the next control step restarts them).
     """
 
     PARAMETERS = params.CONTROLLER
@@ -63,52 +63,46 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ lifecycle
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
-        read_parameters(self, values)      # ... and the core controller, its kernels warmed
+        self.config, self.ctrl = read_parameters(self, values)     # its kernels warmed
+        cfg = self.config
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
-        self.failsafe = ControllerGuards(values, self.model, self.h, self.effort_limit,
+        self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit,
                                          self.get_logger().warning)
-        self._lookahead = None if values["timer.lookahead"] is None or self.mode != "timer" \
+        self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
-        offset = values["timer.phase_offset"]
-        if offset is not None and offset >= self.h:
-            raise ConfigError(f"timer.phase_offset: must be < one period ({self.h:g} s), got "
-                              f"{offset:g}")
-        self._phase_offset_ns = None if offset is None else round(offset * 1e9)
-        self._starvation = Starvation(self, values) if self.mode == "timer" \
+        self._starvation = Starvation(self, values) if cfg.mode == "timer" \
             and values["starvation.delay_margin"] != 0.0 else None     # doc/failsafe.md
         self.phase_error_ns = 0
-        self._stats = Percentiles()
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
-            self, self.joints, self._out, tagged=self.mode == "lockstep",
-            channels=self.channel_names, joint_friction=self.ctrl.joint_friction))
-        self._steps = self._deadline_misses = self._late_ticks = self._nonfinite = 0
+            self, self.joints, cfg.out, tagged=cfg.mode == "lockstep",
+            channels=cfg.channel_names, joint_friction=self.ctrl.joint_friction))
+        self.counts = LoopCounts()
         self.watchdog = Watchdog(
-            self.failsafe.stop, lambda: self._outputs.effort(self.safe_effort, watchdog=True),
+            self.failsafe.stop, lambda: self._outputs.effort(cfg.safe_effort, watchdog=True),
             lambda: self.states.received,
-            self.state_timeout, self.mode == "lockstep", self.get_logger(),
-            stepped=lambda: self._steps > 0,
-            filters_missed=lambda: setattr(self, "filters_stale", True),
+            cfg.state_timeout, cfg.mode == "lockstep", self.get_logger(),
+            stepped=lambda: self.counts.steps > 0, filters_missed=self._filters_missed,
             replan=self._replan)
         self.states = self.keep(StateInput.close, StateInput(
-            self, self.model.joint_names, self.mode == "lockstep", self.h, self.velocity_cutoff,
+            self, self.model.joint_names, cfg.mode == "lockstep", cfg.h, cfg.velocity_cutoff,
             self.failsafe, self.watchdog, self._outputs, self._throttle.warn,
-            is_running=lambda: self.running, steps=lambda: self._steps,
+            is_running=lambda: self.running, steps=lambda: self.counts.steps,
             restarted=self._stream_restarted, control=self._control))
         self._reset_motion()
         self._fjt = None                    # the FollowJointTrajectory server, if any
-        if self.trajectory_source == "topic":   # checked aside, applied in this thread
+        if cfg.trajectory_source == "topic":    # checked aside, applied in this thread
             self.keep(TrajectoryInput.close, TrajectoryInput(
                 self, self.model.joint_names, self.failsafe, self._throttle.warn,
                 self.time_now_ns, self.follow, self.hold_position, self._abort_goal))
-            self._fjt = create_server(self, ActionSink(self), defaults=self.tolerances)
+            self._fjt = create_server(self, ActionSink(self), defaults=cfg.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
         timer = self.destroy_timer
-        if self.mode == "timer" and self.get_parameter("use_sim_time").value:
-            self.keep(timer, self.create_timer(self.h, self._on_tick))  # ticks on /clock
-        elif self.mode == "timer":
-            self.loop = DeadlineLoop(self.h, self._on_tick)  # run() (or a test) drives it
-            self.keep(lambda _: setattr(self, "loop", None), self.loop)
+        if cfg.mode == "timer" and self.get_parameter("use_sim_time").value:
+            self.keep(timer, self.create_timer(cfg.h, self._on_tick))  # ticks on /clock
+        elif cfg.mode == "timer":
+            self.loop = DeadlineLoop(cfg.h, self._on_tick)  # run() (or a test) drives it
+            self.keep(self._drop_loop, self.loop)
         if self.loop is None:               # lockstep, or timer mode on /clock
             self.keep(timer, self.create_timer(self.watchdog.check_period, self._on_watchdog,
                                                clock=Clock(clock_type=ClockType.STEADY_TIME)))
@@ -116,13 +110,13 @@ class ControllerNode(ManagedNode):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
         self.get_logger().info(
-            f"configured: {self.mode} mode, model {self.model.name} (n={self.model.n}), "
-            f"trajectory {self.trajectory_source}, h={self.h * 1e3:g} ms, "
+            f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
+            f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, "
             f"joints {list(self.joints)}")
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
-        self.restart_motion(self.paper_q0)
+        self.restart_motion(self.config.paper_q0)
         self.states.reset()
         self.watchdog.reset()
         self._last_tick = None
@@ -133,8 +127,14 @@ class ControllerNode(ManagedNode):
 
     def _stream_restarted(self):
         """The state stream restarted: the motion starts at the new state, the filters too."""
-        self.restart_motion(self.paper_q0)
-        self.filters_stale = self._steps > 0
+        self.restart_motion(self.config.paper_q0)
+        self.filters_stale = self.counts.steps > 0
+
+    def _filters_missed(self):          # the watchdog's: eqs 21-24 missed states
+        self.filters_stale = True
+
+    def _drop_loop(self, loop):         # cleanup: timer mode's pacing goes with the rest
+        self.loop = None
 
     def _replan(self, held):
         """The watchdog held the safe effort ``held`` s: the motion restarts from the arm."""
@@ -153,7 +153,7 @@ class ControllerNode(ManagedNode):
 
     def restart_motion(self, q0=None):
         """The desired motion starts again, from ``q0`` or the measured state."""
-        self._motion = DesiredMotion(self.paper, q0)
+        self._motion = DesiredMotion(self.config.paper, q0)
         self.failsafe.limiter.reset()       # the new motion starts at the measured state
 
     def _activate(self):
@@ -203,12 +203,9 @@ class ControllerNode(ManagedNode):
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, changed):
-        """Post-set callback: the run-time parameters take effect."""
-        for p in changed:
-            if p.name == "state_timeout":
-                self.state_timeout = self.watchdog.state_timeout = float(p.value)
-            elif p.name == "monitor_decimation":
-                self.publish_every = int(p.value)
+        """Post-set callback: the run-time parameters take effect (a new config)."""
+        self.config = self.config.changed(changed)
+        self.watchdog.state_timeout = self.config.state_timeout
 
     # ------------------------------------------------------------------ time
     def _now_ns(self):
@@ -216,9 +213,9 @@ class ControllerNode(ManagedNode):
 
     def time_now_ns(self):
         """The time base of trajectories: state stamps in lockstep, the node clock otherwise."""
-        if self.mode == "lockstep":
+        if self.config.mode == "lockstep":
             stamp = self.states.stamp
-            return stamp if stamp else self._steps * round(self.h * 1e9)
+            return stamp if stamp else self.counts.steps * round(self.config.h * 1e9)
         return self._now_ns()
 
     # ------------------------------------------------------------------ control
@@ -246,23 +243,23 @@ class ControllerNode(ManagedNode):
             self._throttle.warn("step", str(err))
             tau = None
         elapsed = time.perf_counter() - start
-        self._stats.add(elapsed)
-        if elapsed > self.h:
-            self._deadline_misses += 1
-        self._steps += 1
+        self.counts.compute.add(elapsed)
+        if elapsed > self.config.h:
+            self.counts.compute_overruns += 1
+        self.counts.steps += 1
         if tau is None or not np.all(np.isfinite(tau)):
-            self._nonfinite += 1
+            self.counts.non_finite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
                                 "publishing the safe effort, estimates restored")
             self.ctrl.reset(theta_before, friction_before)  # the last finite ones
-            self._outputs.effort(self.safe_effort, stamp)
+            self._outputs.effort(self.config.safe_effort, stamp)
             return
-        tau = np.clip(tau, -self.effort_limit, self.effort_limit)
+        tau = np.clip(tau, -self.config.effort_limit, self.config.effort_limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         if self._lookahead is not None:
             self._lookahead.applied = tau
-        self._outputs.effort(tau[self._out], stamp)
-        if self._steps % self.publish_every == 0:
+        self._outputs.effort(tau[self.config.out], stamp)
+        if self.counts.steps % self.config.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
         if self._fjt is not None:
@@ -274,21 +271,21 @@ class ControllerNode(ManagedNode):
             return
         now = self._now_ns()
         if self.loop is None and self._last_tick is not None \
-                and now - self._last_tick > 1.5 * self.h * 1e9:
-            self._late_ticks += 1           # ROS-time timer (the loop counts its own)
+                and now - self._last_tick > 1.5 * self.config.h * 1e9:
+            self.counts.late_ticks += 1     # ROS-time timer (the loop counts its own)
         self._last_tick = now
         self.watchdog.ticked()
         if self.watchdog.state_is_stale():
             return self.watchdog.send_safe(no_state=True)
         self._control(now)
-        if self._phase_offset_ns is not None and self.loop is not None:
+        if self.config.phase_offset_ns is not None and self.loop is not None:
             self.phase_error_ns = self.loop.lock_phase(self.states.received,
-                                                       self._phase_offset_ns)
+                                                       self.config.phase_offset_ns)
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
-        return diagnostics(self)
+        return diagnostics(self, self.counts, self._throttle, self._starvation)
 
 
 def main(args=None):

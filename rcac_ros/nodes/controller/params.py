@@ -1,9 +1,14 @@
 """The controller's parameters, read at configure (rows of :data:`rcac_ros.params.CONTROLLER`).
 
-Sets the node's attributes: orders, timing, desired motion, limits, the gains with their
-per-joint overrides ``gains.<joint>.<gain>`` (:mod:`rcac_ros.nodes.controller.gains`), the initial
-estimates (:mod:`rcac_ros.nodes.controller.estimates`) and the core controller.
+:func:`read_parameters` turns the checked values into a frozen :class:`ControllerConfig`
+(orders, timing, desired motion, limits, the initial estimates
+(:mod:`rcac_ros.nodes.controller.estimates`)) and the core controller, with the gains and
+their per-joint overrides ``gains.<joint>.<gain>`` (:mod:`rcac_ros.nodes.controller.gains`).
+The node keeps both; nothing here sets anything on it.
 """
+
+import dataclasses
+from types import MappingProxyType
 
 import numpy as np
 
@@ -11,7 +16,7 @@ from rcac_ros import params
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes.runtime.base import declare
+from rcac_ros.nodes.runtime.base import declare, joint_order
 from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
 from rcac_ros.nodes.controller.estimates import (initial_estimates, initial_joint_terms,
                                                  urdf_child_links)
@@ -19,9 +24,74 @@ from rcac_ros.nodes.fjt.tolerances import Tolerances
 from rcac_ros.nodes.controller.gains import parse_overrides, per_joint_gains
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class ControllerConfig:
+    """The controller's parameters as the node uses them (doc/nodes.md, "Parameters").
+
+    Frozen, its arrays read-only (copies of what it is given). The run-time parameters
+    (``state_timeout``, ``monitor_decimation``) take effect as a new config
+    (:meth:`changed`). Arrays are in the model's joint order unless said.
+    """
+
+    mode: str                   #: ``lockstep`` or ``timer``
+    h: float                    #: the control period, s (``1 / rate``)
+    out: np.ndarray             #: model -> message (``joints``) order (:func:`joint_order`)
+    order: np.ndarray           #: message -> model order
+    trajectory_source: str      #: ``paper`` or ``topic`` (``trajectory``)
+    paper: object               #: the paper's motion (keywords of PaperTrajectory), or None
+    paper_q0: object            #: its start ``paper.q0``, ndarray (n,), or None (measured)
+    state_timeout: float        #: s without a valid state before the safe effort
+    effort_limit: np.ndarray    #: (n,) |tau| bound
+    safe_effort: np.ndarray     #: (n,) the watchdog's effort, message order, within limits
+    velocity_cutoff: float      #: ``velocity_filter_cutoff``, Hz
+    tolerances: Tolerances      #: FollowJointTrajectory's defaults (``constraints.*``)
+    publish_every: int          #: monitors every this many steps (``monitor_decimation``)
+    theta0: np.ndarray          #: (n, 13) the initial estimates
+    friction0: object           #: (n, 3) the joint terms' initial estimates, or None
+    urdf_links: object          #: (links, rotations) of the URDF, or None (estimates.save)
+    channel_names: tuple        #: the label of each prediction channel, the order of ``E``
+    phase_offset_ns: object     #: timer mode's ``timer.phase_offset`` in ns, or None
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, np.ndarray):
+                object.__setattr__(self, field.name, _frozen(value))
+        if self.paper is not None:
+            object.__setattr__(self, "paper", MappingProxyType(dict(self.paper)))
+        if self.urdf_links is not None:
+            links, rotations = self.urdf_links
+            object.__setattr__(self, "urdf_links",
+                               (tuple(links), tuple(_frozen(r) for r in rotations)))
+
+    def changed(self, parameters):
+        """This config with the run-time parameters among ``parameters`` (checked rclpy
+        Parameters: ``state_timeout``, ``monitor_decimation``) applied."""
+        update = {}
+        for p in parameters:
+            if p.name == "state_timeout":
+                update["state_timeout"] = float(p.value)
+            elif p.name == "monitor_decimation":
+                update["publish_every"] = int(p.value)
+        return dataclasses.replace(self, **update) if update else self
+
+
+def _frozen(arr):
+    """A read-only copy of ``arr``."""
+    arr = np.array(arr)
+    arr.flags.writeable = False
+    return arr
+
+
 def read_parameters(node, v):
-    """Apply the checked values ``v`` (name -> value) to the controller ``node``; build its
-    core controller (``node.ctrl``) and warm its kernels up.
+    """The configuration and the core controller of the controller ``node`` (its ``model``,
+    ``joints``, ``description`` and its ``gains.<joint>.<gain>`` overrides) from the checked
+    values ``v`` (name -> value); the controller's kernels are warmed up.
+
+    Returns
+    -------
+    config : ControllerConfig
+    ctrl : RecursiveCompositeController
 
     Raises
     ------
@@ -29,53 +99,58 @@ def read_parameters(node, v):
         Naming the parameter (an unknown joint in ``gains.<joint>.<gain>``, a bad
         ``initial_estimates`` file, gains the core refuses).
     """
-    n = node.model.n
-    node._out = np.array([node.model.joint_names.index(j) for j in node.joints])
-    node._order = np.array([node.joints.index(j) for j in node.model.joint_names])
-    node.mode = v["mode"]
-    node.h = 1.0 / v["rate"]
-    node.trajectory_source = v["trajectory"]
-    node.paper = None if v["trajectory"] != "paper" else dict(
+    model = node.model
+    n = model.n
+    out, order = joint_order(model, node.joints)
+    h = 1.0 / v["rate"]
+    paper = None if v["trajectory"] != "paper" else dict(
         reading=v["paper.reading"], amplitude=v["paper.amplitude"], period=v["paper.period"])
     q0 = params.per_joint("paper.q0", v["paper.q0"], n, None)
-    node.paper_q0 = None if q0 is None else q0[node._order]   # joints -> model order
-    node.state_timeout = v["state_timeout"]
+    paper_q0 = None if q0 is None else q0[order]   # joints -> model order
     limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
-    node.effort_limit = (node.model.effort_limit.copy() if limit is None
-                         else limit[node._order])
-    node.safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
-                               -node.effort_limit[node._out], node.effort_limit[node._out])
-    node.velocity_cutoff = v["velocity_filter_cutoff"]
-    node.tolerances = Tolerances(
+    effort_limit = model.effort_limit.copy() if limit is None else limit[order]
+    safe_effort = np.clip(params.per_joint("safe_effort", v["safe_effort"], n, 0.0),
+                          -effort_limit[out], effort_limit[out])
+    tolerances = Tolerances(
         path_position=v["constraints.trajectory"], goal_position=v["constraints.goal"],
         stopped_velocity=v["constraints.stopped_velocity_tolerance"],
         goal_time=v["constraints.goal_time"])
-    node.publish_every = v["monitor_decimation"]
-    gains = per_joint_gains(v, _gain_overrides(node), node.model.joint_names)
+    gains = per_joint_gains(v, _gain_overrides(node), model.joint_names)
     spec = v["initial_estimates"]
     if v["geometry"] == "natural" and spec == "zero":   # not a body: doc/design.md §8
         spec = "nominal"
-    node.theta0 = initial_estimates(spec, node.model)
-    node.friction0 = initial_joint_terms(v["initial_estimates"], node.model) \
+    theta0 = initial_estimates(spec, model)
+    friction0 = initial_joint_terms(v["initial_estimates"], model) \
         if v["joint_friction"] else None
-    node.urdf_links = urdf_child_links(node._description or v["robot_description"],
-                                       node.model.joint_names)
+    urdf_links = urdf_child_links(node.description or v["robot_description"],
+                                  model.joint_names)
+    offset = v["timer.phase_offset"]
+    if offset is not None and offset >= h:
+        raise ConfigError(f"timer.phase_offset: must be < one period ({h:g} s), got {offset:g}")
     try:
         channels = parse_channels(list(v["channels"]), n)
     except RcacError as err:            # already "channels: ..."
         raise ConfigError(str(err)) from None
+    config = ControllerConfig(
+        mode=v["mode"], h=h, out=out, order=order, trajectory_source=v["trajectory"],
+        paper=paper, paper_q0=paper_q0, state_timeout=v["state_timeout"],
+        effort_limit=effort_limit, safe_effort=safe_effort,
+        velocity_cutoff=v["velocity_filter_cutoff"], tolerances=tolerances,
+        publish_every=v["monitor_decimation"], theta0=theta0, friction0=friction0,
+        urdf_links=urdf_links, channel_names=channel_names(channels),
+        phase_offset_ns=None if offset is None else round(offset * 1e9))
     try:
-        node.ctrl = RecursiveCompositeController(
-            node.model, K_D=gains["K_D"], Lambda=gains["Lambda"], P=gains["P"],
-            gamma=v["gamma"], lam=v["lambda"], h=node.h, theta_hat0=node.theta0,
-            joint_friction=v["joint_friction"], friction_hat0=node.friction0,
+        ctrl = RecursiveCompositeController(
+            model, K_D=gains["K_D"], Lambda=gains["Lambda"], P=gains["P"],
+            gamma=v["gamma"], lam=v["lambda"], h=h, theta_hat0=config.theta0,
+            joint_friction=v["joint_friction"], friction_hat0=config.friction0,
             P_friction=list(v["P_friction"]), **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
-    node.channel_names = channel_names(channels)
     z = np.zeros(n)             # warm up: one compiled step, so the first real one is not slow
-    node.ctrl.step(z, z, z, z, z)
-    node.ctrl.reset(node.theta0, node.friction0)
+    ctrl.step(z, z, z, z, z)
+    ctrl.reset(config.theta0, config.friction0)
+    return config, ctrl
 
 
 def adaptation_options(v, channels):

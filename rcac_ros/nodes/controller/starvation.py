@@ -80,9 +80,9 @@ class Starvation:
         self.node = node
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position
-            q = getattr(node, "paper_q0", None)
+            q = node.config.paper_q0
             margin = feedback_margin(node.ctrl, np.zeros(node.ctrl.model.n) if q is None else q)
-        self.guard = DelayGuard(margin, node.h, values["starvation.recover_after"],
+        self.guard = DelayGuard(margin, node.config.h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
 
     def reset(self):

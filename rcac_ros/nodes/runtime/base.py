@@ -131,6 +131,21 @@ def _joints(joints, model):
     return tuple(joints)
 
 
+def joint_order(model, joints):
+    """The index arrays between the model's joint order and the messages' (``joints``).
+
+    Returns
+    -------
+    out : ndarray of int (n,)
+        Model order -> message order: ``q[out]`` lists ``q`` in ``joints`` order.
+    order : ndarray of int (n,)
+        Message order -> model order: ``x[order]`` lists a ``joints``-ordered ``x`` in the
+        model's order.
+    """
+    return (np.array([model.joint_names.index(j) for j in joints]),
+            np.array([joints.index(j) for j in model.joint_names]))
+
+
 # ------------------------------------------------------------------ node
 class RcacNode(RcacNodeMixin, Node):
     """The start-up of a plain node: read and check every parameter, or leave nothing behind.
@@ -158,9 +173,7 @@ class RcacNode(RcacNodeMixin, Node):
             xml = wait_for_description(self, topic[0], SingleThreadedExecutor) \
                 if topic and topic[0] else None
             values, self.model, self.joints = declare_parameters(self, self.PARAMETERS, xml)
-            # index arrays: model order -> message (joints) order, and back
-            self._out = np.array([self.model.joint_names.index(j) for j in self.joints])
-            self._order = np.array([self.joints.index(j) for j in self.model.joint_names])
+            self._out, self._order = joint_order(self.model, self.joints)
             self._read_parameters(values)
             self._check_unknown_parameters(values["strict_parameters"])
         except Exception:

@@ -114,6 +114,12 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
                 return response
         service.callback = change_state
 
+    @property
+    def description(self):
+        """The URDF XML received on ``description_topic`` (``None``: none received, or no
+        such topic)."""
+        return self._description
+
     def keep(self, destroy, entity):
         """Register ``entity`` (made by configure) for ``destroy(entity)`` at cleanup."""
         self._entities.append((destroy, entity))
