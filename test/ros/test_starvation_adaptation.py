@@ -1,4 +1,4 @@
-"""The two reasons that freeze the adaptation of eq 24 (``nodes/controller/adaptation.py``,
+"""The two reasons that freeze the adaptation of eq 24 (``nodes/controller/freeze.py``,
 doc/failsafe.md "Starved machine"): the operator's ``~/set_adaptation`` and the starvation
 guard each hold their own, and the law is frozen while either holds, whichever order they
 come in. The guard runs on a steady clock of the test's; whether the law is frozen is read
@@ -14,7 +14,7 @@ from std_srvs.srv import SetBool
 from rcac_ros.core import RecursiveCompositeController, css_arm
 from rcac_ros.core.model import PAPER_GAINS, PAPER_Q0
 from rcac_ros.nodes.controller import starvation
-from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
+from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.controller.estimate_services import EstimateServices
 from rcac_ros.nodes.controller.starvation import Starvation
 

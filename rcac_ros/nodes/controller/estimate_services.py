@@ -5,7 +5,7 @@
 * ``~/set_adaptation`` (SetBool): ``false`` freezes the adaptation of eq 24 (the estimates
   are held and still used), ``true`` resumes it, unless the starvation guard holds it
   frozen too (then it resumes when the machine recovers:
-  :class:`~rcac_ros.nodes.controller.adaptation.AdaptationFreeze`);
+  :class:`~rcac_ros.nodes.controller.freeze.AdaptationFreeze`);
 * ``~/save_estimates`` (Trigger): writes the estimates to the parameter ``estimates_file``
   (YAML; with ``joint_friction`` the joint terms too) and the physically consistent links
   as URDF ``<inertial>`` blocks next to it (the joint terms as ``<dynamics>``)
@@ -18,7 +18,7 @@ They exist while the node is configured (inactive or active).
 from std_srvs.srv import SetBool, Trigger
 
 from rcac_ros.nodes.controller import estimates
-from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
+from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 
 
 class EstimateServices:

@@ -22,7 +22,7 @@ from rclpy.clock import Clock, ClockType
 from rcac_ros import params, topics
 from rcac_ros.errors import RcacError
 from rcac_ros.nodes.runtime.base import run
-from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
+from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.controller.diagnostics import diagnostics, LoopCounts
 from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
@@ -88,12 +88,13 @@ class ControllerNode(ManagedNode):
             self.failsafe, self.watchdog, self._outputs, self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
             restarted=self._stream_restarted, control=self._control))
+        self.inputs = [self.states]         # their side threads' errors: diagnostics
         self._reset_motion()
         self._fjt = None                    # the FollowJointTrajectory server, if any
         if cfg.trajectory_source == "topic":    # checked aside, applied in this thread
-            self.keep(TrajectoryInput.close, TrajectoryInput(
+            self.inputs.append(self.keep(TrajectoryInput.close, TrajectoryInput(
                 self, self.model.joint_names, self.failsafe, self._throttle.warn,
-                self.time_now_ns, self.follow, self.hold_position, self._abort_goal))
+                self.time_now_ns, self.follow, self.hold_position, self._abort_goal)))
             self._fjt = create_server(self, ActionSink(self), defaults=cfg.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
@@ -285,7 +286,7 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):
         """The current diagnostics as a DiagnosticStatus (and restart the timing window)."""
-        return diagnostics(self, self.counts, self._throttle, self._starvation)
+        return diagnostics(self, self.counts, self._throttle, self._starvation, self.inputs)
 
 
 def main(args=None):

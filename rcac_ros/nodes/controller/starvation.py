@@ -7,7 +7,7 @@ smoothed delay is past the delay margin of ``K_D`` the core's feedback gain is s
 of eq 24 is frozen (the estimates do not learn from errors that the delay made); once the
 delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains
 return, and the adaptation unless the operator froze it (the guard holds its own reason,
-:class:`~rcac_ros.nodes.controller.adaptation.AdaptationFreeze`). One log line each way;
+:class:`~rcac_ros.nodes.controller.freeze.AdaptationFreeze`). One log line each way;
 diagnostics ``starved``, ``starved_spells``, ``K_D_scale``, ``delay_ms``,
 ``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md, "Starved machine").
 """
@@ -19,7 +19,7 @@ import numpy as np
 
 from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.core.crba import mass_matrix
-from rcac_ros.nodes.controller.adaptation import AdaptationFreeze
+from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.safety.delay_guard import DelayGuard
 
 

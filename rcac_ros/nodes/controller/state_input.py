@@ -123,6 +123,12 @@ class StateInput:
             self._taken = None
             self.gate.reset()
 
+    @property
+    def errors(self):
+        """Failed takes and callback exceptions of the side thread, by kind (none in
+        lockstep, where the executor takes)."""
+        return {} if self._side is None else self._side.errors
+
     # the latest valid state, each read from one Sample
     q = property(lambda self: None if self.latest is None else self.latest.q)
     qd = property(lambda self: None if self.latest is None else self.latest.qd)

@@ -59,6 +59,11 @@ class TrajectoryInput:
             node, JointTrajectory, topics.JOINT_TRAJECTORY, QOS, self._on_message,
             guards.max_trajectory_bytes, "trajectory", self._warn)
 
+    @property
+    def errors(self):
+        """Failed takes and callback exceptions of the side thread, by kind."""
+        return self._side.errors
+
     def _warn(self, kind, text):
         self.warn(f"trajectory {kind}", text)
 
