@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from chains import random_chain
+from chains import exact_run as true_parameters_run, random_chain
 
 from rcac_ros.core import (GainError, PaperTrajectory, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
@@ -83,19 +83,9 @@ def test_all_channels_equal_slotine_li_on_a_random_chain_with_dense_gains():
 
 def exact_run(model, h, steps, channels, traj, q0):
     """theta_hat = theta, adaptation off (P = 1e-12): the worst |E_c| / max |y_c| per channel."""
-    ctrl = RecursiveCompositeController(model, P=1e-12, h=h, theta_hat0=model.theta(),
-                                        channels=channels)
-    sim = Simulator(model, dt=h, q0=q0)
-    E, y = [], []
-    for k in range(steps):
-        tau = ctrl.step(sim.q, sim.qd, *traj(k * h))
-        E.append(ctrl.E)
-        y.append(ctrl.y)
-        sim.step(tau)
-        ctrl.set_applied_torque(sim.applied)
-    E, y = np.abs(E), np.abs(y)
+    ratio, ymax, ctrl = true_parameters_run(model, h, steps, channels, traj, q0, applied=True)
     assert np.allclose(ctrl.theta_hat, model.theta(), rtol=1e-9)
-    return E.max(axis=0) / y.max(axis=0), y.max(axis=0)
+    return ratio, ymax
 
 
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
