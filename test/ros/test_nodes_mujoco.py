@@ -8,6 +8,7 @@ agree on a rigid arm).
 
 import numpy as np
 import pytest
+from chains import needs_mujoco
 
 from lockstep_support import assert_lockstep_states, H, lockstep_run, offline
 from test_nodes_support import DEEP, NS, PAPER_Q0, Probe, ros_context, spin_until
@@ -20,12 +21,12 @@ from rcac_ros.core.simulator import Simulator  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
-pytest.importorskip("mujoco")
 from rcac_ros.plants.mujoco_plant import MujocoPlant  # noqa: E402
 
 DURATION = 1.0
 
 
+@needs_mujoco
 def test_lockstep_steps_the_mujoco_plant():
     rng = np.random.default_rng(5)
     taus = rng.normal(0.0, 50.0, (5, 7))
@@ -59,6 +60,7 @@ def test_a_bad_engine_is_one_line():
     assert str(err.value) == "engine: must be 'builtin' or 'mujoco', got 'ode'"
 
 
+@needs_mujoco
 def test_the_controller_tracks_the_mujoco_arm_over_dds():
     steps = round(DURATION / H)
     ref_q, ref_err, _ = offline(steps, MujocoPlant(css_arm(), dt=H, q0=PAPER_Q0))
