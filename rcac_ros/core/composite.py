@@ -128,6 +128,9 @@ class RecursiveCompositeController:
         On a ``theta_hat0`` of wrong shape or not finite.
     """
 
+    #: the paper's law runs its fused kernel (:meth:`use_fused_kernel`)
+    _fused = True
+
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
@@ -237,14 +240,20 @@ class RecursiveCompositeController:
         through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
         :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
         :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
+        fused = self._fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:
-            kernel = paper_friction_step if is_paper_law(self._chan, self._scal) else \
-                friction_step_kernel
+            kernel = paper_friction_step if fused else friction_step_kernel
             jdata, jfilt = self._jdata, self._jfilt
             self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
             return
-        self._kernel = paper_step if is_paper_law(self._chan, self._scal) else \
-            rcac_step_kernel
+        self._kernel = paper_step if fused else rcac_step_kernel
+
+    def use_fused_kernel(self, fused):
+        """Let the paper's law run its fused kernel (``True``, the default) or the general
+        one (``False``, for benchmarks: the same law, bit for bit without the joint terms,
+        to 1e-12 with them)."""
+        self._fused = bool(fused)
+        self._choose_kernel()
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,
                    theta_bounds):

@@ -156,6 +156,34 @@ def test_fused_paper_step_equals_the_general_kernel():
         assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("joint_friction", [False, True])
+def test_use_fused_kernel_chooses_the_kernel(monkeypatch, joint_friction):
+    """use_fused_kernel(False) sends the paper's law through the general kernel (counted
+    where the controller looks it up), True back through the fused one."""
+    from rcac_ros.core import composite
+    name = "friction_step_kernel" if joint_friction else "rcac_step_kernel"
+    general = getattr(composite, name)
+    calls = []
+
+    def counted(*args):
+        calls.append(1)
+        return general(*args)
+
+    monkeypatch.setattr(composite, name, counted)
+    ctrl = RecursiveCompositeController(css_arm(), joint_friction=joint_friction)
+    x = (Q0, np.zeros(7), Q0 + 0.01, np.zeros(7), np.zeros(7))
+    ctrl.step(*x)
+    assert not calls                                      # the fused kernel
+    ctrl.use_fused_kernel(False)
+    ctrl.step(*x)
+    ctrl.set_adaptation(True)                             # the choice survives a re-choice
+    ctrl.step(*x)
+    assert len(calls) == 2
+    ctrl.use_fused_kernel(True)
+    ctrl.step(*x)
+    assert len(calls) == 2
+
+
 def test_joint_channels_are_independent_of_their_order():
     """[7, 1] predicts the same two filtered torques as [1, 7] (E swapped)."""
     model = css_arm()

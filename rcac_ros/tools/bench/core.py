@@ -19,7 +19,6 @@ import numpy as np
 
 from rcac_ros.core import (RecursiveCompositeController, Simulator, SlotineLiCompositeController,
                            css_arm)
-from rcac_ros.core.composite_kernels import rcac_step_kernel
 from rcac_ros.core.pseudo_inertia import default_start
 
 SIZES = (7, 14, 28, 56, 112, 224)
@@ -107,7 +106,7 @@ def goal_ratios(budget_s=1.0):
             # the natural geometry against the same Euclidean law run by the general kernel
             # (the paper's law alone has a fused kernel of its own)
             general = RecursiveCompositeController(model, theta_hat0=model.theta())
-            general._kernel = rcac_step_kernel
+            general.use_fused_kernel(False)
             nat = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
                                                geometry="natural")
             out["natural_over_general_kernel_n7"] = interleaved_ratio(
