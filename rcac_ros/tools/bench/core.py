@@ -78,7 +78,8 @@ def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
 
 
 def goal_ratios(budget_s=1.0):
-    """The issue's cost goals, each measured side by side (:func:`interleaved_ratio`)."""
+    """The cost goals of doc/tools.md ("The channels, least squares and the cost goals"),
+    each measured side by side (:func:`interleaved_ratio`)."""
     rng = np.random.default_rng(0)
     out = {}
     for n in (7, 56):
