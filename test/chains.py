@@ -104,3 +104,22 @@ def worst_difference(a, b, model, q0, traj, with_E=True, each_step=None):
         sa.step(ta)
         sb.step(tb)
     return worst
+
+
+def frictional(model, seed=0, scale=1.0):
+    """``model`` with armature, damping and Coulomb friction on every joint."""
+    rng = np.random.default_rng(seed)
+    n = model.n
+    return model.replace(armature=scale * rng.uniform(0.5, 2.0, n),
+                         damping=scale * rng.uniform(10.0, 50.0, n),
+                         friction=scale * rng.uniform(5.0, 20.0, n))
+
+
+def frictional_chain():
+    """A random 5-joint chain with gravity and small joint terms, and a sine motion about a
+    random start: ``(model, q0, trajectory)``, the same at every call."""
+    rng = np.random.default_rng(3)
+    model = frictional(random_chain(rng, 5), scale=0.05)
+    q0 = rng.uniform(-1.0, 1.0, 5)
+    amp = rng.uniform(0.3, 0.8, 5)
+    return model, q0, sine_motion(q0, amp)

@@ -3,22 +3,13 @@ parameters, channels="all" equals Slotine-Li, the option off changes nothing."""
 
 import numpy as np
 import pytest
-from chains import exact_run as true_parameters_run, random_chain, sine_motion, worst_difference
+from chains import exact_run as true_parameters_run, frictional, frictional_chain, worst_difference
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.model import PAPER_Q0
 
 Q0 = np.array(PAPER_Q0)
-
-
-def frictional(model, seed=0, scale=1.0):
-    """``model`` with armature, damping and Coulomb friction on every joint."""
-    rng = np.random.default_rng(seed)
-    n = model.n
-    return model.replace(armature=scale * rng.uniform(0.5, 2.0, n),
-                         damping=scale * rng.uniform(10.0, 50.0, n),
-                         friction=scale * rng.uniform(5.0, 20.0, n))
 
 
 def exact_run(model, plant, h, steps, channels, traj, **options):
@@ -50,11 +41,7 @@ def test_every_channel_stays_exact_with_the_true_joint_terms(gravity):
 def test_all_channels_equal_slotine_li_with_joint_friction(update):
     """Closed loops on a frictional random chain with gravity, both laws from zero joint
     estimates: efforts, estimates (link and joint) and E equal to 1e-9 at every step."""
-    rng = np.random.default_rng(3)
-    model = frictional(random_chain(rng, 5), scale=0.05)
-    q0 = rng.uniform(-1.0, 1.0, 5)
-    amp = rng.uniform(0.3, 0.8, 5)
-    traj = sine_motion(q0, amp)
+    model, q0, traj = frictional_chain()
     gains = dict(K_D=30.0, P=1.0 if update == "implicit" else 0.01, gamma=0.5, lam=20.0,
                  joint_friction=True, friction_hat0=np.zeros((5, 3)),
                  P_friction=(0.5, 5.0, 5.0) if update == "implicit" else 0.05, update=update)

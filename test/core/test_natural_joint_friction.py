@@ -8,8 +8,7 @@ path), the Euclidean joint-friction law on the same plant and motion.
 
 import numpy as np
 import pytest
-from chains import random_chain, sine_motion, worst_difference
-from test_joint_friction_law import frictional
+from chains import frictional, frictional_chain, worst_difference
 from test_natural_geometry import run
 
 from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeController, Simulator,
@@ -83,11 +82,7 @@ def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
     by the rate-limited steps, parted them by 8e-2 after 500 steps, measured. Started at
     half the true terms: from a start 100 x too small, the gain k_f x^2 grows 1e4-fold and the
     two laws' rounding then parts them by 2e-7, measured.)"""
-    rng = np.random.default_rng(3)
-    model = frictional(random_chain(rng, 5), scale=0.05)
-    q0 = rng.uniform(-1.0, 1.0, 5)
-    amp = rng.uniform(0.3, 0.8, 5)
-    traj = sine_motion(q0, amp)
+    model, q0, traj = frictional_chain()
     gains = dict(K_D=30.0, P=1.0 if update == "implicit" else 0.01, gamma=0.5, lam=20.0,
                  joint_friction=True, friction_hat0=0.5 * model.joint_terms(),
                  P_friction=(0.5, 5.0, 5.0) if update == "implicit" else 0.005, update=update,

@@ -173,6 +173,27 @@ def feed(probe, stamps, q=PAPER_Q0, period=0.002):
         time.sleep(max(0.0, nxt - time.monotonic()))
 
 
+@contextlib.contextmanager
+def state_driver(probe, q=PAPER_Q0, period=0.002):
+    """For the block, a thread publishes the state ``q`` every ``period``, stamped on the
+    steady clock (a driver at 500 Hz)."""
+    stop = threading.Event()
+
+    def states():
+        nxt = time.monotonic()
+        while not stop.is_set():
+            probe.state(time.monotonic_ns(), q)
+            nxt += period
+            time.sleep(max(0.0, nxt - time.monotonic()))
+    feeder = threading.Thread(target=states, daemon=True)
+    feeder.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        feeder.join(5.0)
+
+
 def set_parameter(probe, name, value, timeout=10.0):
     """Set one controller parameter at run time; return ``(successful, reason)``."""
     from rclpy.parameter import Parameter

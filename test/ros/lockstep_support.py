@@ -5,7 +5,10 @@ import os
 
 import numpy as np
 
-from test_nodes_support import CONFIG, JOINTS, NS, PAPER_Q0, run_to_end, spin_until, start
+from test_nodes_support import (CONFIG, DEEP, JOINTS, NS, PAPER_Q0, Probe, run_to_end,
+                                spin_until, start)
+
+from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
 from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
@@ -35,6 +38,17 @@ def offline(steps, plant, reading="velocity"):
         if k < steps:
             plant.step(tau)
     return np.array(qs), np.array(errs), ctrl.theta_hat
+
+
+def tracking_probe(context, executor):
+    """A probe, added to ``executor``, that records the joint states and the controller's
+    tracking errors: ``(probe, tracking errors (a list it fills), their subscription)``."""
+    probe = Probe(context, record=("states",))
+    track = []
+    sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
+                                    lambda m: track.append(np.array(m.data)), DEEP)
+    executor.add_node(probe)
+    return probe, track, sub
 
 
 def lockstep_run(executor, probe, subs, drained, *sim_overrides):

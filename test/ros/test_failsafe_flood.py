@@ -3,29 +3,18 @@
 
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
 
-from failsafe_harness import controller, PAPER_Q0, ROOT, session, wait
+from failsafe_harness import controller, ROOT, session, state_driver, wait
+
+from rcac_ros.tools.bench.faults import PLAIN_LOOP  # noqa: E402
 
 FLOOD = [sys.executable, "-m", "rcac_ros.tools.bench.flood"]     # also ``rcac bench faults``
 #: the machine's own stalls: a process that does nothing but wake every period (the VM
 #: stalls every process for up to ~100 ms while the flood's 8 MB messages cross DDS)
-SLEEPER = """
-import sys, time
-import numpy as np
-h, secs = float(sys.argv[1]), float(sys.argv[2])
-t = []
-nxt = time.monotonic()
-end = nxt + secs
-while nxt < end:
-    nxt += h
-    time.sleep(max(0.0, nxt - time.monotonic()))
-    t.append(time.monotonic_ns())
-print(" ".join(str(x) for x in t))
-"""
+SLEEPER = PLAIN_LOOP
 H = 0.002
 
 
@@ -36,17 +25,8 @@ def gaps_ms(efforts, t_from, t_to):
 
 
 def test_flood_of_huge_messages_does_not_starve_the_loop():
-    with session() as probe, controller(probe, "mode:=timer", "trajectory:=topic"):
-        stop = threading.Event()
-
-        def states():                   # a driver at 500 Hz, stamps on the steady clock
-            nxt = time.monotonic()
-            while not stop.is_set():
-                probe.state(time.monotonic_ns(), PAPER_Q0)
-                nxt += H
-                time.sleep(max(0.0, nxt - time.monotonic()))
-        feeder = threading.Thread(target=states, daemon=True)
-        feeder.start()
+    with session() as probe, controller(probe, "mode:=timer", "trajectory:=topic"), \
+            state_driver(probe):
         flood = sleeper = None
         try:
             assert wait(lambda: len(probe.answers()) > 200 or len(probe.efforts) > 1000)
@@ -62,8 +42,6 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
             out, _ = flood.communicate(timeout=90.0)
             time.sleep(0.3)
         finally:
-            stop.set()
-            feeder.join(5.0)
             for proc in (flood, sleeper):
                 if proc is not None and proc.poll() is None:     # a failed step: no flood
                     proc.kill()                                  # left for the next tests

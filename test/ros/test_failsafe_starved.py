@@ -4,12 +4,10 @@ that it is starved, scales K_D down, keeps controlling, and returns to nominal a
 
 import os
 import signal
-import threading
 import time
 
-from failsafe_harness import controller, PAPER_Q0, session, wait
+from failsafe_harness import controller, session, state_driver, wait
 
-H = 0.002
 DIAG = "rcac_controller: control loop"
 
 
@@ -19,17 +17,7 @@ def over_lines(probe):
 
 
 def test_a_starved_controller_degrades_once_and_recovers():
-    with session() as probe, controller(probe, "mode:=timer") as proc:
-        stop = threading.Event()
-
-        def states():                   # a driver at 500 Hz, stamps on the steady clock
-            nxt = time.monotonic()
-            while not stop.is_set():
-                probe.state(time.monotonic_ns(), PAPER_Q0)
-                nxt += H
-                time.sleep(max(0.0, nxt - time.monotonic()))
-        feeder = threading.Thread(target=states, daemon=True)
-        feeder.start()
+    with session() as probe, controller(probe, "mode:=timer") as proc, state_driver(probe):
         try:
             assert wait(lambda: len(probe.efforts) > 1000)
             # a machine loaded by other jobs may starve it already: start from nominal
@@ -50,8 +38,6 @@ def test_a_starved_controller_degrades_once_and_recovers():
             assert len(probe.efforts) > n + 500         # it kept controlling
         finally:
             os.kill(proc.pid, signal.SIGCONT)
-            stop.set()
-            feeder.join(5.0)
         spells = int(probe.diagnostics[DIAG]["starved_spells"])
         with probe.lock:
             starved = [m for m in probe.logs if m.msg.startswith("starved:")]

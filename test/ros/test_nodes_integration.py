@@ -7,7 +7,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from lockstep_support import assert_lockstep_states, H, lockstep_run, matched, offline
+from lockstep_support import (assert_lockstep_states, H, lockstep_run, matched, offline,
+                              tracking_probe)
 from test_nodes_support import (CONFIG, DEEP, node_cmd, PAPER_Q0, Probe, ROOT, ros_context,
                                 ros_domain, spin_until, start, stop)
 
@@ -62,11 +63,7 @@ def test_positions_only_states_still_track():
     steps = round(1.0 / H)
     _, ref_err, _ = offline_css(steps)
     with ros_context() as (ctx, ex):
-        probe = Probe(ctx, record=("states",))
-        track = []
-        sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
-                                        lambda m: track.append(np.array(m.data)), DEEP)
-        ex.add_node(probe)
+        probe, track, sub = tracking_probe(ctx, ex)
         _, (sim_code, sim_out), _ = lockstep_run(
             ex, probe, [sub], lambda: len(track) >= steps + 1, "duration:=1.0",
             "publish_velocity:=false")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from chains import needs_mujoco
 
-from lockstep_support import assert_lockstep_states, H, lockstep_run, offline
-from test_nodes_support import DEEP, NS, PAPER_Q0, Probe, ros_context, spin_until
+from lockstep_support import assert_lockstep_states, H, lockstep_run, offline, tracking_probe
+from test_nodes_support import NS, PAPER_Q0, Probe, ros_context, spin_until
 
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -67,11 +67,7 @@ def test_the_controller_tracks_the_mujoco_arm_over_dds():
     builtin_q, _, _ = offline(steps, Simulator(css_arm(), dt=H, q0=PAPER_Q0))
     assert np.abs(ref_q - builtin_q).max() < 1e-9          # the engines agree on this arm
     with ros_context() as (ctx, ex):
-        probe = Probe(ctx, record=("states",))
-        track = []
-        sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
-                                        lambda m: track.append(np.array(m.data)), DEEP)
-        ex.add_node(probe)
+        probe, track, sub = tracking_probe(ctx, ex)
         readers, (sim_code, sim_out), (ctrl_code, ctrl_out) = lockstep_run(
             ex, probe, [sub], lambda: len(track) >= steps + 1, "engine:=mujoco",
             f"duration:={DURATION}")
