@@ -128,6 +128,9 @@ class RecursiveCompositeController:
         On a ``theta_hat0`` of wrong shape or not finite.
     """
 
+    #: the paper's law runs its fused kernel (:meth:`use_fused_kernel`)
+    _fused = True
+
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, channels=(1,), update="implicit", adaptation="gradient",
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
@@ -154,7 +157,6 @@ class RecursiveCompositeController:
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
         self.K_D_scale = 1.0
-        self.fused = True                   # use_general_kernel() turns the fused bodies off
         self.joint_friction = bool(joint_friction)
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
@@ -238,7 +240,7 @@ class RecursiveCompositeController:
         through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
         :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
         :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
-        fused = self.fused and is_paper_law(self._chan, self._scal)
+        fused = self._fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:
             kernel = paper_friction_step if fused else friction_step_kernel
             jdata, jfilt = self._jdata, self._jfilt
@@ -246,11 +248,11 @@ class RecursiveCompositeController:
             return
         self._kernel = paper_step if fused else rcac_step_kernel
 
-    def use_general_kernel(self):
-        """Run every step through the general kernel, the paper's law too (its fused body
-        otherwise): the same results bit for bit, at the general kernel's cost; the
-        reference a benchmark sets the fused body or another law against."""
-        self.fused = False
+    def use_fused_kernel(self, fused):
+        """Let the paper's law run its fused kernel (``True``, the default) or the general
+        one (``False``, for benchmarks: the same law, bit for bit without the joint terms,
+        to 1e-12 with them)."""
+        self._fused = bool(fused)
         self._choose_kernel()
 
     def _configure(self, update, adaptation, forgetting, P_max, dead_zone_s, dead_zone_E,

@@ -32,7 +32,7 @@ SUBCOMMANDS = {
                      "panda with an unknown 2 kg payload attached", ()),
     "friction-demo": ("rcac_ros.tools.demos.friction",
                       "panda learning its joints' armature, viscous and Coulomb friction", ()),
-    "sweep": ("rcac_ros.tools.sweep.engine", "Monte Carlo campaigns of closed-loop runs on Dask",
+    "sweep": ("rcac_ros.tools.sweep.commands", "Monte Carlo campaigns of closed-loop runs on Dask",
               ("sweep",)),
     "compare": ("rcac_ros.tools.demos.compare",
                 "every adaptive law on the paper's run and the payload demo", ()),

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from chains import random_chain
+from chains import exact_run as true_parameters_run, random_chain
 
 from rcac_ros.core import (GainError, PaperTrajectory, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
@@ -83,19 +83,9 @@ def test_all_channels_equal_slotine_li_on_a_random_chain_with_dense_gains():
 
 def exact_run(model, h, steps, channels, traj, q0):
     """theta_hat = theta, adaptation off (P = 1e-12): the worst |E_c| / max |y_c| per channel."""
-    ctrl = RecursiveCompositeController(model, P=1e-12, h=h, theta_hat0=model.theta(),
-                                        channels=channels)
-    sim = Simulator(model, dt=h, q0=q0)
-    E, y = [], []
-    for k in range(steps):
-        tau = ctrl.step(sim.q, sim.qd, *traj(k * h))
-        E.append(ctrl.E)
-        y.append(ctrl.y)
-        sim.step(tau)
-        ctrl.set_applied_torque(sim.applied)
-    E, y = np.abs(E), np.abs(y)
+    ratio, ymax, ctrl = true_parameters_run(model, h, steps, channels, traj, q0, applied=True)
     assert np.allclose(ctrl.theta_hat, model.theta(), rtol=1e-9)
-    return E.max(axis=0) / y.max(axis=0), y.max(axis=0)
+    return ratio, ymax
 
 
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
@@ -151,14 +141,14 @@ def test_default_is_the_paper_law_and_joint_one_channel():
 def test_fused_paper_step_equals_the_general_kernel():
     """The paper's law runs a fused body (``paper_step``); a dead zone on s too small to act
     sends the same law through the general channel kernel, and so does
-    ``use_general_kernel()``: the three runs are bit-identical."""
+    ``use_fused_kernel(False)``: the three runs are bit-identical."""
     model = css_arm()
     traj = PaperTrajectory(Q0, reading="position")       # a 2 rad error: s never near 0
     runs = []
     for kwargs in ({}, dict(dead_zone_s=1e-300), None):
         ctrl = RecursiveCompositeController(model, **(kwargs or {}))
         if kwargs is None:
-            ctrl.use_general_kernel()
+            ctrl.use_fused_kernel(False)
         sim = Simulator(model, q0=Q0)
         taus = []
         for k in range(500):
@@ -168,6 +158,34 @@ def test_fused_paper_step_equals_the_general_kernel():
     for run in runs[1:]:
         for a, b in zip(runs[0], run):
             assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("joint_friction", [False, True])
+def test_use_fused_kernel_chooses_the_kernel(monkeypatch, joint_friction):
+    """use_fused_kernel(False) sends the paper's law through the general kernel (counted
+    where the controller looks it up), True back through the fused one."""
+    from rcac_ros.core import composite
+    name = "friction_step_kernel" if joint_friction else "rcac_step_kernel"
+    general = getattr(composite, name)
+    calls = []
+
+    def counted(*args):
+        calls.append(1)
+        return general(*args)
+
+    monkeypatch.setattr(composite, name, counted)
+    ctrl = RecursiveCompositeController(css_arm(), joint_friction=joint_friction)
+    x = (Q0, np.zeros(7), Q0 + 0.01, np.zeros(7), np.zeros(7))
+    ctrl.step(*x)
+    assert not calls                                      # the fused kernel
+    ctrl.use_fused_kernel(False)
+    ctrl.step(*x)
+    ctrl.set_adaptation(True)                             # the choice survives a re-choice
+    ctrl.step(*x)
+    assert len(calls) == 2
+    ctrl.use_fused_kernel(True)
+    ctrl.step(*x)
+    assert len(calls) == 2
 
 
 def test_joint_channels_are_independent_of_their_order():

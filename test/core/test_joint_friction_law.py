@@ -3,7 +3,7 @@ parameters, channels="all" equals Slotine-Li, the option off changes nothing."""
 
 import numpy as np
 import pytest
-from chains import random_chain
+from chains import exact_run as true_parameters_run, frictional, frictional_chain, worst_difference
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
@@ -12,28 +12,9 @@ from rcac_ros.core.model import PAPER_Q0
 Q0 = np.array(PAPER_Q0)
 
 
-def frictional(model, seed=0, scale=1.0):
-    """``model`` with armature, damping and Coulomb friction on every joint."""
-    rng = np.random.default_rng(seed)
-    n = model.n
-    return model.replace(armature=scale * rng.uniform(0.5, 2.0, n),
-                         damping=scale * rng.uniform(10.0, 50.0, n),
-                         friction=scale * rng.uniform(5.0, 20.0, n))
-
-
 def exact_run(model, plant, h, steps, channels, traj, **options):
     """The true parameters, adaptation off (tiny gains): the worst |E_c| / max |y_c|."""
-    ctrl = RecursiveCompositeController(model, P=1e-12, h=h, theta_hat0=model.theta(),
-                                        channels=channels, **options)
-    sim = Simulator(plant, dt=h, q0=Q0)
-    E, y = [], []
-    for k in range(steps):
-        tau = ctrl.step(sim.q, sim.qd, *traj(k * h))
-        E.append(ctrl.E)
-        y.append(ctrl.y)
-        sim.step(tau)
-    E, y = np.abs(E), np.abs(y)
-    return E.max(axis=0) / y.max(axis=0)
+    return true_parameters_run(model, h, steps, channels, traj, Q0, plant=plant, **options)[0]
 
 
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
@@ -60,27 +41,13 @@ def test_every_channel_stays_exact_with_the_true_joint_terms(gravity):
 def test_all_channels_equal_slotine_li_with_joint_friction(update):
     """Closed loops on a frictional random chain with gravity, both laws from zero joint
     estimates: efforts, estimates (link and joint) and E equal to 1e-9 at every step."""
-    rng = np.random.default_rng(3)
-    model = frictional(random_chain(rng, 5), scale=0.05)
-    q0 = rng.uniform(-1.0, 1.0, 5)
-    amp = rng.uniform(0.3, 0.8, 5)
-    traj = lambda t: (q0 + amp * np.sin(2.0 * t), 2.0 * amp * np.cos(2.0 * t),   # noqa: E731
-                      -4.0 * amp * np.sin(2.0 * t))
+    model, q0, traj = frictional_chain()
     gains = dict(K_D=30.0, P=1.0 if update == "implicit" else 0.01, gamma=0.5, lam=20.0,
                  joint_friction=True, friction_hat0=np.zeros((5, 3)),
                  P_friction=(0.5, 5.0, 5.0) if update == "implicit" else 0.05, update=update)
     a = RecursiveCompositeController(model, channels="all", **gains)
     b = SlotineLiCompositeController(model, **gains)
-    sa, sb = Simulator(model, q0=q0), Simulator(model, q0=q0)
-    worst = 0.0
-    for k in range(1000):
-        x = traj(k * 0.002)
-        ta, tb = a.step(sa.q, sa.qd, *x), b.step(sb.q, sb.qd, *x)
-        for u, v in ((ta, tb), (a.theta_hat, b.theta_hat), (a.friction_hat, b.friction_hat)):
-            worst = max(worst, np.max(np.abs(u - v)) / max(np.max(np.abs(v)), 1e-300))
-        worst = max(worst, np.max(np.abs(a.E - b.E)) / max(1.0, np.max(np.abs(b.y))))
-        sa.step(ta)
-        sb.step(tb)
+    worst = worst_difference(a, b, model, q0, traj)
     assert worst < 1e-9, worst
     assert np.max(np.abs(b.friction_hat)) > 1e-3            # the joint terms did adapt
 

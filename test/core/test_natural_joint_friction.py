@@ -8,8 +8,7 @@ path), the Euclidean joint-friction law on the same plant and motion.
 
 import numpy as np
 import pytest
-from chains import random_chain
-from test_joint_friction_law import frictional
+from chains import frictional, frictional_chain, worst_difference
 from test_natural_geometry import run
 
 from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeController, Simulator,
@@ -83,29 +82,18 @@ def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
     by the rate-limited steps, parted them by 8e-2 after 500 steps, measured. Started at
     half the true terms: from a start 100 x too small, the gain k_f x^2 grows 1e4-fold and the
     two laws' rounding then parts them by 2e-7, measured.)"""
-    rng = np.random.default_rng(3)
-    model = frictional(random_chain(rng, 5), scale=0.05)
-    q0 = rng.uniform(-1.0, 1.0, 5)
-    amp = rng.uniform(0.3, 0.8, 5)
-    traj = lambda t: (q0 + amp * np.sin(2.0 * t), 2.0 * amp * np.cos(2.0 * t),   # noqa: E731
-                      -4.0 * amp * np.sin(2.0 * t))
+    model, q0, traj = frictional_chain()
     gains = dict(K_D=30.0, P=1.0 if update == "implicit" else 0.01, gamma=0.5, lam=20.0,
                  joint_friction=True, friction_hat0=0.5 * model.joint_terms(),
                  P_friction=(0.5, 5.0, 5.0) if update == "implicit" else 0.005, update=update,
                  geometry="natural")
     a = RecursiveCompositeController(model, channels="all", **gains)
     b = SlotineLiCompositeController(model, **gains)
-    sa, sb = Simulator(model, q0=q0), Simulator(model, q0=q0)
-    worst = 0.0
-    for k in range(1000):
-        x = traj(k * 0.002)
-        ta, tb = a.step(sa.q, sa.qd, *x), b.step(sb.q, sb.qd, *x)
-        for u, v in ((ta, tb), (a.theta_hat, b.theta_hat), (a.friction_hat, b.friction_hat)):
-            worst = max(worst, np.max(np.abs(u - v)) / max(np.max(np.abs(v)), 1e-300))
-        worst = max(worst, np.max(np.abs(a.E - b.E)) / max(1.0, np.max(np.abs(b.y))))
-        assert np.all(b.friction_hat > 0.0)
-        sa.step(ta)
-        sb.step(tb)
+
+    def stays_positive(law):
+        assert np.all(law.friction_hat > 0.0)
+
+    worst = worst_difference(a, b, model, q0, traj, each_step=stays_positive)
     assert worst < 1e-9, worst
     assert np.max(np.abs(b.friction_hat - gains["friction_hat0"])) > 1e-3     # they adapted
 

@@ -14,6 +14,7 @@ import sys
 
 import numpy as np
 import pytest
+from chains import needs_mujoco
 
 from rcac_ros.core import (InputError, ModelError, RobotModel, Simulator, css_arm,
                            inverse_dynamics, mass_matrix)
@@ -22,8 +23,12 @@ from rcac_ros.errors import ConfigError, DependencyError
 from rcac_ros.plants import ENGINES, check_engine, make_plant
 from rcac_ros.tools.robots import example_robot_urdf
 
-mujoco = pytest.importorskip("mujoco")
-from rcac_ros.plants.mujoco_plant import MujocoPlant, mjcf  # noqa: E402
+from rcac_ros.plants.mujoco_plant import MujocoPlant, mjcf
+
+try:
+    import mujoco
+except ImportError:                  # the tests that use it are marked needs_mujoco
+    mujoco = None
 
 PANDA = example_robot_urdf(os.path.join("panda_description", "urdf", "panda.urdf"))
 UR5 = example_robot_urdf(os.path.join("ur_description", "urdf", "ur5_robot.urdf"))
@@ -66,6 +71,7 @@ def worst_gap(a, b, taus):
 
 
 @pytest.mark.parametrize("label,build", robots(), ids=[r[0] for r in robots()])
+@needs_mujoco
 def test_open_loop_equals_the_builtin_simulator(label, build):
     model = build()
     q0, qd0, taus = open_loop(model)
@@ -80,6 +86,7 @@ def test_open_loop_equals_the_builtin_simulator(label, build):
 
 @needs_robots
 @pytest.mark.parametrize("which", ["panda", "ur5"])
+@needs_mujoco
 def test_mujocos_own_urdf_reading_gives_the_same_arm(which):
     """MuJoCo's URDF parser (fingers locked, meshes dropped) against the package's loader."""
     path = PANDA if which == "panda" else UR5
@@ -122,6 +129,7 @@ def reference_rk4(rigid, damping, armature, q, qd, taus, h=0.002):
 
 
 @needs_robots
+@needs_mujoco
 def test_damping_and_armature_follow_their_equation():
     # rigid: the URDF's own <dynamics damping> removed (the reference adds the terms itself)
     rigid = with_terms(model_from_urdf(PANDA, tip_link="panda_link8"))
@@ -141,6 +149,7 @@ def test_damping_and_armature_follow_their_equation():
 
 @needs_robots
 @pytest.mark.parametrize("which", ["panda", "ur5"])
+@needs_mujoco
 def test_damping_and_armature_equal_the_builtin_simulator(which):
     rigid = model_from_urdf(PANDA, tip_link="panda_link8") if which == "panda" \
         else model_from_urdf(UR5)
@@ -169,6 +178,7 @@ def pendulum(friction):
     return with_terms(model, friction=np.array([friction])), 0.1 + 2.0 * 0.25
 
 
+@needs_mujoco
 def test_friction_loss_sticks_below_breakaway_and_slides_above():
     """Dry friction F: below F the joint (nearly) sticks, above it ``qdd = (tau - F) / I``.
 
@@ -192,6 +202,7 @@ def test_friction_loss_sticks_below_breakaway_and_slides_above():
         assert plant.qd[0] == pytest.approx(-(ratio - 1.0) * F / inertia * 1.0, rel=1e-6)
 
 
+@needs_mujoco
 def test_the_interface_of_the_simulator():
     model = css_arm()
     plant = MujocoPlant(model, q0=np.full(7, 0.1), effort_limit=10.0)
@@ -219,6 +230,7 @@ def test_the_interface_of_the_simulator():
             MujocoPlant(model, **bad)
 
 
+@needs_mujoco
 def test_substeps_refine_the_step():
     """``substeps`` MuJoCo steps of ``dt / substeps``: RK4 converges at 4th order to the
     built-in simulator with as many substeps."""
@@ -240,6 +252,7 @@ def test_substeps_refine_the_step():
     assert 12.0 < e1 / e2 < 20.0
 
 
+@needs_mujoco
 def test_the_css_arm_keeps_its_table_1_inertias():
     """Table 1 breaks the triangle inequality MuJoCo's compiler checks: the MJCF balances
     them, the plant puts the true ones back (principal moments and axes)."""
@@ -254,6 +267,7 @@ def test_the_css_arm_keeps_its_table_1_inertias():
         assert np.allclose(back, model.inertia[i], rtol=0, atol=1e-12 * model.inertia[i].max())
 
 
+@needs_mujoco
 def test_the_mjcf_is_a_standalone_model(tmp_path):
     """The generated MJCF loads in MuJoCo by itself (e.g. in its viewer), names included."""
     model = css_arm((0.0, 0.0, -9.81))
@@ -265,6 +279,7 @@ def test_the_mjcf_is_a_standalone_model(tmp_path):
     assert loaded.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
 
 
+@needs_mujoco
 def test_a_model_mujoco_refuses_is_one_line():
     model = css_arm()
     broken = copy.copy(model)
@@ -280,6 +295,10 @@ def test_engines():
         with pytest.raises(ConfigError, match="^engine: expected one of builtin, mujoco"):
             check_engine(bad)
     assert isinstance(make_plant(css_arm(), "builtin", dt=0.001), Simulator)
+
+
+@needs_mujoco
+def test_make_plant_builds_the_mujoco_plant():
     assert isinstance(make_plant(css_arm(), "mujoco", dt=0.001), MujocoPlant)
 
 

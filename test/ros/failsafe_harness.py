@@ -173,6 +173,27 @@ def feed(probe, stamps, q=PAPER_Q0, period=0.002):
         time.sleep(max(0.0, nxt - time.monotonic()))
 
 
+@contextlib.contextmanager
+def state_driver(probe, q=PAPER_Q0, period=0.002):
+    """For the block, a thread publishes the state ``q`` every ``period``, stamped on the
+    steady clock (a driver at 500 Hz)."""
+    stop = threading.Event()
+
+    def states():
+        nxt = time.monotonic()
+        while not stop.is_set():
+            probe.state(time.monotonic_ns(), q)
+            nxt += period
+            time.sleep(max(0.0, nxt - time.monotonic()))
+    feeder = threading.Thread(target=states, daemon=True)
+    feeder.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        feeder.join(5.0)
+
+
 def set_parameter(probe, name, value, timeout=10.0):
     """Set one controller parameter at run time; return ``(successful, reason)``."""
     from rclpy.parameter import Parameter
@@ -183,24 +204,3 @@ def set_parameter(probe, name, value, timeout=10.0):
     assert wait(future.done, timeout=timeout)
     result = future.result().results[0]
     return result.successful, result.reason
-
-
-@contextlib.contextmanager
-def driver(probe, q=PAPER_Q0, period=0.002):
-    """A driver publishing ``q`` every ``period`` in a thread, stamps on the steady clock, for
-    as long as the block runs."""
-    stop = threading.Event()
-
-    def states():
-        nxt = time.monotonic()
-        while not stop.is_set():
-            probe.state(time.monotonic_ns(), q)
-            nxt += period
-            time.sleep(max(0.0, nxt - time.monotonic()))
-    thread = threading.Thread(target=states, daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join(5.0)

@@ -6,9 +6,8 @@ import os
 import signal
 import time
 
-from failsafe_harness import controller, driver, session, wait
+from failsafe_harness import controller, session, state_driver, wait
 
-H = 0.002
 DIAG = "rcac_controller: control loop"
 
 
@@ -18,7 +17,7 @@ def over_lines(probe):
 
 
 def test_a_starved_controller_degrades_once_and_recovers():
-    with session() as probe, controller(probe, "mode:=timer") as proc, driver(probe, period=H):
+    with session() as probe, controller(probe, "mode:=timer") as proc, state_driver(probe):
         try:
             assert wait(lambda: len(probe.efforts) > 1000)
             # a machine loaded by other jobs may starve it already: start from nominal

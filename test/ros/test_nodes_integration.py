@@ -7,46 +7,27 @@ import subprocess
 import numpy as np
 import pytest
 
-from test_nodes_support import (CONFIG, DEEP, JOINTS, node_cmd, NS, PAPER_Q0, Probe, ROOT,
-                                ros_context, ros_domain, run_to_end, spin_until, start, stop)
+from lockstep_support import (assert_lockstep_states, H, lockstep_run, matched, offline,
+                              tracking_probe)
+from test_nodes_support import (CONFIG, DEEP, node_cmd, PAPER_Q0, Probe, ROOT, ros_context,
+                                ros_domain, spin_until, start, stop)
 
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
-from rcac_ros.core.composite import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.model import css_arm  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
-from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 
 DURATION = 3.0
-H = 0.002
 
 
-def matched(executor, subs):
-    """Wait until every subscription of the probe is matched to the controller's publisher."""
-    assert spin_until(executor, lambda: all(s.get_publisher_count() > 0 for s in subs),
-                      timeout=60.0)
-
-
-def offline(steps, reading="velocity"):
-    """The experiment without ROS: core Simulator + controller, same settings, same loop."""
-    model = css_arm()
-    sim = Simulator(model, dt=H, q0=PAPER_Q0)
-    ctrl = RecursiveCompositeController(model, **dict(PAPER_GAINS, h=H))   # = controller.yaml
-    traj = PaperTrajectory(PAPER_Q0, reading=reading)
-    qs, errs = [], []
-    for k in range(steps + 1):
-        q_d, qd_d, qdd_d = traj(k * H)
-        qs.append(sim.q.copy())
-        errs.append(sim.q - q_d)
-        tau = ctrl.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
-        if k < steps:
-            sim.step(tau)
-    return np.array(qs), np.array(errs), ctrl.theta_hat
+def offline_css(steps, reading="velocity"):
+    """The experiment without ROS: the core Simulator under the controller, same settings."""
+    return offline(steps, Simulator(css_arm(), dt=H, q0=PAPER_Q0), reading)
 
 
 def test_lockstep_matches_the_offline_experiment():
     steps = round(DURATION / H)
-    ref_q, ref_err, ref_theta = offline(steps)
+    ref_q, ref_err, ref_theta = offline_css(steps)
     with ros_context() as (ctx, ex):
         probe = Probe(ctx, record=("states",))
         track, theta = [], []
@@ -57,35 +38,12 @@ def test_lockstep_matches_the_offline_experiment():
                                       "/rcac_controller/parameter_estimates", theta.append,
                                       DEEP)]
         ex.add_node(probe)
-        ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
-        matched(ex, subs)
-        # the simulator starts once its state publisher has matched every subscription the
-        # graph shows (the controller's, this probe's, and any other): with a fixed 2, one
-        # full-suite run started it before this probe matched, which then saw no state
-        assert spin_until(ex, lambda: probe.count_subscribers("/joint_states") >= 2,
-                          timeout=60.0)
-        readers = probe.count_subscribers("/joint_states")
-        sim = start("simulator_node", f"duration:={DURATION}", f"min_subscribers:={readers}",
-                    # a process stalled 0.5 s on a loaded machine is not a lost
-                    # effort: wait long enough that only a real loss is a miss
-                    "lockstep_timeout:=5.0", params_file=os.path.join(CONFIG, "simulator.yaml"))
-        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
-            ex, sim, ctrl, lambda: len(theta) >= steps + 1)
+        readers, (sim_code, sim_out), (ctrl_code, ctrl_out) = lockstep_run(
+            ex, probe, subs, lambda: len(theta) >= steps + 1, f"duration:={DURATION}")
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
-    # an effort for every state: no lockstep miss, none late
-    line = [ln for ln in sim_out.splitlines() if "finished:" in ln]
-    assert line and f"finished: {steps} steps" in line[0], sim_out
-    assert "lockstep misses 0, late efforts 0" in line[0], line[0]
-    # every state received here is the offline state at the same step (bit-for-bit
-    # up to the float rounding of the time stamps)
-    seen = 0
-    for msg in probe.states:
-        k = round((msg.header.stamp.sec * NS + msg.header.stamp.nanosec) / (H * NS))
-        assert list(msg.name) == JOINTS
-        np.testing.assert_allclose(msg.position, ref_q[k], rtol=0, atol=1e-9)
-        seen += 1
-    assert seen >= steps * 0.9, (seen, readers, sim_out)
+    # an effort for every state, and every state the offline one at the same step
+    assert_lockstep_states(probe.states, ref_q, steps, readers, sim_out)
     # the tracking error stays what the offline run gives over the same seconds
     track = np.array(track)
     assert track.shape[1] == 7 and len(track) >= steps
@@ -103,25 +61,12 @@ def test_lockstep_matches_the_offline_experiment():
 def test_positions_only_states_still_track():
     """The simulator publishes no velocities: the controller estimates them and still tracks."""
     steps = round(1.0 / H)
-    _, ref_err, _ = offline(steps)
+    _, ref_err, _ = offline_css(steps)
     with ros_context() as (ctx, ex):
-        probe = Probe(ctx, record=("states",))
-        track = []
-        sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
-                                        lambda m: track.append(np.array(m.data)), DEEP)
-        ex.add_node(probe)
-        ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
-        matched(ex, [sub])
-        # every state reader the graph shows matched before the start, and a stalled
-        # controller waited for: in one loaded full run fewer than 501 answers came (a
-        # lockstep miss lets the simulator run ahead of the controller)
-        assert spin_until(ex, lambda: probe.count_subscribers("/joint_states") >= 2,
-                          timeout=60.0)
-        readers = probe.count_subscribers("/joint_states")
-        sim = start("simulator_node", "duration:=1.0", "publish_velocity:=false",
-                    f"min_subscribers:={readers}", "lockstep_timeout:=5.0",
-                    params_file=os.path.join(CONFIG, "simulator.yaml"))
-        (sim_code, sim_out), _ = run_to_end(ex, sim, ctrl, lambda: len(track) >= steps + 1)
+        probe, track, sub = tracking_probe(ctx, ex)
+        _, (sim_code, sim_out), _ = lockstep_run(
+            ex, probe, [sub], lambda: len(track) >= steps + 1, "duration:=1.0",
+            "publish_velocity:=false")
     assert sim_code == 0, sim_out
     assert all(len(m.velocity) == 0 for m in probe.states)
     worst = np.max(np.abs(np.array(track)))

@@ -6,31 +6,27 @@ as the offline loop on the MuJoCo plant does, and as on the built-in one (the tw
 agree on a rigid arm).
 """
 
-import os
-
 import numpy as np
 import pytest
+from chains import needs_mujoco
 
-from test_nodes_support import (CONFIG, DEEP, JOINTS, NS, PAPER_Q0, Probe, ros_context,
-                                run_to_end, spin_until, start)
+from lockstep_support import assert_lockstep_states, H, lockstep_run, offline, tracking_probe
+from test_nodes_support import NS, PAPER_Q0, Probe, ros_context, spin_until
 
 from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from rcac_ros.core.model import css_arm, PAPER_GAINS  # noqa: E402
-from rcac_ros.core import RecursiveCompositeController  # noqa: E402
+from rcac_ros.core.model import css_arm  # noqa: E402
 from rcac_ros.core.simulator import Simulator  # noqa: E402
-from rcac_ros.core.trajectory import PaperTrajectory  # noqa: E402
 from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
-pytest.importorskip("mujoco")
 from rcac_ros.plants.mujoco_plant import MujocoPlant  # noqa: E402
 
-H = 0.002
 DURATION = 1.0
 
 
+@needs_mujoco
 def test_lockstep_steps_the_mujoco_plant():
     rng = np.random.default_rng(5)
     taus = rng.normal(0.0, 50.0, (5, 7))
@@ -64,55 +60,21 @@ def test_a_bad_engine_is_one_line():
     assert str(err.value) == "engine: must be 'builtin' or 'mujoco', got 'ode'"
 
 
-def offline(steps, plant):
-    """The controller of config/controller.yaml on ``plant`` (no ROS): states and errors."""
-    ctrl = RecursiveCompositeController(css_arm(), **dict(PAPER_GAINS, h=H))
-    traj = PaperTrajectory(PAPER_Q0)
-    qs, errs = [], []
-    for k in range(steps + 1):
-        q_d, qd_d, qdd_d = traj(k * H)
-        qs.append(plant.q.copy())
-        errs.append(plant.q - q_d)
-        tau = ctrl.step(plant.q, plant.qd, q_d, qd_d, qdd_d)
-        if k < steps:
-            plant.step(tau)
-    return np.array(qs), np.array(errs)
-
-
+@needs_mujoco
 def test_the_controller_tracks_the_mujoco_arm_over_dds():
     steps = round(DURATION / H)
-    ref_q, ref_err = offline(steps, MujocoPlant(css_arm(), dt=H, q0=PAPER_Q0))
-    builtin_q, _ = offline(steps, Simulator(css_arm(), dt=H, q0=PAPER_Q0))
+    ref_q, ref_err, _ = offline(steps, MujocoPlant(css_arm(), dt=H, q0=PAPER_Q0))
+    builtin_q, _, _ = offline(steps, Simulator(css_arm(), dt=H, q0=PAPER_Q0))
     assert np.abs(ref_q - builtin_q).max() < 1e-9          # the engines agree on this arm
     with ros_context() as (ctx, ex):
-        probe = Probe(ctx, record=("states",))
-        track = []
-        sub = probe.create_subscription(Float64MultiArray, "/rcac_controller/tracking_error",
-                                        lambda m: track.append(np.array(m.data)), DEEP)
-        ex.add_node(probe)
-        ctrl = start("controller_node", params_file=os.path.join(CONFIG, "controller.yaml"))
-        assert spin_until(ex, lambda: sub.get_publisher_count() > 0, timeout=60.0)
-        assert spin_until(ex, lambda: probe.count_subscribers("/joint_states") >= 2,
-                          timeout=60.0)
-        readers = probe.count_subscribers("/joint_states")
-        sim = start("simulator_node", "engine:=mujoco", f"duration:={DURATION}",
-                    f"min_subscribers:={readers}", "lockstep_timeout:=5.0",
-                    params_file=os.path.join(CONFIG, "simulator.yaml"))
-        (sim_code, sim_out), (ctrl_code, ctrl_out) = run_to_end(
-            ex, sim, ctrl, lambda: len(track) >= steps + 1)
+        probe, track, sub = tracking_probe(ctx, ex)
+        readers, (sim_code, sim_out), (ctrl_code, ctrl_out) = lockstep_run(
+            ex, probe, [sub], lambda: len(track) >= steps + 1, "engine:=mujoco",
+            f"duration:={DURATION}")
     assert sim_code == 0, sim_out
     assert ctrl_code == 0, ctrl_out
     assert "mujoco engine" in sim_out
-    line = [ln for ln in sim_out.splitlines() if "finished:" in ln]
-    assert line and f"finished: {steps} steps" in line[0], sim_out
-    assert "lockstep misses 0, late efforts 0" in line[0], line[0]
-    seen = 0
-    for msg in probe.states:
-        k = round((msg.header.stamp.sec * NS + msg.header.stamp.nanosec) / (H * NS))
-        assert list(msg.name) == JOINTS
-        np.testing.assert_allclose(msg.position, ref_q[k], rtol=0, atol=1e-9)
-        seen += 1
-    assert seen >= steps * 0.9, (seen, readers, sim_out)
+    assert_lockstep_states(probe.states, ref_q, steps, readers, sim_out)
     track = np.array(track[:steps + 1])
     np.testing.assert_allclose(np.sqrt(np.mean(track ** 2, axis=0)),
                                np.sqrt(np.mean(ref_err ** 2, axis=0)), rtol=1e-6)

@@ -14,6 +14,7 @@ import sys
 import numpy as np
 import pytest
 import yaml
+from chains import needs_mujoco
 
 from rcac_ros.core import PAPER_Q0, RecursiveCompositeController, SinusoidTrajectory, css_arm
 from rcac_ros.tools import cli
@@ -21,7 +22,6 @@ from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.scenarios import find_panda_urdf, gains_for, with_payload
 from rcac_ros.tools.sweep import campaign as cp
 
-pytest.importorskip("mujoco")
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 needs_panda = pytest.mark.skipif(find_panda_urdf() is None,
                                  reason="example-robot-data's panda.urdf not installed")
@@ -34,6 +34,7 @@ def rcac(*args, path=()):
                           env=env, capture_output=True, text=True, timeout=600)
 
 
+@needs_mujoco
 def test_closed_loop_with_a_grasp_is_the_same_on_both_engines():
     model = css_arm(gravity=(0.0, 0.0, -9.81))
     loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
@@ -51,6 +52,7 @@ def test_closed_loop_with_a_grasp_is_the_same_on_both_engines():
     assert np.abs(free["tau"][101:] - b["tau"][101:]).max() > 1.0
 
 
+@needs_mujoco
 def test_experiment_on_mujoco_gives_the_builtin_figures(tmp_path):
     figures = {}
     for engine in ("builtin", "mujoco"):
@@ -66,6 +68,7 @@ def test_experiment_on_mujoco_gives_the_builtin_figures(tmp_path):
             assert b[key] == pytest.approx(a[key], rel=1e-6), (law, key)
 
 
+@needs_mujoco
 @needs_panda
 def test_payload_demo_on_mujoco_gives_the_builtin_figures(tmp_path):
     figures = {}
@@ -81,6 +84,7 @@ def test_payload_demo_on_mujoco_gives_the_builtin_figures(tmp_path):
             assert b[key] == pytest.approx(a[key], rel=1e-6), (law, key)
 
 
+@needs_mujoco
 @needs_panda
 def test_compare_joint_scenarios(tmp_path):
     """panda_rigid on MuJoCo is the built-in run; the joint terms make every law worse."""
@@ -122,6 +126,7 @@ def sweep_doc(**scenario):
                      "payload_mass": {"uniform": {"low": 0.0, "high": 50.0}}}}
 
 
+@needs_mujoco
 def test_sweep_takes_the_engine_as_a_campaign_key():
     builtin, mujoco = cp.validate(sweep_doc()), cp.validate(sweep_doc(engine="mujoco"))
     assert "engine" not in builtin["scenario"]          # the default leaves the record as it was

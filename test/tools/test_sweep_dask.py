@@ -16,7 +16,8 @@ import yaml
 pytest.importorskip("distributed")
 
 from rcac_ros.tools.sweep import campaign as cp  # noqa: E402
-from rcac_ros.tools.sweep import engine as sweep  # noqa: E402
+from rcac_ros.tools.sweep.engine import execute  # noqa: E402
+from rcac_ros.tools.sweep.store import Store  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 ENV = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -105,9 +106,9 @@ def test_real_cluster_localcluster_and_serial_give_the_same_rows(tmp_path, clust
     outs = {}
     for name, kwargs in (("serial", dict(workers=0)), ("local", dict(workers=2)),
                          ("real", dict(scheduler=cluster.address))):
-        store = sweep.Store(str(tmp_path / name))
+        store = Store(str(tmp_path / name))
         store.claim(campaign)
-        assert sweep.execute(campaign, store, chunk=3, progress=False, **kwargs) == 20
+        assert execute(campaign, store, chunk=3, progress=False, **kwargs) == 20
         store.merge()
         outs[name] = table(store.results)
     assert list(outs["serial"]["run"]) == list(range(20))

@@ -78,7 +78,8 @@ def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
 
 
 def goal_ratios(budget_s=1.0):
-    """The issue's cost goals, each measured side by side (:func:`interleaved_ratio`)."""
+    """The cost goals of doc/tools.md ("The channels, least squares and the cost goals"),
+    each measured side by side (:func:`interleaved_ratio`)."""
     rng = np.random.default_rng(0)
     out = {}
     for n in (7, 56):
@@ -106,7 +107,7 @@ def goal_ratios(budget_s=1.0):
             # the natural geometry against the same Euclidean law run by the general kernel
             # (the paper's law alone has a fused kernel of its own)
             general = RecursiveCompositeController(model, theta_hat0=model.theta())
-            general.use_general_kernel()
+            general.use_fused_kernel(False)
             nat = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
                                                geometry="natural")
             out["natural_over_general_kernel_n7"] = interleaved_ratio(
