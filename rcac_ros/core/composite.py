@@ -41,7 +41,7 @@ from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
 from rcac_ros.errors import GainError, InputError
-from .joint_friction import (F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, friction_step_kernel,
                              natural_friction_start, paper_friction_step)
 from .least_squares import initial_factor
@@ -102,8 +102,8 @@ class RecursiveCompositeController:
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
         ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8). With
-        ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``k_f x^2``,
-        ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
+        ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``min(k_f x^2,
+        P_friction)``, ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
@@ -211,6 +211,7 @@ class RecursiveCompositeController:
                                                         self.model.joint_terms(), InputError)
             self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
                                                                 self.friction_hat0)
+            self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 

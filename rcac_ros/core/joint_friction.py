@@ -24,7 +24,8 @@ as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
 terms use least squares); the leakage acts on the link terms only; the projection keeps
 the joint terms >= 0. Natural geometry (doc/design.md §8): each term adapts in the positive
-orthant's geometry (gain ``k_f x^2`` at the step's start, then :func:`retract_term`), so it
+orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, then
+:func:`retract_term`), so it
 stays > 0. Discretisation as the link terms' (explicit Euler on the tracking
 term, implicit or explicit on the prediction term, one joint solve over all parameters).
 """
@@ -58,7 +59,8 @@ F_SQ = 12           #: s_qj = qd_j - qd_rj
 F_VC = 13           #: v_c of sigma
 F_K = 14            #: natural geometry: k_f,j, the natural gain (3) (doc/design.md §8)
 F_PREV = 17         #: natural geometry: theta_f_hat_j before the step (3)
-JOINT_COLS = 20
+F_CAP = 20          #: natural geometry: the largest gain, P_f,j (3) (doc/design.md §8)
+JOINT_COLS = 23
 
 # ---- channel c, joint j: jfilt[c, j, :] ----------------------------------------------------
 JPHI_F = 0          #: phi_f^f (3)
@@ -129,6 +131,17 @@ def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
 def sees(code, i):
     """Whether a channel of code ``code`` has joint i's friction terms (W_f,ci != 0)."""
     return code == POWER or code == i
+
+
+@njit(cache=True, inline="always")
+def term_gain(k, cap, x):
+    """A joint term's natural gain at ``x > 0``: ``min(k x^2, cap)`` (doc/design.md §8).
+
+    The inverse Hessian of the potential with ``psi'' = max(1 / (k x^2), 1 / cap)``: the
+    log barrier's metric near 0, the Euclidean law's fixed gain ``cap`` above
+    ``sqrt(cap / k)``, so the gain never exceeds the Euclidean one.
+    """
+    return min(k * x * x, cap)
 
 
 @njit(cache=True, inline="always")
@@ -316,11 +329,11 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
                          + jrow[F_Y + 2] * jrow[F_HAT + 2])                        # eq 20
         if not frozen:
             adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
-            if scal[I_NATURAL] != 0.0:                # doc/design.md §8: P_f = k_f x^2
+            if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
                 for k in range(3):
                     x = jrow[F_HAT + k]
                     jrow[F_PREV + k] = x
-                    jrow[F_GAIN + k] = jrow[F_K + k] * x * x
+                    jrow[F_GAIN + k] = term_gain(jrow[F_K + k], jrow[F_CAP + k], x)
             adapt_joint(chan, jfilt, i, jrow, scal, tracking)
     if frozen:
         pass
@@ -555,7 +568,8 @@ def natural_friction_start(friction_hat0, model_terms, exc):
 
 def friction_natural_gain(P_friction, start):
     """Default natural gain of the joint terms, ``k_f = P_f / x0^2``: the natural law's gain
-    ``k_f x^2`` equals ``P_friction`` at the start (doc/design.md §8)."""
+    ``min(k_f x^2, P_f)`` (:func:`term_gain`) equals ``P_friction`` from the start up, and
+    falls as ``x^2`` below it (doc/design.md §8)."""
     return P_friction / start ** 2
 
 

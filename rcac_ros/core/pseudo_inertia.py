@@ -70,6 +70,9 @@ FLOOR = 1e-12
 NU_RATIO = 100.0
 #: Most halvings of a step that would cross the floor (2^-30: the step is then kept out).
 HALVINGS = 30
+#: A step with tr(J+) tr(J_hat^-1) at most this skips the floor's factorisation on its first
+#: try: it provably passes (it can fail only beyond 1 / (2 FLOOR) = 5e11, :func:`retract`).
+COND_SHORTCUT = 1e9
 
 
 # ---- the linear maps (numba, one link: 13 entries at th[o:o+13]) ---------------------------
@@ -220,22 +223,30 @@ def retract(old, oo, new, on, J, D, L, K):
         for k in range(13):                         # a step that is not finite: no step
             new[on + k] = old[oo + k]
         return 0.0
+    for i in range(4):                              # K <- Q = D J^-1 D (upper, mirrored)
+        for j in range(i, 4):
+            v = D[i, 0] * L[0, j] + D[i, 1] * L[1, j] + D[i, 2] * L[2, j] + D[i, 3] * L[3, j]
+            K[i, j] = v
+            K[j, i] = v
+    for i in range(4):                              # L <- Q (K is the trial's scratch)
+        for j in range(4):
+            L[i, j] = K[i, j]
     a = 1.0 if z2 <= 1.0 else 1.0 / math.sqrt(z2)
     for h in range(HALVINGS):
         half = 0.5 * a * a
         tr = 0.0
-        for i in range(4):                          # K <- J + a D + a^2/2 D J^-1 D
+        for i in range(4):                          # K <- J + a D + a^2/2 Q
             for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
-                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
+                v = J[i, j] + a * D[i, j] + half * L[i, j]
                 K[i, j] = v
                 K[j, i] = v
             tr += K[i, i]
         # the numerical floor (module docstring). Shortcut: lambda_min(J+) >= (1 - r + r^2/2)
         # lambda_min(J) >= lambda_min(J) / 2 (r = a ||Z||_F <= 1) and lambda_min(J) >= 1 /
-        # tr(J^-1), so a J of condition tr(J) tr(J^-1) <= 1e6 keeps J+ far above the floor and
-        # far above the rounding of this step; otherwise a factorisation decides.
-        if h == 0 and tr * tr_inv <= 1e6:
+        # tr(J^-1), so J+ clears the floor when tr(J+) tr(J^-1) < 1 / (2 FLOOR) = 5e11; at
+        # most COND_SHORTCUT (500x under that, J+'s margin far above the rounding of this
+        # step) the factorisation would pass: it is skipped.
+        if h == 0 and tr * tr_inv <= COND_SHORTCUT:
             break
         for i in range(4):
             K[i, i] -= FLOOR * tr
@@ -247,8 +258,7 @@ def retract(old, oo, new, on, J, D, L, K):
     if a > 0.0:
         for i in range(4):
             for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * (D[i, 0] * L[0, j] + D[i, 1] * L[1, j]
-                                                    + D[i, 2] * L[2, j] + D[i, 3] * L[3, j])
+                v = J[i, j] + a * D[i, j] + half * L[i, j]
                 J[i, j] = v
                 J[j, i] = v
     bound = NU_RATIO * (J[0, 0] + J[1, 1] + J[2, 2] + J[3, 3])

@@ -349,7 +349,8 @@ class SlotineLiCompositeController:
             if self.joint_friction:
                 fh = self._theta[13 * self.n:].reshape(self.n, 3)
                 self._prev_f = fh.copy()
-                self._joint[:, :3] = self._friction_k * fh * fh
+                self._joint[:, :3] = np.minimum(self._friction_k * fh * fh,   # term_gain
+                                                self.P_friction)
         try:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint, q, qd,
                                          q_d, qd_d, qdd_d)

@@ -96,6 +96,10 @@ LAWS = {
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
+    # with the joint terms: on a plant with dry friction the rigid-body natural law's J_hat
+    # escapes to infinity (doc/design.md §8, "Unmodelled joint effects"); this one is bounded
+    "paper_natural_friction": ("rcac", dict(geometry="natural", joint_friction=True,
+                                            P_friction=INERTIA_SCALED)),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
     # direct and paper laws, adapting them mostly from the tracking term (an explicit step,
     # stable only below a gain set by the joint's inertia), with the inertia-scaled gain
