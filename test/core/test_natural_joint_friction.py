@@ -8,7 +8,7 @@ path), the Euclidean joint-friction law on the same plant and motion.
 
 import numpy as np
 import pytest
-from chains import frictional, frictional_chain, worst_difference
+from chains import frictional, frictional_chain, random_chain, worst_difference
 from test_natural_geometry import run
 
 from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeController, Simulator,
