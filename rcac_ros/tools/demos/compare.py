@@ -96,6 +96,8 @@ LAWS = {
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
+    "ls_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
+                                geometry="natural")),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
     # direct and paper laws, adapting them mostly from the tracking term (an explicit step,
     # stable only below a gain set by the joint's inertia), with the inertia-scaled gain
