@@ -206,8 +206,9 @@ CONTROLLER = _robot("controller") + (
                   "||theta_hat_i - theta_0i|| <= M_0, full beyond 2 M_0 (0: leak always)"),
     Param("geometry", "string", "euclidean",
           "adaptation geometry: 'euclidean' (eq 24 as written) or 'natural' (every link's "
-          "estimates stay a physical body at every step, pseudo-inertia J > 0; "
-          "doc/design.md §8)", choices=("euclidean", "natural")),
+          "estimates stay a physical body at every step, pseudo-inertia J > 0; with "
+          "adaptation 'gradient' or 'least_squares'; doc/design.md §8)",
+          choices=("euclidean", "natural")),
     Param("natural_gain", "double", None,
           "geometry 'natural': gain k_i of every link (unset: matched to P at the start, "
           "doc/design.md §8)", lo=0.0, hi=BIG, strict=True),

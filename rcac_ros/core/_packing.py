@@ -48,7 +48,10 @@ TAU = 19            #: the torque of joint i applied over the last period
 Q_PREV = 20         #: q_i at the last step (the power channel's tau^T dq)
 P_FACTOR = 21       #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
 THETA_PREV = 190    #: theta_hat_i before this step's update (the natural retraction)
-STATE_COLS = 203
+NAT_LS_CHOL = 203   #: natural least squares: Cholesky factor of I + S^T H S / k (13x13 lower,
+#:                     row-major), doc/design.md §8
+NAT_LS_N = 372      #: natural least squares: the whitened J(S e_j) of S's 13 columns (13 x 10)
+STATE_COLS = 502
 LINK_COLS = CONST_COLS + STATE_COLS
 
 # ---- scalars: data[n, :] -------------------------------------------------------------------

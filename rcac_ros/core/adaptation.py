@@ -47,12 +47,14 @@ from numba import njit
 
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT,
                        I_DZ_S, I_FORGET, I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG,
-                       I_RETRACT_MIN, LAMBDA, LEAK_M0, NAT_K, NAT_P_NU, P_FACTOR, THETA_0,
-                       THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
+                       I_RETRACT_MIN, LAMBDA, LEAK_M0, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU,
+                       P_FACTOR, THETA_0, THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX,
+                       U_ROW, W_ROW)
 from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update
-from .pseudo_inertia import natural_gain_apply, retract
+from .pseudo_inertia import (inverse_cholesky4, natural_gain_apply, pseudo_inertia_into, retract,
+                             whitened_into)
 
 
 @njit(cache=True, inline="always")
@@ -130,7 +132,9 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``.
 
     Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
-    (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction.
+    (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction;
+    with least squares the gain is ``(H(theta_hat_i) / k_i + Gamma_i)^-1``
+    (:func:`natural_ls_factor`).
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
@@ -155,7 +159,11 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
             gain_step(row, p_diag, st, grad, h, R, i)
     elif mode == ADAPT_LS:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        apply_factored(st, P_FACTOR, grad, Pg, t)
+        if natural:                     # (H(theta_hat_i) / k_i + Gamma_i)^-1, doc/design.md §8
+            natural_ls_factor(st, row[NAT_K], Pg, M4)
+            natural_ls_apply(st, grad, 0, Pg, 0, t)
+        else:
+            apply_factored(st, P_FACTOR, grad, Pg, t)
         for k in range(13):
             R[i, k] = st[THETA_HAT + k] - h * Pg[k]
     else:                               # fixed P on the tracking term, least squares on E
@@ -184,6 +192,8 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
                     for k in range(13):
                         acc += row[GAIN_P + 13 * a + k] * filt[c, i, W_ROW + k]
                     filt[c, i, U_ROW + a] = acc
+        elif natural:                           # U_ci = (H / k + Gamma)^-1 W_ci^T
+            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t)
         else:
             for k in range(13):
                 grad[k] = filt[c, i, W_ROW + k]
@@ -341,3 +351,73 @@ def project(const, state):
         for k in range(13):
             state[i, THETA_HAT + k] = min(max(state[i, THETA_HAT + k], const[i, THETA_MIN + k]),
                                           const[i, THETA_MAX + k])
+
+
+@njit(cache=True, inline="always")
+def natural_ls_factor(st, k, col, M4):
+    """The natural least-squares gain of link i (doc/design.md §8), factored:
+
+        P_i = (H(theta_hat_i) / k_i + Gamma_i)^-1 = S_i K_i^-1 S_i^T,
+        K_i = I + S_i^T H(theta_hat_i) S_i / k_i,
+
+    with ``Gamma_i = P_ls,i^-1 = (S_i S_i^T)^-1`` the least-squares information of
+    :mod:`rcac_ros.core.least_squares` (forgetting included) and ``H`` the Hessian of
+    ``-log det J`` in the 13 parameters. ``K_i >= I``, so its Cholesky factor (into
+    ``st[NAT_LS_CHOL]``, lower, row-major) always exists, and ``P_i <= S_i S_i^T``.
+    ``H``'s entries between S's columns are inner products of the whitened ``J(S e_j)``
+    (:func:`~rcac_ros.core.pseudo_inertia.whitened_into`, 10 numbers each, kept at
+    ``st[NAT_LS_N]``). ``col``: 13 scratch; ``M4``: 4x4 scratch. O(1): 13 whitenings, one
+    13x13 product of rank 10 and one 13x13 Cholesky factorisation.
+    """
+    J, R, X = M4[0], M4[1], M4[2]
+    pseudo_inertia_into(st, THETA_HAT, J)
+    if not inverse_cholesky4(J, R):     # never: theta_hat_i is a body after every step
+        for a in range(13):
+            for b in range(13):
+                st[NAT_LS_CHOL + 13 * a + b] = 1.0 if a == b else 0.0
+        return
+    for j in range(13):
+        for r in range(13):
+            col[r] = st[P_FACTOR + 13 * r + j]
+        whitened_into(R, col, 0, X, st, NAT_LS_N + 10 * j)
+    inv_k = 1.0 / k
+    for a in range(13):                 # Cholesky of K, row by row (lower, in place)
+        oa = NAT_LS_N + 10 * a
+        for b in range(a + 1):
+            ob = NAT_LS_N + 10 * b
+            acc = 0.0
+            for e in range(10):
+                acc += st[oa + e] * st[ob + e]
+            v = acc * inv_k + (1.0 if a == b else 0.0)
+            for m in range(b):
+                v -= st[NAT_LS_CHOL + 13 * a + m] * st[NAT_LS_CHOL + 13 * b + m]
+            if a == b:
+                st[NAT_LS_CHOL + 14 * a] = np.sqrt(v)
+            else:
+                st[NAT_LS_CHOL + 13 * a + b] = v / st[NAT_LS_CHOL + 14 * b]
+
+
+@njit(cache=True, inline="always")
+def natural_ls_apply(st, x, xo, out, oo, t):
+    """``out[oo:oo+13] = S_i K_i^-1 S_i^T x[xo:xo+13]``: the natural least-squares gain of
+    :func:`natural_ls_factor` applied to x (``t``: 13 scratch)."""
+    for c in range(13):                 # t = S^T x
+        acc = 0.0
+        for r in range(13):
+            acc += st[P_FACTOR + 13 * r + c] * x[xo + r]
+        t[c] = acc
+    for a in range(13):                 # K^-1 t: forward, then backward substitution
+        acc = t[a]
+        for b in range(a):
+            acc -= st[NAT_LS_CHOL + 13 * a + b] * t[b]
+        t[a] = acc / st[NAT_LS_CHOL + 14 * a]
+    for a in range(12, -1, -1):
+        acc = t[a]
+        for b in range(a + 1, 13):
+            acc -= st[NAT_LS_CHOL + 13 * b + a] * t[b]
+        t[a] = acc / st[NAT_LS_CHOL + 14 * a]
+    for r in range(13):                 # out = S t
+        acc = 0.0
+        for c in range(13):
+            acc += st[P_FACTOR + 13 * r + c] * t[c]
+        out[oo + r] = acc

@@ -101,7 +101,9 @@ class RecursiveCompositeController:
         stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
         ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
         the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. Only with ``adaptation="gradient"`` (doc/design.md §8). With
+        ``J > 0``. With ``adaptation="least_squares"`` the gain is ``(H / k_i +
+        Gamma_i)^-1``, ``H`` that Hessian and ``Gamma_i`` the least-squares information
+        (doc/design.md §8); not with ``"least_squares_prediction"``. With
         ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``min(k_f x^2,
         P_friction)``, ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
     natural_gain : float or (n,), optional
@@ -189,9 +191,9 @@ class RecursiveCompositeController:
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
         self.natural_gain = None
-        if geometry == "natural" and self.adaptation != "gradient":
-            raise GainError(f"geometry: 'natural' needs adaptation='gradient', got "
-                            f"{self.adaptation!r} (doc/design.md §8)")
+        if geometry == "natural" and self.adaptation == "least_squares_prediction":
+            raise GainError("geometry: 'natural' needs adaptation='gradient' or "
+                            "'least_squares', got 'least_squares_prediction' (doc/design.md §8)")
         if geometry == "euclidean":
             if natural_gain is not None:
                 raise GainError("natural_gain: only with geometry='natural'")
@@ -491,7 +493,10 @@ class RecursiveCompositeController:
 
     @property
     def gain(self):
-        """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares."""
+        """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares (with
+        ``geometry="natural"``: the fixed ``P_i`` the natural gain was matched to, or the
+        least-squares ``P_ls,i = Gamma_i^-1`` of the metric ``H / k_i + Gamma_i``,
+        doc/design.md §8)."""
         if self.adaptation == "gradient":
             return self.P.copy()
         S = self._state[:, P_FACTOR:P_FACTOR + 169].reshape(self.n, 13, 13)

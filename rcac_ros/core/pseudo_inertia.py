@@ -461,3 +461,51 @@ def as_start(theta_hat0, n, name="theta_hat0"):
     th = as_array(theta_hat0, (n, 13), name)
     check_body(th, name)
     return th
+
+
+# ---- the natural least-squares gain (doc/design.md §8) ---------------------------------------
+
+#: sqrt(2): the weight of an off-diagonal entry of a whitened 4x4 (see :func:`whitened_into`).
+_SQRT2 = math.sqrt(2.0)
+
+
+@njit(cache=True, inline="always")
+def inverse_cholesky4(J, L):
+    """``L`` <- the inverse of the lower Cholesky factor of the 4x4 ``J`` (lower triangular,
+    ``J^-1 = L^T L``); False (L partial) if J is not positive definite."""
+    if not cholesky4(J, L):
+        return False
+    d0, d1, d2, d3 = 1.0 / L[0, 0], 1.0 / L[1, 1], 1.0 / L[2, 2], 1.0 / L[3, 3]
+    for j in range(4):                              # in place, column by column
+        dj = d0 if j == 0 else d1 if j == 1 else d2 if j == 2 else d3
+        for i in range(j + 1, 4):
+            acc = L[i, j] * dj
+            for m in range(j + 1, i):
+                acc += L[i, m] * L[m, j]
+            L[i, j] = -acc * (d1 if i == 1 else d2 if i == 2 else d3)
+        L[j, j] = dj
+    return True
+
+
+@njit(cache=True, inline="always")
+def whitened_into(R, th, o, X, out, oo):
+    """``out[oo:oo+10]``: the entries of ``N = R J(th[o:o+13]) R^T`` (``R`` from
+    :func:`inverse_cholesky4` of ``J_hat``), the off-diagonal ones times sqrt(2), so that
+    ``out_a . out_b = tr(J_hat^-1 J(d_a) J_hat^-1 J(d_b))``: the Hessian of ``-log det J``
+    at ``J_hat`` between two directions ``d_a``, ``d_b`` of the 13 parameters. ``X``: 4x4
+    scratch (``J(d)`` is linear in d, so ``th`` may be any direction)."""
+    pseudo_inertia_into(th, o, X)
+    for i in range(3, -1, -1):                      # X <- R X in place, bottom row first
+        for j in range(4):                          # (row i reads rows m <= i only)
+            acc = 0.0
+            for m in range(i + 1):
+                acc += R[i, m] * X[m, j]
+            X[i, j] = acc
+    c = 0
+    for i in range(4):                              # N = (R X) R^T, lower triangle
+        for j in range(i + 1):
+            acc = 0.0
+            for m in range(j + 1):
+                acc += X[i, m] * R[j, m]
+            out[oo + c] = acc if i == j else _SQRT2 * acc
+            c += 1

@@ -126,7 +126,8 @@ def test_consistent_at_every_step_under_huge_gains_errors_and_noise():
 
 def test_every_adaptation_variant_keeps_bodies():
     """Explicit update, leakage and projection with the natural geometry: a body per link
-    at every step; least squares is refused (doc/design.md §8)."""
+    at every step; least squares on the prediction term only is refused (doc/design.md §8;
+    least squares: test/core/test_natural_least_squares.py)."""
     model = css_arm()
     variants = [dict(update="explicit"), dict(leakage=1e-3), dict(theta_bounds="mass"),
                 dict(channels=[2, "power"])]
@@ -137,9 +138,10 @@ def test_every_adaptation_variant_keeps_bodies():
         def check(c):
             assert is_body(c.theta_hat).all(), extra
         assert run(ctrl, model, 100, check=check) == 100
-    for adaptation in ("least_squares", "least_squares_prediction"):
-        with pytest.raises(GainError, match="geometry: 'natural' needs adaptation='gradient'"):
-            RecursiveCompositeController(model, geometry="natural", adaptation=adaptation)
+    with pytest.raises(GainError, match="geometry: 'natural' needs adaptation='gradient' or "
+                                        "'least_squares', got 'least_squares_prediction'"):
+        RecursiveCompositeController(model, geometry="natural",
+                                     adaptation="least_squares_prediction")
 
 
 def test_slotine_li_natural_keeps_bodies_and_matches_the_recursive_law_with_all_channels():

@@ -100,6 +100,8 @@ LAWS = {
     # escapes to infinity (doc/design.md §8, "Unmodelled joint effects"); this one is bounded
     "paper_natural_friction": ("rcac", dict(geometry="natural", joint_friction=True,
                                             P_friction=INERTIA_SCALED)),
+    "ls_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
+                                geometry="natural")),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
     # direct and paper laws, adapting them mostly from the tracking term (an explicit step,
     # stable only below a gain set by the joint's inertia), with the inertia-scaled gain
