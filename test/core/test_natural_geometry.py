@@ -37,6 +37,20 @@ def run(ctrl, model, steps, noise=0.0, rng=None, check=None):
     return steps
 
 
+def assert_bodies_at_every_step(ctrl, model, steps, noise, rng):
+    """:func:`run` with noise, checking after every step that every link's J is positive
+    definite (Cholesky) and the estimates finite; at least 10 steps ran and the smallest
+    lambda_min(J_hat) stayed > 0."""
+    worst = []
+
+    def check(c):
+        assert c.consistent.all()
+        assert np.all(np.isfinite(c.theta_hat))
+        worst.append(c.lambda_min.min())
+    run(ctrl, model, steps, noise=noise, rng=rng, check=check)
+    assert len(worst) > 10 and min(worst) > 0.0
+
+
 def p_eff(theta, k, Pnu):
     """The natural gain P_eff(theta) (13 x 13) of one link, column by column."""
     out = np.zeros((13, 13))
@@ -114,14 +128,7 @@ def test_consistent_at_every_step_under_huge_gains_errors_and_noise():
     for channels in ([1], "all"):
         ctrl = RecursiveCompositeController(model, geometry="natural", channels=channels,
                                             natural_gain=1e3, **gains)
-        worst = []
-
-        def check(c):
-            assert c.consistent.all()
-            assert np.all(np.isfinite(c.theta_hat))
-            worst.append(c.lambda_min.min())
-        run(ctrl, model, 300, noise=1e-2, rng=rng, check=check)
-        assert len(worst) > 10 and min(worst) > 0.0
+        assert_bodies_at_every_step(ctrl, model, 300, 1e-2, rng)
 
 
 def test_every_adaptation_variant_keeps_bodies():
