@@ -40,18 +40,21 @@ class Machine:
         gains = {k: v for k, v in PAPER_GAINS.items() if k != "h"}
         ctrl = RecursiveCompositeController(model, h=H, **gains)
         self.log = Logger()
-        self.node = types.SimpleNamespace(
-            ctrl=ctrl, adaptation=AdaptationFreeze(ctrl),
-            config=types.SimpleNamespace(h=H, paper_q0=None),
-            states=types.SimpleNamespace(received=0), get_logger=lambda: self.log)
+        self.ctrl, adaptation = ctrl, AdaptationFreeze(ctrl)
+        self.received = 0           # steady ns of the state a step uses
         self.now = 10 ** 12
         monkeypatch.setattr(starvation, "time",
                             types.SimpleNamespace(monotonic_ns=lambda: self.now))
-        self.guard = Starvation(self.node, {"starvation.delay_margin": None,
-                                            "starvation.recover_after": 0.1,
-                                            "starvation.min_scale": 0.02})
-        self.services = object.__new__(EstimateServices)
-        self.services.node = self.node
+        self.guard = Starvation({"starvation.delay_margin": None,
+                                 "starvation.recover_after": 0.1,
+                                 "starvation.min_scale": 0.02},
+                                ctrl=ctrl, adaptation=adaptation, h=H, q0=None,
+                                state_received=lambda: self.received, log=self.log)
+        host = types.SimpleNamespace(create_service=lambda *args: None)     # no ROS here
+        self.services = EstimateServices(
+            host, ctrl=ctrl, adaptation=adaptation, model=model, theta0=ctrl.theta_hat,
+            friction0=None, initial="zero", urdf_links=None, estimates_file=lambda: "",
+            log=self.log)
         self.q = np.array(PAPER_Q0)
 
     def run(self, seconds, age):
@@ -59,7 +62,7 @@ class Machine:
         events = []
         for _ in range(round(seconds / H)):
             self.now += H_NS
-            self.node.states.received = self.now - round(age * 1e9)
+            self.received = self.now - round(age * 1e9)
             starved = self.guard.guard.starved
             self.guard.step()
             if self.guard.guard.starved != starved:
@@ -80,7 +83,7 @@ class Machine:
 
     def learns(self):
         """A step off the desired motion changes the estimates (the law adapts)."""
-        ctrl = self.node.ctrl
+        ctrl = self.ctrl
         before = ctrl.theta_hat.copy()
         for _ in range(3):
             ctrl.step(self.q, np.zeros(7), self.q + 0.1, np.ones(7), np.ones(7))
@@ -95,9 +98,9 @@ def machine(monkeypatch):
 def test_starvation_alone_freezes_and_its_recovery_resumes(machine):
     assert machine.learns()
     machine.starve()
-    assert not machine.learns() and machine.node.ctrl.K_D_scale < 1.0
+    assert not machine.learns() and machine.ctrl.K_D_scale < 1.0
     machine.recover()
-    assert machine.learns() and machine.node.ctrl.K_D_scale == 1.0
+    assert machine.learns() and machine.ctrl.K_D_scale == 1.0
     assert machine.log.lines[-1].startswith("starvation over: nominal K_D and adaptation again")
 
 

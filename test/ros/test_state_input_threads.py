@@ -4,7 +4,6 @@ one snapshot and never touches the watchdog or the node; a reset waits for a sta
 read."""
 
 import threading
-import types
 
 import numpy as np
 
@@ -55,10 +54,11 @@ class PausingGate(StampGate):
 
 def state_input(ctx, gate, watchdog, restarted):
     node = Node("state_input_threads", context=ctx)
-    guards = types.SimpleNamespace(gate=gate, max_state_bytes=65_536)
     warnings = []
-    states = StateInput(node, JOINTS, False, H, 20.0, guards, watchdog, None,
-                        lambda kind, text: warnings.append((kind, text)),
+    states = StateInput(node, joint_names=JOINTS, lockstep=False, h=H, velocity_cutoff=20.0,
+                        gate=gate, max_bytes=65_536, watchdog=watchdog, outputs=None,
+                        log=node.get_logger(),
+                        warn=lambda kind, text: warnings.append((kind, text)),
                         is_running=lambda: True, steps=lambda: 1, restarted=restarted,
                         control=None)
     return node, states, warnings

@@ -16,6 +16,13 @@ class LoopCounts:
         self.late_ticks = 0             # late ticks of the ROS-time timer (timer mode, /clock)
         self.non_finite = 0             # NaN/Inf efforts (the safe effort went out instead)
 
+    def stepped(self, elapsed, h):
+        """A control step took ``elapsed`` s (the period is ``h`` s)."""
+        self.compute.add(elapsed)
+        if elapsed > h:
+            self.compute_overruns += 1
+        self.steps += 1
+
 
 def diagnostics(node, counts, rejected, starvation, inputs):
     """The controller ``node``'s current status (and restart its timing window).

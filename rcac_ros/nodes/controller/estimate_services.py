@@ -22,19 +22,36 @@ from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 
 
 class EstimateServices:
-    """The three services on ``node`` (which has ``ctrl``, ``model``, ``config``).
+    """The three services of a controller: what they read and what they call, nothing more.
 
     Parameters
     ----------
     node : rclpy.node.Node
-        The controller: ``node.ctrl`` (the core controller), ``node.adaptation``
-        (:class:`AdaptationFreeze`), ``node.model``, ``node.config.theta0`` and ``.friction0``
-        (the initial estimates, model order), ``node.config.urdf_links`` (or ``None``), and the
-        parameter ``estimates_file``.
+        Where the services live (rclpy's API only).
+    ctrl : RecursiveCompositeController
+        The core controller (its estimates).
+    adaptation : AdaptationFreeze
+        ``~/set_adaptation`` holds its own reason, :attr:`AdaptationFreeze.USER`.
+    model : RobotModel
+        ``joint_names``, ``name`` and ``n``, for the files.
+    theta0, friction0 : ndarray or None
+        The initial estimates, model order (``friction0``: the joint terms', or ``None``).
+    initial : str
+        The parameter ``initial_estimates``, named in ``~/reset_estimates``' answer.
+    urdf_links : tuple or None
+        The URDF's links (:func:`~rcac_ros.nodes.controller.estimates.save`).
+    estimates_file : callable
+        ``estimates_file()``: the parameter ``estimates_file`` now (a run-time parameter).
+    log : rclpy logger
+        One line an answer.
     """
 
-    def __init__(self, node):
+    def __init__(self, node, *, ctrl, adaptation, model, theta0, friction0, initial,
+                 urdf_links, estimates_file, log):
         self.node = node
+        self.ctrl, self.adaptation, self.model = ctrl, adaptation, model
+        self.theta0, self.friction0, self.initial = theta0, friction0, initial
+        self.urdf_links, self.estimates_file, self.log = urdf_links, estimates_file, log
         self.services = [
             node.create_service(Trigger, "~/reset_estimates", self._reset),
             node.create_service(SetBool, "~/set_adaptation", self._set_adaptation),
@@ -47,48 +64,44 @@ class EstimateServices:
         self.services = []
 
     def _reset(self, request, response):
-        node = self.node
-        node.ctrl.reset(node.config.theta0, node.config.friction0)
+        self.ctrl.reset(self.theta0, self.friction0)
         response.success = True
-        response.message = f"estimates reset to the initial estimates " \
-                           f"({node.get_parameter('initial_estimates').value})"
-        node.get_logger().info(response.message)
+        response.message = f"estimates reset to the initial estimates ({self.initial})"
+        self.log.info(response.message)
         return response
 
     def _set_adaptation(self, request, response):
-        node = self.node
-        node.adaptation.freeze(AdaptationFreeze.USER, not request.data)
+        self.adaptation.freeze(AdaptationFreeze.USER, not request.data)
         response.success = True
         if not request.data:
             response.message = "adaptation frozen: the estimates are held (and still used)"
-        elif node.ctrl.adapting:
+        elif self.ctrl.adapting:
             response.message = "adaptation resumed"
         else:
             response.message = "adaptation: the freeze of set_adaptation is lifted; still " \
                 "frozen by the starvation guard until the control loop's delay recovers"
-        node.get_logger().info(response.message)
+        self.log.info(response.message)
         return response
 
     def _save(self, request, response):
-        node = self.node
-        path = node.get_parameter("estimates_file").value
+        path = self.estimates_file()
         if not path:
             response.success = False
             response.message = "estimates_file: not set (set the parameter to a .yaml path)"
             return response
         try:
             yaml_path, urdf, problems = estimates.save(
-                path, node.ctrl.theta_hat, node.model.joint_names, node.model.name,
-                node.config.urdf_links, friction=node.ctrl.friction_hat)
+                path, self.ctrl.theta_hat, self.model.joint_names, self.model.name,
+                self.urdf_links, friction=self.ctrl.friction_hat)
         except OSError as err:
             response.success = False
             response.message = f"estimates_file: cannot write {path!r} ({err.strerror})"
             return response
-        n = node.model.n
+        n = self.model.n
         response.success = True
         response.message = (f"saved the estimates of {n} links to {yaml_path}; URDF inertials "
                             f"of {n - len(problems)} links to {urdf}")
         if problems:
             response.message += "; not physical, left out of the URDF: " + "; ".join(problems)
-        node.get_logger().info(response.message)
+        self.log.info(response.message)
         return response

@@ -64,28 +64,30 @@ class ControllerNode(ManagedNode):
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
         self.config, self.ctrl = read_parameters(self, values)     # its kernels warmed
-        cfg = self.config
+        cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
-        self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit,
-                                         self.get_logger().warning)
+        self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
-        self._starvation = Starvation(self, values) if cfg.mode == "timer" \
-            and values["starvation.delay_margin"] != 0.0 else None     # doc/failsafe.md
+        self._starvation = Starvation(      # doc/failsafe.md
+            values, ctrl=self.ctrl, adaptation=self.adaptation, h=cfg.h, q0=cfg.paper_q0,
+            state_received=lambda: self.states.received, log=log) \
+            if cfg.mode == "timer" and values["starvation.delay_margin"] != 0.0 else None
         self.phase_error_ns = 0
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
-            self, self.joints, cfg.out, tagged=cfg.mode == "lockstep",
+            self, self.joints, cfg.out, tagged=lockstep,
             channels=cfg.channel_names, joint_friction=self.ctrl.joint_friction))
         self.counts = LoopCounts()
         self.watchdog = Watchdog(
-            self.failsafe.stop, lambda: self._outputs.effort(cfg.safe_effort, watchdog=True),
-            lambda: self.states.received,
-            cfg.state_timeout, cfg.mode == "lockstep", self.get_logger(),
-            stepped=lambda: self.counts.steps > 0, filters_missed=self._filters_missed,
-            replan=self._replan)
+            stop=self.failsafe.stop, state_timeout=cfg.state_timeout, lockstep=lockstep, log=log,
+            send_safe_effort=lambda: self._outputs.effort(cfg.safe_effort, watchdog=True),
+            state_received=lambda: self.states.received, stepped=lambda: self.counts.steps > 0,
+            filters_missed=self._filters_missed, replan=self._replan)
         self.states = self.keep(StateInput.close, StateInput(
-            self, self.model.joint_names, cfg.mode == "lockstep", cfg.h, cfg.velocity_cutoff,
-            self.failsafe, self.watchdog, self._outputs, self._throttle.warn,
+            self, joint_names=self.model.joint_names, lockstep=lockstep, h=cfg.h,
+            velocity_cutoff=cfg.velocity_cutoff, gate=self.failsafe.gate,
+            max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
+            outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
             restarted=self._stream_restarted, control=self._control))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
@@ -93,8 +95,9 @@ class ControllerNode(ManagedNode):
         self._fjt = None                    # the FollowJointTrajectory server, if any
         if cfg.trajectory_source == "topic":    # checked aside, applied in this thread
             self.inputs.append(self.keep(TrajectoryInput.close, TrajectoryInput(
-                self, self.model.joint_names, self.failsafe, self._throttle.warn,
-                self.time_now_ns, self.follow, self.hold_position, self._abort_goal)))
+                self, joint_names=self.model.joint_names, guards=self.failsafe,
+                warn=self._throttle.warn, now_ns=self.time_now_ns, follow=self.follow,
+                hold=self.hold_position, replaced=self._abort_goal)))
             self._fjt = create_server(self, ActionSink(self), defaults=cfg.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
@@ -107,13 +110,16 @@ class ControllerNode(ManagedNode):
         if self.loop is None:               # lockstep, or timer mode on /clock
             self.keep(timer, self.create_timer(self.watchdog.check_period, self._on_watchdog,
                                                clock=Clock(clock_type=ClockType.STEADY_TIME)))
-        self.keep(EstimateServices.destroy, EstimateServices(self))
+        self.keep(EstimateServices.destroy, EstimateServices(
+            self, ctrl=self.ctrl, adaptation=self.adaptation, model=self.model, log=log,
+            theta0=cfg.theta0, friction0=cfg.friction0, initial=values["initial_estimates"],
+            urdf_links=cfg.urdf_links,
+            estimates_file=lambda: self.get_parameter("estimates_file").value))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
-        self.get_logger().info(
-            f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
-            f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, "
-            f"joints {list(self.joints)}")
+        log.info(f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
+                 f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
+                 f"{list(self.joints)}")
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
@@ -226,9 +232,7 @@ class ControllerNode(ManagedNode):
         spell = self.failsafe.stop.active
         self.watchdog.resume()              # a spell of safe effort ends here
         if self._starvation is not None:    # timer mode: K_D within the delay margin
-            if spell:
-                self._starvation.after_spell()
-            self._starvation.step()
+            self._starvation.step(after_spell=spell)
         if self.filters_stale:
             self.filters_stale = False
             self.ctrl.restart_filters()
@@ -243,11 +247,7 @@ class ControllerNode(ManagedNode):
         except RcacError as err:
             self._throttle.warn("step", str(err))
             tau = None
-        elapsed = time.perf_counter() - start
-        self.counts.compute.add(elapsed)
-        if elapsed > self.config.h:
-            self.counts.compute_overruns += 1
-        self.counts.steps += 1
+        self.counts.stepped(time.perf_counter() - start, self.config.h)
         if tau is None or not np.all(np.isfinite(tau)):
             self.counts.non_finite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "

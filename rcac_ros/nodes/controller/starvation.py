@@ -65,24 +65,35 @@ def feedback_margin(ctrl, q):
 
 
 class Starvation:
-    """The starvation guard of a controller ``node`` (configured, timer mode).
+    """The starvation guard of a controller (configured, timer mode).
 
     Parameters
     ----------
-    node : ControllerNode
-        Its ``ctrl``, ``adaptation`` (:class:`AdaptationFreeze`), ``h``, ``states.received``
-        and logger are used.
     values : dict
-        The checked parameters (``starvation.*``).
+        The checked parameters ``starvation.*`` (``delay_margin``: ``None`` for
+        :func:`feedback_margin` at ``q0``).
+    ctrl : RecursiveCompositeController
+        The core controller: its ``K_D`` is scaled
+        (:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`).
+    adaptation : AdaptationFreeze
+        The guard holds its own reason, :attr:`AdaptationFreeze.STARVED`.
+    h : float
+        The control period, s.
+    q0 : ndarray (n,) or None
+        Where the default delay margin is computed (``paper.q0``; ``None``: zero).
+    state_received : callable
+        ``state_received()``: steady-clock ns of the state the step uses.
+    log : rclpy logger
+        One line each way.
     """
 
-    def __init__(self, node, values):
-        self.node = node
+    def __init__(self, values, *, ctrl, adaptation, h, q0, state_received, log):
+        self.ctrl, self.adaptation = ctrl, adaptation
+        self.state_received, self.log = state_received, log
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position
-            q = node.config.paper_q0
-            margin = feedback_margin(node.ctrl, np.zeros(node.ctrl.model.n) if q is None else q)
-        self.guard = DelayGuard(margin, node.config.h, values["starvation.recover_after"],
+            margin = feedback_margin(ctrl, np.zeros(ctrl.model.n) if q0 is None else q0)
+        self.guard = DelayGuard(margin, h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
 
     def reset(self):
@@ -91,28 +102,30 @@ class Starvation:
             self._leave()
         self.guard.reset()
 
-    def after_spell(self):
-        """A spell of safe effort ended: its length is the watchdog's, not a held effort of
-        this loop (a frozen ``/clock`` must not read as a starved loop); the smoothed delay
-        and the degraded mode, if on, are kept (a starved machine also trips the watchdog)."""
-        self.guard.forget_gap()
+    def step(self, after_spell=False):
+        """Before a control step: judge the delay, scale ``K_D`` (and say so once).
 
-    def step(self):
-        """Before a control step: judge the delay, scale ``K_D`` (and say so once)."""
-        ctrl = self.node.ctrl
+        ``after_spell``: a spell of safe effort ended; its length is the watchdog's, not a
+        held effort of this loop (a frozen ``/clock`` must not read as a starved loop): the
+        gap is forgotten, the smoothed delay and the degraded mode, if on, are kept (a
+        starved machine also trips the watchdog).
+        """
+        if after_spell:
+            self.guard.forget_gap()
+        ctrl = self.ctrl
         now = time.monotonic_ns()
-        event = self.guard.step(now, now - self.node.states.received)
+        event = self.guard.step(now, now - self.state_received())
         if event == "starved":
-            self.node.adaptation.freeze(AdaptationFreeze.STARVED, True)
-            self.node.get_logger().warning(
+            self.adaptation.freeze(AdaptationFreeze.STARVED, True)
+            self.log.warning(
                 f"starved: the control loop's delay {self.guard.delay * 1e3:.1f} ms is past "
                 f"the delay margin of K_D ({self.guard.margin * 1e3:.1f} ms): K_D scaled by "
                 f"{self.guard.scale:.3g} and adaptation frozen until the delay stays within "
                 f"the margin for {self.guard.recover_after:g} s")
         elif event == "recovered":
             self._leave()
-            user = AdaptationFreeze.USER in self.node.adaptation.reasons
-            self.node.get_logger().info(
+            user = AdaptationFreeze.USER in self.adaptation.reasons
+            self.log.info(
                 f"starvation over: nominal K_D and "
                 f"{'adaptation still frozen (by set_adaptation)' if user else 'adaptation again'}"
                 f" (worst delay {self.guard.worst * 1e3:.1f} ms)")
@@ -120,8 +133,8 @@ class Starvation:
             ctrl.scale_K_D(self.guard.scale)
 
     def _leave(self):
-        self.node.ctrl.scale_K_D(1.0)
-        self.node.adaptation.freeze(AdaptationFreeze.STARVED, False)
+        self.ctrl.scale_K_D(1.0)
+        self.adaptation.freeze(AdaptationFreeze.STARVED, False)
 
     def diagnostics(self):
         """Key-value pairs for the node's diagnostics."""

@@ -53,7 +53,7 @@ class StateInput:
     Parameters
     ----------
     node : rclpy.node.Node
-        Where the subscription lives (rclpy's API only), and its logger.
+        Where the subscription lives (rclpy's API only).
     joint_names : sequence of str
         The model's joints.
     lockstep : bool
@@ -62,12 +62,16 @@ class StateInput:
         The control period, s.
     velocity_cutoff : float
         Of the velocity estimate (:class:`~rcac_ros.nodes.msgs.joint_state.VelocityEstimate`).
-    guards : ControllerGuards
-        ``gate`` (the stamps) and ``max_state_bytes``.
+    gate : StampGate
+        The stamps (:class:`~rcac_ros.nodes.safety.state_guards.StampGate`).
+    max_bytes : int
+        The size cap of a serialised state (``max_state_bytes``; 0: none).
     watchdog : Watchdog
         Told of each valid state; its ``tripped`` lets the gate take a restart at once.
     outputs : ControllerOutputs
         Lockstep: the last answer, sent again for a repeated state.
+    log : rclpy logger
+        A restart of the stream, a state period that is not ``h``.
     warn : callable
         ``warn(kind, text)``: a throttled warning.
     is_running : callable
@@ -91,26 +95,26 @@ class StateInput:
         Steady-clock ns at which it came.
     """
 
-    def __init__(self, node, joint_names, lockstep, h, velocity_cutoff, guards, watchdog,
-                 outputs, warn, is_running, steps, restarted, control):
+    def __init__(self, node, *, joint_names, lockstep, h, velocity_cutoff, gate, max_bytes,
+                 watchdog, outputs, log, warn, is_running, steps, restarted, control):
         self.node = node
         self.lockstep, self.h, self.velocity_cutoff = lockstep, h, velocity_cutoff
-        self.gate, self.watchdog, self.outputs, self.warn = guards.gate, watchdog, outputs, warn
+        self.gate, self.watchdog, self.outputs = gate, watchdog, outputs
+        self.log, self.warn = log, warn
         self.is_running, self.steps = is_running, steps
         self.restarted, self.control = restarted, control
         self._reader = JointStateReader(joint_names)
         self._rate_warned = False
         self._lock = threading.Lock()       # the side thread's reading against reset()
-        cap = guards.max_state_bytes
         if not lockstep:                    # states in their own thread: the loop only ticks
             self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS, self._on_state,
-                                   cap, "state", self.warn)
+                                   max_bytes, "state", self.warn)
             self._sub = None
         else:                               # lockstep: the answer is the state's callback
             self._side = None
             self._sub = node.create_subscription(
                 JointState, topics.JOINT_STATES,
-                capped(JointState, cap, "state", self._on_state, self.warn), QOS, raw=True)
+                capped(JointState, max_bytes, "state", self._on_state, self.warn), QOS, raw=True)
         self.reset()
 
     def reset(self):
@@ -161,7 +165,7 @@ class StateInput:
     def _restart(self, stamp):
         """The stream restarted (a simulator or driver restart): start over from it (the
         motion and the filters at the next :meth:`take`)."""
-        self.node.get_logger().warning(
+        self.log.warning(
             f"joint state stamps restarted ({self.stamp * 1e-9:.6f} s -> "
             f"{stamp * 1e-9:.6f} s): filters, velocity estimate and desired motion restart "
             "from the new state; the estimates are kept")
@@ -174,7 +178,7 @@ class StateInput:
         gap = (stamp - self.stamp) * 1e-9
         if abs(gap - h) > 0.01 * h:
             self._rate_warned = True
-            self.node.get_logger().warning(
+            self.log.warning(
                 f"state period {gap * 1e3:.3f} ms differs from h = {h * 1e3:.3f} ms "
                 "(set 'rate' to 1/dt of the simulator)")
 

@@ -49,7 +49,7 @@ class TrajectoryInput:
         ``replaced(text)``: a new trajectory replaced any action goal.
     """
 
-    def __init__(self, node, joint_names, guards, warn, now_ns, follow, hold, replaced):
+    def __init__(self, node, *, joint_names, guards, warn, now_ns, follow, hold, replaced):
         self.node = node
         self.joint_names, self.guards, self.warn = joint_names, guards, warn
         self.now_ns, self.follow, self.hold, self.replaced = now_ns, follow, hold, replaced

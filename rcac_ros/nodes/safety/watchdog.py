@@ -50,7 +50,7 @@ class Watchdog:
         Spells of safe effort after a valid state (diagnostics ``watchdog_trips``).
     """
 
-    def __init__(self, stop, send_safe_effort, state_received, state_timeout, lockstep, log,
+    def __init__(self, *, stop, send_safe_effort, state_received, state_timeout, lockstep, log,
                  stepped, filters_missed, replan):
         self.stop = stop
         self.send_safe_effort = send_safe_effort

@@ -98,10 +98,16 @@ def read_bag(path, report=None):
     dict
         topic -> TopicData, for every connection in the bag.
     """
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import get_typestore, Stores
-
     path = find_bag(path)
+    sent = _verify(path, report)
+    data = _read_messages(path)
+    _add_send_stamps(data, sent)
+    return {k: v.finish() for k, v in data.items()}
+
+
+def _verify(path, report):
+    """Verify the bag (filling ``report``); the mcap scan's ``(log_time, publish_time,
+    sequence)`` of each message, by topic (empty for sqlite3)."""
     sent = {}
 
     def collect(channel, schemas, msg):
@@ -111,6 +117,20 @@ def read_bag(path, report=None):
     checked = verify(path, on_message=collect)
     if report is not None:
         report.__dict__.update(checked.__dict__)
+    return sent
+
+
+#: the message types whose fields are read (the others are counted only)
+DECODED = {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",
+           "std_msgs/msg/Float64", "rosgraph_msgs/msg/Clock",
+           "diagnostic_msgs/msg/DiagnosticArray"}
+
+
+def _read_messages(path):
+    """Every message of the bag read with rosbags: topic -> :class:`TopicData` (lists)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import get_typestore, Stores
+
     typestore = get_typestore(Stores.ROS2_JAZZY)
     data = {}
     try:
@@ -121,36 +141,43 @@ def read_bag(path, report=None):
     try:
         for conn in reader.connections:
             data.setdefault(conn.topic, TopicData(conn.topic, conn.msgtype))
-        decoded = {"sensor_msgs/msg/JointState", "std_msgs/msg/Float64MultiArray",
-                   "std_msgs/msg/Float64", "rosgraph_msgs/msg/Clock",
-                   "diagnostic_msgs/msg/DiagnosticArray"}
         for conn, stamp, raw in reader.messages():
             td = data[conn.topic]
             td.recv.append(stamp)
-            if conn.msgtype not in decoded:
+            if conn.msgtype not in DECODED:
                 continue
-            msg = typestore.deserialize_cdr(raw, conn.msgtype)
-            if conn.msgtype == "sensor_msgs/msg/JointState":
-                td.stamp.append(_stamp(msg.header))
-                td.values.append(np.array(msg.position, dtype=float))
-                td.velocity.append(np.array(msg.velocity, dtype=float))
-                if td.names is None:
-                    td.names = list(msg.name)
-            elif conn.msgtype == "std_msgs/msg/Float64MultiArray":
-                td.values.append(np.array(msg.data, dtype=float))
-                td.labels.append(msg.layout.dim[0].label if msg.layout.dim else "")
-                if td.dims is None:
-                    td.dims = [(d.label, int(d.size)) for d in msg.layout.dim]
-            elif conn.msgtype == "std_msgs/msg/Float64":
-                td.values.append(float(msg.data))
-            elif conn.msgtype == "diagnostic_msgs/msg/DiagnosticArray":
-                td.last_status = getattr(td, "last_status", {})
-                for status in msg.status:
-                    td.last_status[status.name] = {kv.key: kv.value for kv in status.values}
-            else:  # Clock
-                td.stamp.append(msg.clock.sec + 1e-9 * msg.clock.nanosec)
+            _add_message(td, conn.msgtype, typestore.deserialize_cdr(raw, conn.msgtype))
     finally:
         reader.close()
+    return data
+
+
+def _add_message(td, msgtype, msg):
+    """The fields of one decoded message (of :data:`DECODED`) that ``td`` keeps."""
+    if msgtype == "sensor_msgs/msg/JointState":
+        td.stamp.append(_stamp(msg.header))
+        td.values.append(np.array(msg.position, dtype=float))
+        td.velocity.append(np.array(msg.velocity, dtype=float))
+        if td.names is None:
+            td.names = list(msg.name)
+    elif msgtype == "std_msgs/msg/Float64MultiArray":
+        td.values.append(np.array(msg.data, dtype=float))
+        td.labels.append(msg.layout.dim[0].label if msg.layout.dim else "")
+        if td.dims is None:
+            td.dims = [(d.label, int(d.size)) for d in msg.layout.dim]
+    elif msgtype == "std_msgs/msg/Float64":
+        td.values.append(float(msg.data))
+    elif msgtype == "diagnostic_msgs/msg/DiagnosticArray":
+        td.last_status = getattr(td, "last_status", {})
+        for status in msg.status:
+            td.last_status[status.name] = {kv.key: kv.value for kv in status.values}
+    else:  # Clock
+        td.stamp.append(msg.clock.sec + 1e-9 * msg.clock.nanosec)
+
+
+def _add_send_stamps(data, sent):
+    """The publishers' send stamps and sequence numbers (from :func:`_verify`), where the
+    bag holds them for every message of a topic."""
     for topic, rows in sent.items():
         td = data.get(topic)
         if td is None or len(rows) != td.count or all(r[1] == r[0] for r in rows):
@@ -158,7 +185,6 @@ def read_bag(path, report=None):
         rows.sort(key=lambda r: r[0])     # rosbags yields receive-stamp order
         td.sent = [r[1] for r in rows]
         td.seq = [r[2] for r in rows]
-    return {k: v.finish() for k, v in data.items()}
 
 
 def summary(data):
@@ -441,11 +467,29 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     """
     tl = Timeline(data, controller_node)
     metrics, series = {}, {}
+    _tracking(data, tl, controller_node, metrics, series)
+    eff, tagged, effort_counts = _efforts(data, tl, metrics, series)
+    _estimates_and_predictions(data, tl, controller_node, theta_true, metrics, series)
+    js = _joint_states(data, tl, metrics)
+    if eff is not None:
+        metrics.update(effort_counts)
+    _timing(data, eff, js, tagged, metrics, series)
+    return metrics, series
+
+
+def _tracking(data, tl, controller_node, metrics, series):
+    """``~/tracking_error``: the tracking metrics."""
     te = data.get(topics.resolve(topics.TRACKING_ERROR, controller_node))
     if te is not None and te.count and isinstance(te.values, np.ndarray):
         t, e = tl.controller_time(te), te.values
         series["tracking_error"] = (t, e)
         metrics.update(measure.tracking(t, e))
+
+
+def _efforts(data, tl, metrics, series):
+    """The effort commands: the watchdog's and the repeated answers set apart, the torque
+    metrics of the others. Returns those (:class:`TopicData` or ``None``), their tags and
+    their counts (metrics added by :func:`analyse` after the joint states')."""
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     watchdog_efforts = 0
     repeated_answers = 0
@@ -465,6 +509,14 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
     if eff is not None and eff.count and isinstance(eff.values, np.ndarray):
         series["effort"] = (tl.controller_time(eff, tagged), eff.values)
         metrics.update(measure.torque(eff.values))
+    counts = {"effort_commands": None if eff is None else eff.count,
+              "watchdog_efforts": watchdog_efforts, "repeated_answers": repeated_answers}
+    return eff, tagged, counts
+
+
+def _estimates_and_predictions(data, tl, controller_node, theta_true, metrics, series):
+    """``~/parameter_estimates`` (errors against ``theta_true``), ``~/prediction_error``
+    and every channel's ``~/prediction_errors``."""
     pe = data.get(topics.resolve(topics.PARAMETER_ESTIMATES, controller_node))
     if pe is not None and pe.count:
         est = _estimates(pe)
@@ -485,6 +537,11 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         series["prediction_errors"] = (tl.controller_time(prs), prs.values, names)
         for name, e in zip(names, prs.values[-1]):
             metrics[f"final_abs_prediction_error_{name.replace(' ', '_')}"] = float(abs(e))
+
+
+def _joint_states(data, tl, metrics):
+    """The joint states (a re-sent first one set apart): the simulated time span and
+    counts. Returns them (:class:`TopicData` or ``None``)."""
     js = data.get("/" + topics.JOINT_STATES)
     resent_states = 0
     if js is not None and js.count and np.any(js.stamp != 0.0):
@@ -497,10 +554,11 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
         metrics["sim_time_end_s"] = float(ts[-1])
         metrics["joint_states"] = js.count
         metrics["resent_states"] = resent_states
-    if eff is not None:
-        metrics["effort_commands"] = eff.count
-        metrics["watchdog_efforts"] = watchdog_efforts
-        metrics["repeated_answers"] = repeated_answers
+    return js
+
+
+def _timing(data, eff, js, tagged, metrics, series):
+    """The loop timing (:func:`loop_timing`): state periods and state-to-effort latencies."""
     timing = loop_timing(data, eff, js, tagged)
     if timing is not None:
         series["timing"] = timing
@@ -510,7 +568,6 @@ def analyse(data, theta_true=None, controller_node=topics.CONTROLLER_NODE):
                 metrics.update(measure.percentiles(timing[key], prefix))
         metrics["unanswered_states"] = timing["unanswered"]
         metrics["timing_stamps"] = timing["clock"]
-    return metrics, series
 
 
 def notes(metrics, summ):

@@ -316,110 +316,144 @@ class _Run:
         self.relay = self.probe = self.flood = self.plain = self.window = None
         self.busy = []
         self.third = self.t0 = self.t_restart = self.t_resume = self.track = None
+        self.children, self.ctx, self.executor = [], None, None
+        self.ctrl = self.sim_child = None
+
+    def spin_for(self, seconds, cond=None, what="running"):
+        """Spin this process's node for ``seconds`` (or until ``cond()``); the controller
+        exiting meanwhile raises :class:`NodeFailed`."""
+        from rcac_ros.tools.launch import NodeFailed
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            if cond is not None and cond():
+                return True
+            if not self.ctrl.alive():
+                raise NodeFailed(f"the controller exited ({self.ctrl.returncode}) {what}:"
+                                 f"\n{self.ctrl.tail()}")
+            self.executor.spin_once(timeout_sec=0.005)
+        return cond is None
 
 
 def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
              verbose=True):
     """Run one case; return its figures (see the module docstring)."""
     import domain_coordinator
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
 
-    from rcac_ros.tools.launch import init_context
-    from rcac_ros.tools.launch import Child, child_env, node_command, NodeFailed, shut_down
+    from rcac_ros.tools.launch import child_env
 
     spec = CASES[case]
     h = 1.0 / rate
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
     os.makedirs(log_dir, exist_ok=True)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    out = {"case": case, "rate": float(rate)}
+    with domain_coordinator.domain_id() as domain:
+        env = child_env(domain)
+        run = _Run(h, env)
+        try:
+            _start_nodes(run, case, spec, controller, rate, domain, log_dir)
+            run.spin_for(warmup)
+            run.probe.recording = True
+            rss = _run_windows(run, spec, duration, soak, verbose)
+            run.probe.recording = False
+            t1 = time.monotonic_ns()
+            run.spin_for(1.2)       # one more diagnostics message
+        finally:
+            _stop_all(run)
+    _collect_figures(run, spec, out, rss, t1, soak)
+    return out
+
+
+def _start_nodes(run, case, spec, controller, rate, domain, log_dir):
+    """This process's node (the relay and the probe), the controller and the simulator;
+    returns once they are connected."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from rcac_ros.tools.launch import init_context
+    from rcac_ros.tools.launch import Child, node_command, NodeFailed
+
+    h, env = run.h, run.env
     ctrl_over = dict(controller, mode="timer", rate=float(rate), monitor_decimation=10)
     ctrl_over.update(spec.controller)
     sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
     sim_over.update(spec.simulator)
     remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
              "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
-    children, ctx, executor = [], None, None
-    out = {"case": case, "rate": float(rate)}
-    with domain_coordinator.domain_id() as domain:
-        env = child_env(domain)
-        run = _Run(h, env)
-        try:
-            ctx = init_context(domain)
-            executor = SingleThreadedExecutor(context=ctx)
-            node = Node("rcac_fault_bench", context=ctx)
-            executor.add_node(node)
-            relay = run.relay = Relay(node, h)
-            probe = run.probe = Probe(node)
+    run.ctx = init_context(domain)
+    run.executor = SingleThreadedExecutor(context=run.ctx)
+    node = Node("rcac_fault_bench", context=run.ctx)
+    run.executor.add_node(node)
+    relay = run.relay = Relay(node, h)
+    probe = run.probe = Probe(node)
 
-            def sim_child(tag=""):
-                return Child("simulator", node_command("simulator", overrides=sim_over) + remap,
-                             env, os.path.join(log_dir, f"{case}_simulator{tag}.log"))
-            ctrl = Child("controller", node_command("controller", overrides=ctrl_over), env,
-                         os.path.join(log_dir, f"{case}_controller.log"))
-            children += [ctrl, sim_child()]
+    def sim_child(tag=""):
+        return Child("simulator", node_command("simulator", overrides=sim_over) + remap,
+                     env, os.path.join(log_dir, f"{case}_simulator{tag}.log"))
+    run.sim_child = sim_child
+    run.ctrl = Child("controller", node_command("controller", overrides=ctrl_over), env,
+                     os.path.join(log_dir, f"{case}_controller.log"))
+    run.children += [run.ctrl, sim_child()]
+    if not run.spin_for(60.0, lambda: all(s.get_publisher_count() for s in probe.subs[:2])
+                        and relay.forwarded > 0, "while starting"):
+        raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
 
-            def spin_for(seconds, cond=None, what="running"):
-                end = time.monotonic() + seconds
-                while time.monotonic() < end:
-                    if cond is not None and cond():
-                        return True
-                    if not ctrl.alive():
-                        raise NodeFailed(f"the controller exited ({ctrl.returncode}) {what}:"
-                                         f"\n{ctrl.tail()}")
-                    executor.spin_once(timeout_sec=0.005)
-                return cond is None
 
-            if not spin_for(60.0, lambda: all(s.get_publisher_count() for s in probe.subs[:2])
-                            and relay.forwarded > 0, "while starting"):
-                raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
-            spin_for(warmup)
-            probe.recording = True
-            t0 = run.t0 = time.monotonic_ns()
-            relay.drop = spec.drop
-            relay.jitter = spec.jitter
-            third = run.third = duration / 3.0
-            rss = [(0.0, rss_kb(ctrl.proc.pid))]
-            if spec.window == "restart":
-                spin_for(duration / 2.0)
-                children[1].stop()
-                spin_for(0.5)
-                relay.first_state_after = (time.monotonic_ns(), None)
-                run.t_restart = time.monotonic_ns()
-                children[1] = sim_child("_restarted")
-                spin_for(duration / 2.0 - 0.5)
-            elif spec.window == "third":
-                spin_for(third)
-                spec.inject(run)
-                if spec.plain_loop:
-                    run.plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
-                                                  str(third)], stdout=subprocess.PIPE,
-                                                 text=True)
-                run.window = (time.time_ns(), time.monotonic_ns())
-                spin_for(third)
-                run.window += (time.time_ns(), time.monotonic_ns())
-                run.t_resume = time.monotonic_ns()
-                if spec.clear is not None:
-                    spec.clear(run)
-                spin_for(duration - 2 * third)
-            else:
-                step = 10.0 if soak else duration
-                while (time.monotonic_ns() - t0) * 1e-9 < duration:
-                    spin_for(min(step, duration - (time.monotonic_ns() - t0) * 1e-9))
-                    rss.append(((time.monotonic_ns() - t0) * 1e-9, rss_kb(ctrl.proc.pid)))
-                    if soak and verbose:
-                        print(f"  soak {rss[-1][0] / 60:5.1f} min: controller RSS "
-                              f"{rss[-1][1]} kB", flush=True)
-            probe.recording = False
-            t1 = time.monotonic_ns()
-            spin_for(1.2)           # one more diagnostics message
-        finally:
-            for p in run.busy + [p for p in (run.flood,) if p is not None]:
-                p.kill()
-                p.wait()
-            if run.relay is not None:
-                run.relay.close()
-            shut_down(children, executor, ctx)
+def _run_windows(run, spec, duration, soak, verbose):
+    """The run with its fault (:attr:`Case.window`); the controller's RSS samples."""
+    spin_for, relay, h = run.spin_for, run.relay, run.h
+    t0 = run.t0 = time.monotonic_ns()
+    relay.drop = spec.drop
+    relay.jitter = spec.jitter
+    third = run.third = duration / 3.0
+    rss = [(0.0, rss_kb(run.ctrl.proc.pid))]
+    if spec.window == "restart":
+        spin_for(duration / 2.0)
+        run.children[1].stop()
+        spin_for(0.5)
+        relay.first_state_after = (time.monotonic_ns(), None)
+        run.t_restart = time.monotonic_ns()
+        run.children[1] = run.sim_child("_restarted")
+        spin_for(duration / 2.0 - 0.5)
+    elif spec.window == "third":
+        spin_for(third)
+        spec.inject(run)
+        if spec.plain_loop:
+            run.plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
+                                          str(third)], stdout=subprocess.PIPE,
+                                         text=True)
+        run.window = (time.time_ns(), time.monotonic_ns())
+        spin_for(third)
+        run.window += (time.time_ns(), time.monotonic_ns())
+        run.t_resume = time.monotonic_ns()
+        if spec.clear is not None:
+            spec.clear(run)
+        spin_for(duration - 2 * third)
+    else:
+        step = 10.0 if soak else duration
+        while (time.monotonic_ns() - t0) * 1e-9 < duration:
+            spin_for(min(step, duration - (time.monotonic_ns() - t0) * 1e-9))
+            rss.append(((time.monotonic_ns() - t0) * 1e-9, rss_kb(run.ctrl.proc.pid)))
+            if soak and verbose:
+                print(f"  soak {rss[-1][0] / 60:5.1f} min: controller RSS "
+                      f"{rss[-1][1]} kB", flush=True)
+    return rss
+
+
+def _stop_all(run):
+    """The fault's processes, the relay, the nodes and this process's context."""
+    from rcac_ros.tools.launch import shut_down
+    for p in run.busy + [p for p in (run.flood,) if p is not None]:
+        p.kill()
+        p.wait()
+    if run.relay is not None:
+        run.relay.close()
+    shut_down(run.children, run.executor, run.ctx)
+
+
+def _collect_figures(run, spec, out, rss, t1, soak):
+    """The case's figures from what the probe recorded (into ``out``)."""
+    probe, relay, t0, h = run.probe, run.relay, run.t0, run.h
     src = np.array([e[0] for e in probe.efforts], dtype=np.int64)
     gaps = np.diff(src) * 1e-6 if src.size > 1 else np.array([np.inf])
     track = run.track = np.array([e for e in probe.tracking]).reshape(-1, 2)
@@ -447,7 +481,6 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         base = good[1] if soak else good[0]       # soak: after the first 10 s
         out["rss_kb"] = good
         out["memory_growth"] = (good[-1] - base) / base
-    return out
 
 
 def window_figures(probe, track, window, h):
