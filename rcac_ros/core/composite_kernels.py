@@ -31,7 +31,7 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
                          update_least_squares)
-from .channels import (axis_terms, close_channels, filtered_output, predict_link,
+from .channels import (axis_terms, close_channels, filter_step, filtered_output, predict_link,
                        start_channels)
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
                              JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)
@@ -111,19 +111,12 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
                 for k in range(3):
                     ph = qdi if k == 0 else 0.0
                     ps = 0.0 if k == 0 else (qdi if k == 1 else sig)
-                    if first:
-                        jfilt[0, 0, JPHI_F + k] = ph
-                        jfilt[0, 0, JPSI_F + k] = 0.0
-                    else:
-                        php = jfilt[0, 0, JPHI_PREV + k]
-                        psp = jfilt[0, 0, JPSI_PREV + k]
-                        jfilt[0, 0, JPHI_F + k] = (fe * jfilt[0, 0, JPHI_F + k] + fb0 * php
-                                                   + fb1 * (ph - php))
-                        jfilt[0, 0, JPSI_F + k] = (fe * jfilt[0, 0, JPSI_F + k] + fb0 * psp
-                                                   + fb1 * (ps - psp))
+                    jfilt[0, 0, JPHI_F + k], jfilt[0, 0, JPSI_F + k], w = filter_step(
+                        first, jfilt[0, 0, JPHI_F + k], jfilt[0, 0, JPSI_F + k],
+                        jfilt[0, 0, JPHI_PREV + k], jfilt[0, 0, JPSI_PREV + k], ph, ps, fe,
+                        fb0, fb1, lam)
                     jfilt[0, 0, JPHI_PREV + k] = ph
                     jfilt[0, 0, JPSI_PREV + k] = ps
-                    w = lam * (ph - jfilt[0, 0, JPHI_F + k]) + jfilt[0, 0, JPSI_F + k]
                     jfilt[0, 0, JW + k] = w
                     E += w * jrow[F_HAT + k]
         vx, vy, vz, wx, wy, wz = V
@@ -151,17 +144,11 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
         for k in range(13):
             ph = phi[k]
             ps = psi[k]
-            if first:
-                filt[0, i, PHI_F + k] = ph
-                filt[0, i, PSI_F + k] = 0.0
-            else:
-                php = filt[0, i, PHI_PREV + k]
-                psp = filt[0, i, PSI_PREV + k]
-                filt[0, i, PHI_F + k] = fe * filt[0, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
-                filt[0, i, PSI_F + k] = fe * filt[0, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHI_F + k], filt[0, i, PSI_F + k], w = filter_step(       # eq 22-23
+                first, filt[0, i, PHI_F + k], filt[0, i, PSI_F + k], filt[0, i, PHI_PREV + k],
+                filt[0, i, PSI_PREV + k], ph, ps, fe, fb0, fb1, lam)
             filt[0, i, PHI_PREV + k] = ph
             filt[0, i, PSI_PREV + k] = ps
-            w = lam * (ph - filt[0, i, PHI_F + k]) + filt[0, i, PSI_F + k]     # eq 23
             filt[0, i, W_ROW + k] = w
             E += w * state[i, THETA_HAT + k]
     E -= y

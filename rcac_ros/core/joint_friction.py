@@ -43,7 +43,8 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        POWER, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, project, retract_links, tracking_active,
                          update_least_squares)
-from .channels import channel_start, close_channels, predict_link, start_channels
+from .channels import (channel_start, close_channels, filter_step, predict_link,
+                       start_channels)
 from .regressor import reference_wrench, regressor_row
 from .spatial import P0, transform_force_T
 
@@ -105,19 +106,12 @@ def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
         for k in range(3):
             ph = phi[k]
             ps = psi[k]
-            if first:
-                jfilt[c, i, JPHI_F + k] = ph
-                jfilt[c, i, JPSI_F + k] = 0.0
-            else:
-                php = jfilt[c, i, JPHI_PREV + k]
-                psp = jfilt[c, i, JPSI_PREV + k]
-                jfilt[c, i, JPHI_F + k] = (fe * jfilt[c, i, JPHI_F + k] + fb0 * php
-                                           + fb1 * (ph - php))
-                jfilt[c, i, JPSI_F + k] = (fe * jfilt[c, i, JPSI_F + k] + fb0 * psp
-                                           + fb1 * (ps - psp))
+            jfilt[c, i, JPHI_F + k], jfilt[c, i, JPSI_F + k], w = filter_step(
+                first, jfilt[c, i, JPHI_F + k], jfilt[c, i, JPSI_F + k],
+                jfilt[c, i, JPHI_PREV + k], jfilt[c, i, JPSI_PREV + k], ph, ps, fe, fb0, fb1,
+                lam)
             jfilt[c, i, JPHI_PREV + k] = ph
             jfilt[c, i, JPSI_PREV + k] = ps
-            w = lam * (ph - jfilt[c, i, JPHI_F + k]) + jfilt[c, i, JPSI_F + k]
             jfilt[c, i, JW + k] = w
             E += w * jrow[F_HAT + k]
         chan[c, CH_E] = E
