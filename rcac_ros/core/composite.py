@@ -53,6 +53,17 @@ ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
 
+def initial_estimates(model, geometry, theta_hat0):
+    """The link estimates a controller starts from (both laws): ``theta_hat0`` checked, by
+    default zero (Euclidean) or a body per link (natural: the nominal model made a body,
+    doc/design.md §8)."""
+    n = model.n
+    if geometry == "natural":
+        return default_start(model.theta()) if theta_hat0 is None else as_start(theta_hat0, n)
+    return np.zeros((n, 13)) if theta_hat0 is None else \
+        as_array(theta_hat0, (n, 13), "theta_hat0")
+
+
 class RecursiveCompositeController:
     """The recursive composite adaptive controller of eqs 18-24, O(m n) per step.
 
@@ -193,7 +204,7 @@ class RecursiveCompositeController:
             if natural_gain is not None:
                 raise GainError("natural_gain: only with geometry='natural'")
             return
-        start = self._start(theta_hat0)
+        start = initial_estimates(self.model, self.geometry, theta_hat0)
         if natural_gain is None:
             k = matched_gain(self.P, start)
         else:
@@ -210,14 +221,6 @@ class RecursiveCompositeController:
                                                                 self.friction_hat0)
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
-
-    def _start(self, theta_hat0):
-        """The initial estimates: zero (Euclidean) or a body per link (natural)."""
-        if self.geometry == "natural":
-            return default_start(self.model.theta()) if theta_hat0 is None else \
-                as_start(theta_hat0, self.n)
-        return np.zeros((self.n, 13)) if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0")
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
@@ -324,7 +327,7 @@ class RecursiveCompositeController:
         InputError
             On a ``theta_hat0`` of wrong shape, not finite, or (natural geometry) not a body.
         """
-        th = self._start(theta_hat0)
+        th = initial_estimates(self.model, self.geometry, theta_hat0)
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")

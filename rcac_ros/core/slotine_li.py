@@ -37,8 +37,9 @@ from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I
 from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
-from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
-                             natural_gains_into, nu_gain, retract_rows)
+from .composite import initial_estimates
+from .pseudo_inertia import (is_body, lambda_min, matched_gain, natural_gains_into, nu_gain,
+                             retract_rows)
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
@@ -276,7 +277,8 @@ class SlotineLiCompositeController:
         self.geometry = geometry
         self.natural_gain = None
         if geometry == "natural":
-            k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
+            start = initial_estimates(model, geometry, theta_hat0)
+            k = matched_gain(self.P, start) if natural_gain is None else \
                 joint_values(natural_gain, n, "natural_gain", GainError)
             if np.any(k <= 0.0):
                 raise GainError("natural_gain: must be > 0")
@@ -307,19 +309,12 @@ class SlotineLiCompositeController:
         """Number of joints."""
         return self.model.n
 
-    def _start(self, theta_hat0):
-        if self.geometry == "natural":
-            return default_start(self.model.theta()) if theta_hat0 is None else \
-                as_start(theta_hat0, self.n)
-        return np.zeros((self.n, 13)) if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0")
-
     def reset(self, theta_hat0=None, friction_hat0=None):
         """Restart: estimates to ``theta_hat0`` (default zero; natural geometry: its default
         start) and, with the joint terms, to ``friction_hat0`` (default the constructor's);
         filters and step count to zero."""
         nl = 13 * self.n
-        self._theta[:nl] = self._start(theta_hat0).ravel()
+        self._theta[:nl] = initial_estimates(self.model, self.geometry, theta_hat0).ravel()
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
