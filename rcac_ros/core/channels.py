@@ -147,6 +147,23 @@ def power_terms(V, g):
 
 
 @njit(cache=True, inline="always")
+def filter_step(first, phf, psf, php, psp, ph, ps, fe, fb0, fb1, lam):
+    """Eqs 22-23 for one entry of ``phi``, ``psi``: ``(phi^f, psi^f, W)`` after this period.
+
+    ``phf``, ``psf`` are the filtered values and ``php``, ``psp`` the samples of the last
+    period, ``ph``, ``ps`` this period's; the filter is the first-order hold of the module
+    docstring (coefficients ``fe``, ``fb0``, ``fb1``), started at ``(phi, 0)`` on the first
+    period; ``W = lambda (phi - phi^f) + psi^f``. Scalars in and out: no array argument.
+    """
+    if first:
+        phf, psf = ph, 0.0
+    else:
+        phf = fe * phf + fb0 * php + fb1 * (ph - php)
+        psf = fe * psf + fb0 * psp + fb1 * (ps - psp)
+    return phf, psf, lam * (ph - phf) + psf
+
+
+@njit(cache=True, inline="always")
 def filtered_output(chan, c, state, scal, q, first):
     """``y_c``: the applied ``c^T tau`` of the last period through the filter (zero-order hold).
 
@@ -221,17 +238,11 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
         for k in range(13):
             ph = pp[k]
             ps = pp[13 + k]
-            if first:
-                filt[c, i, PHI_F + k] = ph
-                filt[c, i, PSI_F + k] = 0.0
-            else:
-                php = filt[c, i, PHI_PREV + k]
-                psp = filt[c, i, PSI_PREV + k]
-                filt[c, i, PHI_F + k] = fe * filt[c, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
-                filt[c, i, PSI_F + k] = fe * filt[c, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[c, i, PHI_F + k], filt[c, i, PSI_F + k], w = filter_step(
+                first, filt[c, i, PHI_F + k], filt[c, i, PSI_F + k], filt[c, i, PHI_PREV + k],
+                filt[c, i, PSI_PREV + k], ph, ps, fe, fb0, fb1, lam)
             filt[c, i, PHI_PREV + k] = ph
             filt[c, i, PSI_PREV + k] = ps
-            w = lam * (ph - filt[c, i, PHI_F + k]) + filt[c, i, PSI_F + k]
             filt[c, i, W_ROW + k] = w
             E += w * st[THETA_HAT + k]
         chan[c, CH_E] = E

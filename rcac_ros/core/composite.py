@@ -39,11 +39,11 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
                        new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
-from .composite_kernels import is_paper_law, paper_step, rcac_step_kernel
+from .composite_kernels import is_paper_law, paper_friction_step, paper_step, rcac_step_kernel
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, friction_step_kernel,
-                             natural_friction_start, paper_friction_step)
+                             natural_friction_start)
 from .least_squares import initial_factor
 from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
@@ -51,6 +51,17 @@ UPDATES = ("implicit", "explicit")
 GEOMETRIES = ("euclidean", "natural")
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
+
+
+def initial_estimates(model, geometry, theta_hat0):
+    """The link estimates a controller starts from (both laws): ``theta_hat0`` checked, by
+    default zero (Euclidean) or a body per link (natural: the nominal model made a body,
+    doc/design.md §8)."""
+    n = model.n
+    if geometry == "natural":
+        return default_start(model.theta()) if theta_hat0 is None else as_start(theta_hat0, n)
+    return np.zeros((n, 13)) if theta_hat0 is None else \
+        as_array(theta_hat0, (n, 13), "theta_hat0")
 
 
 class RecursiveCompositeController:
@@ -198,7 +209,7 @@ class RecursiveCompositeController:
             if natural_gain is not None:
                 raise GainError("natural_gain: only with geometry='natural'")
             return
-        start = self._start(theta_hat0)
+        start = initial_estimates(self.model, self.geometry, theta_hat0)
         if natural_gain is None:
             k = matched_gain(self.P, start)
         else:
@@ -216,14 +227,6 @@ class RecursiveCompositeController:
             self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
-
-    def _start(self, theta_hat0):
-        """The initial estimates: zero (Euclidean) or a body per link (natural)."""
-        if self.geometry == "natural":
-            return default_start(self.model.theta()) if theta_hat0 is None else \
-                as_start(theta_hat0, self.n)
-        return np.zeros((self.n, 13)) if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0")
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
@@ -336,7 +339,7 @@ class RecursiveCompositeController:
         InputError
             On a ``theta_hat0`` of wrong shape, not finite, or (natural geometry) not a body.
         """
-        th = self._start(theta_hat0)
+        th = initial_estimates(self.model, self.geometry, theta_hat0)
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")

@@ -9,9 +9,16 @@ Two compiled bodies of one law, tested against each other bit for bit
   channel (joint 1), the fixed gain, the implicit update. It is the speed (doc/tools.md,
   ``rcac bench``).
 
-Both read and write the packed arrays of :mod:`rcac_ros.core._packing`; the controller
+With the joint terms (doc/design.md §7) the general kernel is
+:func:`~rcac_ros.core.joint_friction.friction_step_kernel`, the fused one
+:func:`paper_friction_step`: the same loop body as :func:`paper_step`
+(:func:`paper_law`), its joint terms switched on by a constant.
+
+All read and write the packed arrays of :mod:`rcac_ros.core._packing`; the controller
 (:class:`~rcac_ros.core.composite.RecursiveCompositeController`) chooses one.
 """
+
+import math
 
 import numpy as np
 from numba import njit
@@ -20,13 +27,14 @@ from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
-                       I_PROJECT,
-                       I_P_DIAG, I_TRACKING, I_Y, PHI_F, PHI_PREV, PSI_F, PSI_PREV, Q_PREV,
-                       S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+                       I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
+                       PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
                          update_least_squares)
-from .channels import (axis_terms, close_channels, filtered_output, predict_link,
+from .channels import (axis_terms, close_channels, filter_step, filtered_output, predict_link,
                        start_channels)
+from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
+                             JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)
 from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
@@ -44,16 +52,20 @@ def is_paper_law(chan, scal):
             and scal[I_NATURAL] == 0.0)
 
 
-@njit(RCAC_SIGNATURE, cache=True)
-def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
-    """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`), fused in one body.
+@njit(cache=True, inline="always")
+def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
+    """The one body of :func:`paper_step` and :func:`paper_friction_step`: the paper's law
+    (:func:`is_paper_law`) fused in one loop, with joint i's terms of doc/design.md §7
+    (``jdata``, ``jfilt``) when ``joint`` is true, else without them (``jdata``, ``jfilt``
+    unread). Each caller passes ``joint`` as a constant, so the compiler keeps one branch.
 
-    The controller calls it directly for that law: one compiled call, as the kernel's.
-
-    The same equations, in the same floating-point order, as the general kernel with
+    The same equations, in the same floating-point order, as the general kernels with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
     are computed in place, with no per-link helper taking arrays (each such argument
     costs an atomic reference count in the loop). One allocation besides ``tau``.
+
+    Joint 1's channel sees joint 1's terms only, so they join the Sherman-Morrison solve
+    at link 1; every other joint's terms adapt from the tracking term alone.
     """
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
@@ -87,6 +99,26 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
         qdi = qd[i]
         V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
                                          V, Vr, Vdr, g)
+        if joint:                    # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri)
+            jrow = jdata[i]
+            qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
+            sig = math.tanh(qdi / jrow[F_VC])
+            jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qdi - qd_d[i])
+            jrow[F_Y + 1] = qdr
+            jrow[F_Y + 2] = sig
+            jrow[F_SQ] = qdi - qdr
+            if i == 0:                           # joint 1's terms in joint 1's channel
+                for k in range(3):
+                    ph = qdi if k == 0 else 0.0
+                    ps = 0.0 if k == 0 else (qdi if k == 1 else sig)
+                    jfilt[0, 0, JPHI_F + k], jfilt[0, 0, JPSI_F + k], w = filter_step(
+                        first, jfilt[0, 0, JPHI_F + k], jfilt[0, 0, JPSI_F + k],
+                        jfilt[0, 0, JPHI_PREV + k], jfilt[0, 0, JPSI_PREV + k], ph, ps, fe,
+                        fb0, fb1, lam)
+                    jfilt[0, 0, JPHI_PREV + k] = ph
+                    jfilt[0, 0, JPSI_PREV + k] = ps
+                    jfilt[0, 0, JW + k] = w
+                    E += w * jrow[F_HAT + k]
         vx, vy, vz, wx, wy, wz = V
         rvx, rvy, rvz, rwx, rwy, rwz = Vr
         dvx, dvy, dvz, dwx, dwy, dwz = Vdr
@@ -112,17 +144,11 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
         for k in range(13):
             ph = phi[k]
             ps = psi[k]
-            if first:
-                filt[0, i, PHI_F + k] = ph
-                filt[0, i, PSI_F + k] = 0.0
-            else:
-                php = filt[0, i, PHI_PREV + k]
-                psp = filt[0, i, PSI_PREV + k]
-                filt[0, i, PHI_F + k] = fe * filt[0, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
-                filt[0, i, PSI_F + k] = fe * filt[0, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
+            filt[0, i, PHI_F + k], filt[0, i, PSI_F + k], w = filter_step(       # eq 22-23
+                first, filt[0, i, PHI_F + k], filt[0, i, PSI_F + k], filt[0, i, PHI_PREV + k],
+                filt[0, i, PSI_PREV + k], ph, ps, fe, fb0, fb1, lam)
             filt[0, i, PHI_PREV + k] = ph
             filt[0, i, PSI_PREV + k] = ps
-            w = lam * (ph - filt[0, i, PHI_F + k]) + filt[0, i, PSI_F + k]     # eq 23
             filt[0, i, W_ROW + k] = w
             E += w * state[i, THETA_HAT + k]
     E -= y
@@ -144,7 +170,18 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
                 for k in range(6):
                     acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
             F[r] += acc
-        tau[i] = F[5]                                                        # eq 20
+        if joint:
+            jrow = jdata[i]
+            tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                             + jrow[F_Y + 2] * jrow[F_HAT + 2])             # eq 20
+            for k in range(3):       # eq 24, step 1, joint i's terms
+                gk = jrow[F_Y + k] * jrow[F_SQ]
+                if i == 0:
+                    gk -= gamma * jfilt[0, 0, JW + k] * y
+                    jfilt[0, 0, JU + k] = jrow[F_GAIN + k] * jfilt[0, 0, JW + k]
+                jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * gk
+        else:
+            tau[i] = F[5]                                                    # eq 20
         # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
         for k in range(13):
             G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
@@ -169,7 +206,17 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
         for k in range(13):
             w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
             w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
+    if joint:
+        for k in range(3):
+            w_dot_r += jfilt[0, 0, JW + k] * jdata[0, F_R + k]
+            w_dot_u += jfilt[0, 0, JW + k] * jfilt[0, 0, JU + k]
     kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
+    if joint:
+        for i in range(n):
+            for k in range(3):
+                jdata[i, F_HAT + k] = jdata[i, F_R + k]
+        for k in range(3):
+            jdata[0, F_HAT + k] -= kc * jfilt[0, 0, JU + k]
     for i in range(n):
         for k in range(13):
             state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
@@ -177,6 +224,21 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
         state[i, Q_PREV] = q[i]
     scal[I_K] += 1.0
     return tau
+
+
+@njit(RCAC_SIGNATURE, cache=True)
+def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
+    """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`): :func:`paper_law`
+    without the joint terms. The controller calls it directly for that law: one compiled
+    call, as the kernel's."""
+    return paper_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
+
+
+@njit(FRICTION_SIGNATURE, cache=True)
+def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
+    """:func:`~rcac_ros.core.joint_friction.friction_step_kernel` for the paper's law
+    (:func:`is_paper_law`): :func:`paper_law` with the joint terms (doc/design.md §7)."""
+    return paper_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)
 
 
 @njit(RCAC_SIGNATURE, cache=True)

@@ -38,17 +38,16 @@ from numba import njit
 from ._validate import numeric
 from rcac_ros.errors import GainError
 from ._blocks import VEC, check_vectors, cholesky_solve, feedback_wrench, reference_motion
-from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
-                       GAIN_P, I_ADAPT, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
-                       I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_P_DIAG,
-                       I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, POWER, PSI_F,
-                       PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, I_ADAPT,
+                       I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA, I_H, I_IMPLICIT, I_K,
+                       I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, LAMBDA,
+                       POWER, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, project, retract_links, tracking_active,
                          update_least_squares)
-from .channels import (axis_terms, channel_start, close_channels, filtered_output, predict_link,
+from .channels import (channel_start, close_channels, filter_step, predict_link,
                        start_channels)
-from .regressor import reference_wrench, regressor_row, regressor_terms
-from .spatial import P0, propagate, transform_force_T
+from .regressor import reference_wrench, regressor_row
+from .spatial import P0, transform_force_T
 
 # ---- joint j: jdata[j, :] ------------------------------------------------------------------
 F_HAT = 0           #: theta_f_hat_j = (armature, damping, friction) estimates (3)
@@ -109,19 +108,12 @@ def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
         for k in range(3):
             ph = phi[k]
             ps = psi[k]
-            if first:
-                jfilt[c, i, JPHI_F + k] = ph
-                jfilt[c, i, JPSI_F + k] = 0.0
-            else:
-                php = jfilt[c, i, JPHI_PREV + k]
-                psp = jfilt[c, i, JPSI_PREV + k]
-                jfilt[c, i, JPHI_F + k] = (fe * jfilt[c, i, JPHI_F + k] + fb0 * php
-                                           + fb1 * (ph - php))
-                jfilt[c, i, JPSI_F + k] = (fe * jfilt[c, i, JPSI_F + k] + fb0 * psp
-                                           + fb1 * (ps - psp))
+            jfilt[c, i, JPHI_F + k], jfilt[c, i, JPSI_F + k], w = filter_step(
+                first, jfilt[c, i, JPHI_F + k], jfilt[c, i, JPSI_F + k],
+                jfilt[c, i, JPHI_PREV + k], jfilt[c, i, JPSI_PREV + k], ph, ps, fe, fb0, fb1,
+                lam)
             jfilt[c, i, JPHI_PREV + k] = ph
             jfilt[c, i, JPSI_PREV + k] = ps
-            w = lam * (ph - jfilt[c, i, JPHI_F + k]) + jfilt[c, i, JPSI_F + k]
             jfilt[c, i, JW + k] = w
             E += w * jrow[F_HAT + k]
         chan[c, CH_E] = E
@@ -360,181 +352,6 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
                 a_min = min(a_min, retract_term(jdata[i], F_PREV + k, F_HAT + k))
         scal[I_RETRACT_MIN] = a_min
     for i in range(n):
-        state[i, TAU] = tau[i]
-        state[i, Q_PREV] = q[i]
-    scal[I_K] += 1.0
-    return tau
-
-
-@njit(FRICTION_SIGNATURE, cache=True)
-def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
-    """:func:`~rcac_ros.core.composite_kernels.paper_step` with the joint terms: the
-    paper's law (one channel, joint 1; fixed gain; implicit) fused in one loop body, as
-    :func:`friction_step_kernel` computes it for ``channels=[1]`` (the speed, ``rcac bench``).
-
-    Joint 1's channel sees joint 1's terms only, so they join the Sherman-Morrison solve
-    at link 1; every other joint's terms adapt from the tracking term alone.
-    """
-    n = data.shape[0] - 1
-    const = data[:n, :CONST_COLS]
-    state = data[:n, CONST_COLS:]
-    scal = data[n]
-    chan = filt[:, n]
-    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
-    if err != 0:
-        scal[I_ERR] = err
-        return np.empty(0, q.dtype)
-    work = np.empty(n * 41 + 6, q.dtype)
-    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
-    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
-    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
-    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
-    F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
-    tau = np.empty(n, q.dtype)
-    lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
-    fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
-    first = scal[I_K] == 0.0
-    kd_diag = scal[I_KD_DIAG] != 0.0
-    p_diag = scal[I_P_DIAG] != 0.0
-    y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
-    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
-    A, Ad = zero, zero                                 # a_j, adot_j (joint 1's axis, frame j)
-    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
-    E = 0.0
-    for i in range(n):
-        row = data[i]                                  # link i: constants, then state
-        qdi = qd[i]
-        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qdi, q_d[i], qd_d[i], qdd_d[i],
-                                         V, Vr, Vdr, g)
-        jrow = jdata[i]
-        qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
-        sig = math.tanh(qdi / jrow[F_VC])
-        jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qdi - qd_d[i])
-        jrow[F_Y + 1] = qdr
-        jrow[F_Y + 2] = sig
-        jrow[F_SQ] = qdi - qdr
-        if i == 0:                           # joint 1's terms in joint 1's channel
-            for k in range(3):
-                ph = qdi if k == 0 else 0.0
-                ps = 0.0 if k == 0 else (qdi if k == 1 else sig)
-                if first:
-                    jfilt[0, 0, JPHI_F + k] = ph
-                    jfilt[0, 0, JPSI_F + k] = 0.0
-                else:
-                    php = jfilt[0, 0, JPHI_PREV + k]
-                    psp = jfilt[0, 0, JPSI_PREV + k]
-                    jfilt[0, 0, JPHI_F + k] = (fe * jfilt[0, 0, JPHI_F + k] + fb0 * php
-                                               + fb1 * (ph - php))
-                    jfilt[0, 0, JPSI_F + k] = (fe * jfilt[0, 0, JPSI_F + k] + fb0 * psp
-                                               + fb1 * (ps - psp))
-                jfilt[0, 0, JPHI_PREV + k] = ph
-                jfilt[0, 0, JPSI_PREV + k] = ps
-                w = lam * (ph - jfilt[0, 0, JPHI_F + k]) + jfilt[0, 0, JPSI_F + k]
-                jfilt[0, 0, JW + k] = w
-                E += w * jrow[F_HAT + k]
-        vx, vy, vz, wx, wy, wz = V
-        rvx, rvy, rvz, rwx, rwy, rwz = Vr
-        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
-        gx, gy, gz = g
-        # a_1 = z6, a_j = T_j a_j-1 ; adot_j = Tdot_j a_j-1 + T_j adot_j-1
-        if i == 0:
-            A = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-        else:
-            A, Ad = propagate(C, i, row[P0], row[P0 + 1], row[P0 + 2], qdi, A, Ad, 0.0, 0.0)
-        svx, svy, svz, swx, swy, swz = vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz
-        state[i, S_LINK], state[i, S_LINK + 1], state[i, S_LINK + 2] = svx, svy, svz
-        state[i, S_LINK + 3], state[i, S_LINK + 4], state[i, S_LINK + 5] = swx, swy, swz
-        # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
-        f = reference_wrench(row, CONST_COLS + THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz,
-                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
-        for k in range(6):
-            Fs[i, k] = f[k]
-        gr = regressor_terms(svx, svy, svz, swx, swy, swz, dvx, dvy, dvz, dwx, dwy, dwz,
-                             rvx, rvy, rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
-        for k in range(13):
-            G[i, k] = gr[k]
-        phi, psi = axis_terms(A, Ad, V, g)                           # eq 22
-        for k in range(13):
-            ph = phi[k]
-            ps = psi[k]
-            if first:
-                filt[0, i, PHI_F + k] = ph
-                filt[0, i, PSI_F + k] = 0.0
-            else:
-                php = filt[0, i, PHI_PREV + k]
-                psp = filt[0, i, PSI_PREV + k]
-                filt[0, i, PHI_F + k] = fe * filt[0, i, PHI_F + k] + fb0 * php + fb1 * (ph - php)
-                filt[0, i, PSI_F + k] = fe * filt[0, i, PSI_F + k] + fb0 * psp + fb1 * (ps - psp)
-            filt[0, i, PHI_PREV + k] = ph
-            filt[0, i, PSI_PREV + k] = ps
-            w = lam * (ph - filt[0, i, PHI_F + k]) + filt[0, i, PSI_F + k]     # eq 23
-            filt[0, i, W_ROW + k] = w
-            E += w * state[i, THETA_HAT + k]
-    E -= y
-    chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
-    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
-    for k in range(6):
-        F[k] = 0.0
-    for i in range(n - 1, -1, -1):
-        if i < n - 1:
-            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
-                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
-                F[0], F[1], F[2], F[3], F[4], F[5])
-        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
-        for r in range(6):
-            acc = Fs[i, r]
-            if kd_diag:
-                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
-            else:
-                for k in range(6):
-                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
-            F[r] += acc
-        jrow = jdata[i]
-        tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                         + jrow[F_Y + 2] * jrow[F_HAT + 2])                 # eq 20
-        for k in range(3):
-            gk = jrow[F_Y + k] * jrow[F_SQ]
-            if i == 0:
-                gk -= gamma * jfilt[0, 0, JW + k] * y
-                jfilt[0, 0, JU + k] = jrow[F_GAIN + k] * jfilt[0, 0, JW + k]
-            jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * gk
-        # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
-        for k in range(13):
-            G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
-        if p_diag:
-            for a in range(13):
-                R[i, a] = state[i, THETA_HAT + a] - h * const[i, GAIN_P + 14 * a] * G[i, a]
-                filt[0, i, U_ROW + a] = const[i, GAIN_P + 14 * a] * filt[0, i, W_ROW + a]
-        else:
-            for a in range(13):
-                acc_r = 0.0
-                acc_u = 0.0
-                for c in range(13):
-                    acc_r += const[i, GAIN_P + 13 * a + c] * G[i, c]
-                    acc_u += const[i, GAIN_P + 13 * a + c] * filt[0, i, W_ROW + c]
-                R[i, a] = state[i, THETA_HAT + a] - h * acc_r
-                filt[0, i, U_ROW + a] = acc_u
-    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
-    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
-    w_dot_r = 0.0
-    w_dot_u = 0.0
-    for i in range(n):
-        for k in range(13):
-            w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
-            w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
-    for k in range(3):
-        w_dot_r += jfilt[0, 0, JW + k] * jdata[0, F_R + k]
-        w_dot_u += jfilt[0, 0, JW + k] * jfilt[0, 0, JU + k]
-    kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
-    for i in range(n):
-        for k in range(3):
-            jdata[i, F_HAT + k] = jdata[i, F_R + k]
-    for k in range(3):
-        jdata[0, F_HAT + k] -= kc * jfilt[0, 0, JU + k]
-    for i in range(n):
-        for k in range(13):
-            state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
     scal[I_K] += 1.0

@@ -12,6 +12,40 @@ from .aba import aba_kernel
 from rcac_ros.errors import InputError
 
 
+def plant_period(dt, substeps):
+    """A plant's period ``dt`` (s, > 0) and its ``substeps`` (an integer >= 1), checked: the
+    options this simulator shares with the plants of :mod:`rcac_ros.plants`."""
+    dt = scalar(dt, "dt", minimum=0.0, strict=True)
+    steps = scalar(substeps, "substeps", minimum=1.0)
+    if steps != int(steps):
+        raise InputError(f"substeps: must be an integer >= 1, got {substeps!r}")
+    return dt, int(steps)
+
+
+def effort_limits(model, effort_limit):
+    """A plant's torque limits (n,): ``effort_limit`` (a scalar or n values, Inf allowed,
+    each > 0), default the model's ``effort_limit``."""
+    limit = model.effort_limit if effort_limit is None else effort_limit
+    limits = joint_values(limit, model.n, "effort_limit", finite=False)
+    if np.any(limits <= 0.0):
+        raise InputError("effort_limit: every entry must be > 0")
+    return limits
+
+
+def initial_state(n, q0=None, qd0=None):
+    """A plant's ``(q, qd)`` from the optional initial state (default zero), checked."""
+    q = np.zeros(n) if q0 is None else as_array(q0, (n,), "q0")
+    qd = np.zeros(n) if qd0 is None else as_array(qd0, (n,), "qd0")
+    return q, qd
+
+
+def held_torque(tau, effort_limit):
+    """The torque a plant holds over one period: ``tau`` checked (n finite values, InputError
+    otherwise) and clipped to ``+-effort_limit``."""
+    tau = as_array(tau, effort_limit.shape, "tau")
+    return np.clip(tau, -effort_limit, effort_limit)
+
+
 @njit(cache=True)
 def rk4_kernel(kin, g, q, qd, tau, dt, substeps):
     """Integrate ``qdd = ABA(q, qd, tau)`` over ``dt`` with ``substeps`` classical RK4 steps."""
@@ -52,23 +86,15 @@ class Simulator:
 
     def __init__(self, model, dt=0.002, q0=None, qd0=None, substeps=1, effort_limit=None):
         self.model = model
-        self.dt = scalar(dt, "dt", minimum=0.0, strict=True)
-        steps = scalar(substeps, "substeps", minimum=1.0)
-        if steps != int(steps):
-            raise InputError(f"substeps: must be an integer >= 1, got {substeps!r}")
-        self.substeps = int(steps)
-        limit = model.effort_limit if effort_limit is None else effort_limit
-        self.effort_limit = joint_values(limit, model.n, "effort_limit", finite=False)
-        if np.any(self.effort_limit <= 0.0):
-            raise InputError("effort_limit: every entry must be > 0")
+        self.dt, self.substeps = plant_period(dt, substeps)
+        self.effort_limit = effort_limits(model, effort_limit)
         self._kin = model.packed
         self.reset(q0, qd0)
 
     def reset(self, q0=None, qd0=None, t=0.0):
         """Set the state (default zero) and the time."""
         n = self.model.n
-        self.q = np.zeros(n) if q0 is None else as_array(q0, (n,), "q0")
-        self.qd = np.zeros(n) if qd0 is None else as_array(qd0, (n,), "qd0")
+        self.q, self.qd = initial_state(n, q0, qd0)
         self.t = float(t)
         self.applied = np.zeros(n)          # the torque held over the last step, after clipping
 
@@ -82,8 +108,7 @@ class Simulator:
         InputError
             If ``tau`` has the wrong length or holds NaN/Inf (the state is left untouched).
         """
-        tau = as_array(tau, (self.model.n,), "tau")
-        self.applied = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.applied = held_torque(tau, self.effort_limit)
         self.q, self.qd = rk4_kernel(self._kin, self.model.gravity, self.q, self.qd,
                                      self.applied, self.dt, self.substeps)
         self.t += self.dt

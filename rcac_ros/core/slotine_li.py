@@ -36,8 +36,10 @@ from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I
                        I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
 from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError, InputError
-from .pseudo_inertia import (as_start, default_start, is_body, lambda_min, matched_gain,
-                             natural_gains_into, nu_gain, retract_rows)
+from .channels import filter_step
+from .composite import initial_estimates
+from .pseudo_inertia import (is_body, lambda_min, matched_gain, natural_gains_into, nu_gain,
+                             retract_rows)
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
@@ -135,17 +137,11 @@ def slotine_li_step_kernel(data, theta_hat, filt, joint, q, qd, q_d, qd_d, qdd_d
                     psi += J[i, r, k] * Ys[1, r, c] - Jd[i, r, k] * Ys[0, r, c]
                 col = 13 * i + c
                 Yj[k, col] = yv
-                if first:
-                    filt[0, k, col] = phi
-                    filt[1, k, col] = 0.0
-                else:
-                    filt[0, k, col] = (fe * filt[0, k, col] + fb0 * filt[2, k, col]
-                                       + fb1 * (phi - filt[2, k, col]))
-                    filt[1, k, col] = (fe * filt[1, k, col] + fb0 * filt[3, k, col]
-                                       + fb1 * (psi - filt[3, k, col]))
+                filt[0, k, col], filt[1, k, col], W[k, col] = filter_step(
+                    first, filt[0, k, col], filt[1, k, col], filt[2, k, col], filt[3, k, col],
+                    phi, psi, fe, fb0, fb1, lam)
                 filt[2, k, col] = phi
                 filt[3, k, col] = psi
-                W[k, col] = lam * (phi - filt[0, k, col]) + filt[1, k, col]
         if m > nj:
             # joint i's terms, row i only: Y_f = [qdd_ri, qd_ri, sigma(qd_i)],
             # Phi_f = [qd_i, 0, 0], Psi_f = [0, qd_i, sigma(qd_i)]  (doc/design.md §7)
@@ -157,19 +153,14 @@ def slotine_li_step_kernel(data, theta_hat, filt, joint, q, qd, q_d, qd_d, qdd_d
                 col = nj + 3 * i + c
                 phi = qdi if c == 0 else 0.0
                 psi = 0.0 if c == 0 else (qdi if c == 1 else sig)
-                if first:
-                    filt[0, i, col] = phi
-                    filt[1, i, col] = 0.0
-                else:
-                    filt[0, i, col] = (fe * filt[0, i, col] + fb0 * filt[2, i, col]
-                                       + fb1 * (phi - filt[2, i, col]))
-                    filt[1, i, col] = (fe * filt[1, i, col] + fb0 * filt[3, i, col]
-                                       + fb1 * (psi - filt[3, i, col]))
+                filt[0, i, col], filt[1, i, col], w = filter_step(
+                    first, filt[0, i, col], filt[1, i, col], filt[2, i, col], filt[3, i, col],
+                    phi, psi, fe, fb0, fb1, lam)
                 filt[2, i, col] = phi
                 filt[3, i, col] = psi
                 for k in range(n):
                     W[k, col] = 0.0
-                W[i, col] = lam * (phi - filt[0, i, col]) + filt[1, i, col]
+                W[i, col] = w
     # joint-space feedback gain K = sum_i J_i^T K_Di J_i, then tau = Y theta_hat - K s (eq 2)
     K = np.zeros((n, n), q.dtype)
     for i in range(n):
@@ -286,7 +277,8 @@ class SlotineLiCompositeController:
         self.geometry = geometry
         self.natural_gain = None
         if geometry == "natural":
-            k = matched_gain(self.P, self._start(theta_hat0)) if natural_gain is None else \
+            start = initial_estimates(model, geometry, theta_hat0)
+            k = matched_gain(self.P, start) if natural_gain is None else \
                 joint_values(natural_gain, n, "natural_gain", GainError)
             if np.any(k <= 0.0):
                 raise GainError("natural_gain: must be > 0")
@@ -317,19 +309,12 @@ class SlotineLiCompositeController:
         """Number of joints."""
         return self.model.n
 
-    def _start(self, theta_hat0):
-        if self.geometry == "natural":
-            return default_start(self.model.theta()) if theta_hat0 is None else \
-                as_start(theta_hat0, self.n)
-        return np.zeros((self.n, 13)) if theta_hat0 is None else \
-            as_array(theta_hat0, (self.n, 13), "theta_hat0")
-
     def reset(self, theta_hat0=None, friction_hat0=None):
         """Restart: estimates to ``theta_hat0`` (default zero; natural geometry: its default
         start) and, with the joint terms, to ``friction_hat0`` (default the constructor's);
         filters and step count to zero."""
         nl = 13 * self.n
-        self._theta[:nl] = self._start(theta_hat0).ravel()
+        self._theta[:nl] = initial_estimates(self.model, self.geometry, theta_hat0).ravel()
         if self.joint_friction:
             fh = self.friction_hat0 if friction_hat0 is None else \
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")

@@ -21,8 +21,8 @@ MuJoCo is imported here only: :func:`require_mujoco` turns its absence into a on
 
 import numpy as np
 
-from rcac_ros.core._validate import as_array, joint_values, scalar
-from rcac_ros.errors import ConfigError, DependencyError, InputError, ModelError
+from rcac_ros.core.simulator import effort_limits, held_torque, initial_state, plant_period
+from rcac_ros.errors import ConfigError, DependencyError, ModelError
 
 #: MJCF names of MuJoCo's integrators (``option/@integrator``); RK4 is the built-in one's.
 INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
@@ -178,19 +178,12 @@ class MujocoPlant:
                  integrator="RK4"):
         mujoco = require_mujoco()
         self.model = model
-        self.dt = scalar(dt, "dt", minimum=0.0, strict=True)
-        steps = scalar(substeps, "substeps", minimum=1.0)
-        if steps != int(steps):
-            raise InputError(f"substeps: must be an integer >= 1, got {substeps!r}")
-        self.substeps = int(steps)
+        self.dt, self.substeps = plant_period(dt, substeps)
         if integrator not in INTEGRATORS:
             raise ConfigError(f"integrator: expected one of {', '.join(INTEGRATORS)}, "
                               f"got {integrator!r}")
         self.integrator = integrator
-        limit = model.effort_limit if effort_limit is None else effort_limit
-        self.effort_limit = joint_values(limit, model.n, "effort_limit", finite=False)
-        if np.any(self.effort_limit <= 0.0):
-            raise InputError("effort_limit: every entry must be > 0")
+        self.effort_limit = effort_limits(model, effort_limit)
         self.xml = mjcf(model, self.dt / self.substeps, integrator)
         try:
             self.mj_model = mujoco.MjModel.from_xml_string(self.xml)
@@ -232,8 +225,7 @@ class MujocoPlant:
     def reset(self, q0=None, qd0=None, t=0.0):
         """Set the state (default zero) and the time."""
         n = self.model.n
-        q = np.zeros(n) if q0 is None else as_array(q0, (n,), "q0")
-        qd = np.zeros(n) if qd0 is None else as_array(qd0, (n,), "qd0")
+        q, qd = initial_state(n, q0, qd0)
         self._reset_data(self.mj_model, self.mj_data)
         self.mj_data.qpos[:] = q
         self.mj_data.qvel[:] = qd
@@ -251,8 +243,7 @@ class MujocoPlant:
         InputError
             If ``tau`` has the wrong length or holds NaN/Inf (the state is left untouched).
         """
-        tau = as_array(tau, (self.model.n,), "tau")
-        self.applied = np.clip(tau, -self.effort_limit, self.effort_limit)
+        self.applied = held_torque(tau, self.effort_limit)
         self.mj_data.qfrc_applied[:] = self.applied
         for _ in range(self.substeps):
             self._step(self.mj_model, self.mj_data)

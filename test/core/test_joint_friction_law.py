@@ -7,6 +7,7 @@ from chains import exact_run as true_parameters_run, frictional, frictional_chai
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
+from rcac_ros.core.composite_kernels import is_paper_law
 from rcac_ros.core.model import PAPER_Q0
 
 Q0 = np.array(PAPER_Q0)
@@ -112,6 +113,34 @@ def test_least_squares_with_joint_terms_stays_exact(adaptation):
     np.testing.assert_allclose(ls, fixed, rtol=1e-6)
     blind = exact_run(model, model, 0.002, 500, "all", traj, adaptation=adaptation)
     assert np.all(blind > 10.0 * ls)
+
+
+@pytest.mark.parametrize("P", [100.0, "full"])
+def test_fused_paper_law_with_vanishing_joint_terms_equals_it_without(P):
+    """``paper_step`` and ``paper_friction_step`` run one fused body (``paper_law``), the
+    joint terms switched on in the second. With the joint terms at zero and a gain so small
+    (1e-300) that every joint product is below the rounding of the link terms' sums, the
+    joint terms add exact zeros: tau, theta_hat and E are bit-identical to the law without
+    them, on a full gain P (the 13x13 branch) as on the diagonal one."""
+    model = css_arm((0.0, 0.0, -9.81))
+    if P == "full":
+        A = np.random.default_rng(4).normal(size=(7, 13, 13)) * 0.1
+        P = 50.0 * (A @ A.transpose(0, 2, 1) + np.eye(13))
+    traj = PaperTrajectory(Q0, reading="position")
+    runs = []
+    for kwargs in ({}, dict(joint_friction=True, friction_hat0=np.zeros((7, 3)),
+                            P_friction=1e-300)):
+        ctrl = RecursiveCompositeController(model, P=P, **kwargs)
+        assert is_paper_law(ctrl._chan, ctrl._scal)          # the fused kernels
+        sim = Simulator(model, q0=Q0)
+        taus = []
+        for k in range(300):
+            taus.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+            sim.step(taus[-1])
+        runs.append((np.array(taus), ctrl.theta_hat, ctrl.E))
+    for a, b in zip(*runs):
+        assert np.array_equal(a, b)
+    assert np.max(np.abs(runs[0][1])) > 1.0          # the law adapted (from theta_hat = 0)
 
 
 def test_fused_paper_step_with_joint_terms_equals_the_general_kernel():
