@@ -74,6 +74,18 @@ def exact_run(model, h, steps, channels, traj, q0, plant=None, applied=False, **
     return E.max(axis=0) / y.max(axis=0), y.max(axis=0), ctrl
 
 
+def track(ctrl, model, traj, steps, q0, h=0.002):
+    """Close the loop of ``ctrl`` on the built-in simulator from rest at ``q0`` for
+    ``steps`` periods of ``traj``: ``(efforts (steps, n), theta_hat, E)`` at the end."""
+    from rcac_ros.core import Simulator
+    sim = Simulator(model, q0=q0)
+    taus = []
+    for k in range(steps):
+        taus.append(ctrl.step(sim.q, sim.qd, *traj(k * h)))
+        sim.step(taus[-1])
+    return np.array(taus), ctrl.theta_hat, ctrl.E
+
+
 def sine_motion(q0, amp):
     """``q0 + amp sin(2 t)`` with its velocity and acceleration: a trajectory ``t -> (q_d,
     qd_d, qdd_d)``."""

@@ -234,15 +234,9 @@ class MujocoPlant:
         self.applied = np.zeros(n)          # the torque held over the last step, after clipping
 
     def step(self, tau):
-        """Hold ``tau`` (clipped to the effort limit) for ``dt``; return the new ``(q, qd)``.
-
-        The clipped torque is left in ``applied``.
-
-        Raises
-        ------
-        InputError
-            If ``tau`` has the wrong length or holds NaN/Inf (the state is left untouched).
-        """
+        """As :meth:`rcac_ros.core.simulator.Simulator.step`, integrated by MuJoCo: hold
+        ``tau`` (clipped, left in ``applied``) for ``dt``; the new ``(q, qd)``; an
+        :class:`InputError` leaves the state untouched."""
         self.applied = held_torque(tau, self.effort_limit)
         self.mj_data.qfrc_applied[:] = self.applied
         for _ in range(self.substeps):

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from chains import exact_run as true_parameters_run, random_chain
+from chains import exact_run as true_parameters_run, random_chain, track
 
 from rcac_ros.core import (GainError, PaperTrajectory, RecursiveCompositeController, Simulator,
                            SinusoidTrajectory, SlotineLiCompositeController, css_arm)
@@ -149,12 +149,7 @@ def test_fused_paper_step_equals_the_general_kernel():
         ctrl = RecursiveCompositeController(model, **(kwargs or {}))
         if kwargs is None:
             ctrl.use_fused_kernel(False)
-        sim = Simulator(model, q0=Q0)
-        taus = []
-        for k in range(500):
-            taus.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
-            sim.step(taus[-1])
-        runs.append((np.array(taus), ctrl.theta_hat, ctrl.E))
+        runs.append(track(ctrl, model, traj, 500, Q0))
     for run in runs[1:]:
         for a, b in zip(runs[0], run):
             assert np.array_equal(a, b)

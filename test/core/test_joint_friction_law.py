@@ -3,7 +3,8 @@ parameters, channels="all" equals Slotine-Li, the option off changes nothing."""
 
 import numpy as np
 import pytest
-from chains import exact_run as true_parameters_run, frictional, frictional_chain, worst_difference
+from chains import (exact_run as true_parameters_run, frictional, frictional_chain, track,
+                    worst_difference)
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
@@ -132,12 +133,7 @@ def test_fused_paper_law_with_vanishing_joint_terms_equals_it_without(P):
                             P_friction=1e-300)):
         ctrl = RecursiveCompositeController(model, P=P, **kwargs)
         assert is_paper_law(ctrl._chan, ctrl._scal)          # the fused kernels
-        sim = Simulator(model, q0=Q0)
-        taus = []
-        for k in range(300):
-            taus.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
-            sim.step(taus[-1])
-        runs.append((np.array(taus), ctrl.theta_hat, ctrl.E))
+        runs.append(track(ctrl, model, traj, 300, Q0))
     for a, b in zip(*runs):
         assert np.array_equal(a, b)
     assert np.max(np.abs(runs[0][1])) > 1.0          # the law adapted (from theta_hat = 0)

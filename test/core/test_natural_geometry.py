@@ -51,6 +51,44 @@ def assert_bodies_at_every_step(ctrl, model, steps, noise, rng):
     assert len(worst) > 10 and min(worst) > 0.0
 
 
+def euclidean_twin(euc, nat, P, filters):
+    """Set the Euclidean law ``euc`` to the natural law ``nat``'s estimates with the gain
+    ``P`` (n, 13, 13) (and, with ``filters``, its filters of eqs 21-24): its next step is
+    the natural step's linearly implicit part, before the retraction."""
+    euc.reset(nat.theta_hat)
+    if filters:
+        euc._filt[:] = nat._filt
+        euc._chan[:] = nat._chan
+        euc._scal[9] = nat._scal[9]
+        euc._state[:, 19:21] = nat._state[:, 19:21]
+    euc._const[:, 49:218] = P.reshape(-1, 169)
+    euc._scal[12] = 0.0                                  # P is not diagonal
+
+
+def assert_retracted_step(nat, euc, args, rtol, atol_J=0.0, atol_D=0.0, nu_rtol=0.0,
+                          nu_atol=0.0, nu_atol_step=0.0):
+    """One step of both (:func:`euclidean_twin`): the same effort, and the natural law's
+    estimates are the retraction J + D + 1/2 D J^-1 D of the Euclidean step (D its change
+    of J) with nu(theta_lin), the retraction not shortened (doc/design.md §8). Absolute
+    tolerances relative to the largest entry of J, of D, of the step."""
+    th_start = nat.theta_hat
+    tau_e = euc.step(*args)
+    tau_n = nat.step(*args)
+    assert np.allclose(tau_e, tau_n, rtol=1e-12, atol=1e-9)
+    lin = euc.theta_hat
+    assert nat.retraction_length == 1.0
+    for i in range(th_start.shape[0]):
+        J = pseudo_inertia(th_start[i])
+        D = pseudo_inertia(lin[i] - th_start[i])
+        want = J + D + 0.5 * D @ np.linalg.solve(J, D)
+        got = pseudo_inertia(nat.theta_hat[i])
+        assert np.allclose(got, want, rtol=rtol,
+                           atol=atol_J * np.abs(J).max() + atol_D * np.abs(D).max())
+        assert np.allclose(nat.theta_hat[i, 4:7], lin[i, 4:7], rtol=nu_rtol,
+                           atol=nu_atol + nu_atol_step * np.abs(lin[i] - th_start[i]).max())
+    assert np.abs(lin - th_start).max() > 1e-6        # the step did something
+
+
 def p_eff(theta, k, Pnu):
     """The natural gain P_eff(theta) (13 x 13) of one link, column by column."""
     out = np.zeros((13, 13))
@@ -93,30 +131,13 @@ def test_natural_step_is_the_euclidean_step_with_p_eff_then_the_retraction(gamma
     q = np.array(PAPER_Q0) + 0.05
     qd = np.linspace(-0.3, 0.3, model.n)
     args = (q, qd, np.array(PAPER_Q0), np.zeros(7), np.full(7, 0.2))
-    for _ in range(2):                       # the second step has a live prediction term
+    for step in range(2):                   # the second step has a live prediction term
         th_start = nat.theta_hat
-        euc.reset(th_start)
-        if _ == 1:
-            euc._filt[:] = nat._filt
-            euc._chan[:] = nat._chan
-            euc._scal[9] = nat._scal[9]
-            euc._state[:, 19:21] = nat._state[:, 19:21]
         P = np.array([p_eff(th_start[i], nat.natural_gain[i],
                             nat._const[i, 260:269].reshape(3, 3)) for i in range(model.n)])
-        euc._const[:, 49:218] = P.reshape(model.n, 169)
-        tau_e = euc.step(*args)
-        tau_n = nat.step(*args)
-        assert np.allclose(tau_e, tau_n, rtol=1e-12, atol=1e-9)
-        lin = euc.theta_hat
-        assert nat.retraction_length == 1.0
-        for i in range(model.n):
-            J = pseudo_inertia(th_start[i])
-            D = pseudo_inertia(lin[i] - th_start[i])
-            want = J + D + 0.5 * D @ np.linalg.solve(J, D)
-            got = pseudo_inertia(nat.theta_hat[i])
-            assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(J).max())
-            assert np.allclose(nat.theta_hat[i, 4:7], lin[i, 4:7], rtol=1e-12, atol=1e-12)
-        assert np.abs(lin - th_start).max() > 1e-6        # the step did something
+        euclidean_twin(euc, nat, P, filters=step == 1)
+        assert_retracted_step(nat, euc, args, rtol=1e-9, atol_J=1e-9, nu_rtol=1e-12,
+                              nu_atol=1e-12)
 
 
 def test_consistent_at_every_step_under_huge_gains_errors_and_noise():

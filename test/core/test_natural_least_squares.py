@@ -16,7 +16,8 @@ from rcac_ros.core import RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core.model import PAPER_GAINS, PAPER_Q0
 from rcac_ros.core.pseudo_inertia import is_body, log_det_hessian, pseudo_inertia
 
-from test_natural_geometry import assert_bodies_at_every_step, run
+from test_natural_geometry import (assert_bodies_at_every_step, assert_retracted_step,
+                                   euclidean_twin, run)
 
 LS = dict(adaptation="least_squares", forgetting=1.0)
 
@@ -49,29 +50,10 @@ def test_natural_ls_step_is_the_euclidean_step_with_the_metric_then_the_retracti
         assert np.allclose(nat.gain, ls.gain, rtol=1e-12, atol=0.0)
         P = np.array([natural_ls_gain(th_start[i], nat.natural_gain[i], nat.gain[i])
                       for i in range(model.n)])
-        euc.reset(th_start)
-        if step == 1:
-            euc._filt[:] = nat._filt
-            euc._chan[:] = nat._chan
-            euc._scal[9] = nat._scal[9]
-            euc._state[:, 19:21] = nat._state[:, 19:21]
-        euc._const[:, 49:218] = P.reshape(model.n, 169)
-        euc._scal[12] = 0.0                                  # P is not diagonal
-        tau_e = euc.step(*args)
-        tau_n = nat.step(*args)
         ls.step(*args)
-        assert np.allclose(tau_e, tau_n, rtol=1e-12, atol=1e-9)
-        lin = euc.theta_hat
-        assert nat.retraction_length == 1.0
-        for i in range(model.n):
-            J = pseudo_inertia(th_start[i])
-            D = pseudo_inertia(lin[i] - th_start[i])
-            want = J + D + 0.5 * D @ np.linalg.solve(J, D)
-            got = pseudo_inertia(nat.theta_hat[i])
-            assert np.allclose(got, want, rtol=1e-8, atol=1e-8 * np.abs(D).max())
-            assert np.allclose(nat.theta_hat[i, 4:7], lin[i, 4:7], rtol=1e-8,
-                               atol=1e-8 * np.abs(lin[i] - th_start[i]).max())
-        assert np.abs(lin - th_start).max() > 1e-6        # the step did something
+        euclidean_twin(euc, nat, P, filters=step == 1)
+        assert_retracted_step(nat, euc, args, rtol=1e-8, atol_D=1e-8, nu_rtol=1e-8,
+                              nu_atol_step=1e-8)
     assert np.allclose(nat.gain, ls.gain, rtol=1e-12, atol=0.0)
 
 
