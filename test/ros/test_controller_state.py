@@ -73,13 +73,13 @@ def test_empty_trajectory_holds_the_current_position():
             JointTrajectoryPoint(positions=target.tolist(), time_from_start=Duration(sec=1))])
         for _ in range(20):
             pub.publish(move)
-            if spin_until(ex, lambda: node._motion.active is not None, timeout=1.0):
+            if spin_until(ex, lambda: node.motion.active is not None, timeout=1.0):
                 break
         here = PAPER_Q0 + 0.05                  # where the arm is when the empty one comes
         k = feed(ex, probe, k, 10, q=here)
         n = len(ref)
         pub.publish(JointTrajectory())
-        assert spin_until(ex, lambda: node._motion.active is None, timeout=10.0)
+        assert spin_until(ex, lambda: node.motion.active is None, timeout=10.0)
         k = feed(ex, probe, k, 20, q=here)
         assert spin_until(ex, lambda: len(ref) >= n + 20)
         for msg in ref[-10:]:

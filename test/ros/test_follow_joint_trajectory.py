@@ -456,13 +456,13 @@ def _closed_loop_once(via, steps, **tolerances):
             assert loop.wait(lambda: pub.get_subscription_count() > 0)
             for _ in range(20):
                 pub.publish(goal.trajectory)
-                if loop.wait(lambda: node._motion.active is not None, timeout=1.0):
+                if loop.wait(lambda: node.motion.active is not None, timeout=1.0):
                     break
         else:
             handle = loop.send(goal)
             assert handle.accepted
             result = handle.get_result_async()
-        assert node._motion.active is not None
+        assert node.motion.active is not None
         for k in range(5, steps):
             loop.step(k)
         if node.watchdog.trips:
@@ -470,7 +470,7 @@ def _closed_loop_once(via, steps, **tolerances):
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)
-        held = node._motion.active is None
+        held = node.motion.active is None
     return np.array(loop.qs), np.array(loop.efforts), outcome, held
 
 
@@ -558,27 +558,27 @@ def test_controller_topic_trajectory_replaces_the_goal_in_the_executor_thread():
         handle = loop.send(_arm_goal(PAPER_Q0, 0))
         assert handle.accepted
         result = handle.get_result_async()
-        goal_motion = node._motion.active
+        goal_motion = node.motion.active
         threads = []
-        # the inputs hold the node's follow/hold as callbacks: spy on what both reach
+        # both sources call the motion's follow and hold: spy on what they reach
         for name in ("follow", "hold"):
-            def spy(*args, _f=getattr(node._motion, name)):
+            def spy(*args, _f=getattr(node.motion, name)):
                 threads.append(threading.current_thread())
                 return _f(*args)
-            setattr(node._motion, name, spy)
+            setattr(node.motion, name, spy)
         replacement = _arm_goal(PAPER_Q0 + AMPLITUDE, 0).trajectory
         for _ in range(20):
             pub.publish(replacement)
-            if loop.wait(lambda: node._motion.active is not goal_motion, timeout=1.0):
+            if loop.wait(lambda: node.motion.active is not goal_motion, timeout=1.0):
                 break
         assert loop.wait(result.done)
         assert result.result().status == GoalStatus.STATUS_ABORTED
         assert result.result().result.error_code == result.result().result.INVALID_GOAL
         assert "replaced by a ~/joint_trajectory message" in result.result().result.error_string
-        np.testing.assert_array_equal(node._motion.active.pos[-1],
+        np.testing.assert_array_equal(node.motion.active.pos[-1],
                                       replacement.points[-1].positions)
         assert threads and all(t is threading.current_thread() for t in threads)
         empty = JointTrajectory(joint_names=[f"joint{i}" for i in range(1, 8)])
         pub.publish(empty)                  # empty: hold, in the executor thread too
-        assert loop.wait(lambda: node._motion.active is None)
+        assert loop.wait(lambda: node.motion.active is None)
         assert len(threads) >= 2 and all(t is threading.current_thread() for t in threads)

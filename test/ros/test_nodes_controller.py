@@ -327,9 +327,9 @@ def test_topic_trajectory_is_followed_like_jtc():
         msg = _trajectory([JOINTS[i] for i in perm], [0.1, 0.3], p[:, perm], v[:, perm])
         for _ in range(20):                 # the first message can be lost while discovery
             pub.publish(msg)                # settles on the subscriber's side
-            if spin_until(ex, lambda: node._motion.active is not None, timeout=1.0):
+            if spin_until(ex, lambda: node.motion.active is not None, timeout=1.0):
                 break
-        assert node._motion.active is not None
+        assert node.motion.active is not None
         start = (k - 1) * H_NS              # "start now" = the latest state's stamp
         k = feed(ex, probe, k, 200)
         ref = interpolate.CubicHermiteSpline([0.0, 0.1, 0.3], np.vstack([hold, p]),
@@ -353,12 +353,12 @@ def test_topic_trajectory_is_followed_like_jtc():
             _trajectory(JOINTS, [0.1], [hold[:5]]),
             _trajectory(JOINTS, [0.2, 0.1], [hold, hold]),
         ]   # (an empty JointTrajectory is not malformed: it holds, see test_controller_state)
-        active = node._motion.active
+        active = node.motion.active
         for msg in bad:
             pub.publish(msg)
         assert spin_until(ex, lambda: sum(c for kind, c in node._throttle.counts.items()
                                           if kind.startswith("trajectory")) == len(bad))
-        assert node._motion.active is active
+        assert node.motion.active is active
         assert spin_until(ex, lambda: probe.warned("rejected (trajectory"))
 
 

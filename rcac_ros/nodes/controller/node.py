@@ -7,7 +7,8 @@ the efforts, deactivate sends one zero effort. Thin: message -> arrays ->
 (one step per valid JointState, time from its stamp) or ``timer`` mode (``rate`` Hz on
 the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop` or
 ``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
-the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the trajectory sources
+the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the desired motion (:mod:`.motion`,
+also the FollowJointTrajectory server's sink), the ``~/joint_trajectory`` topic
 (:mod:`.trajectory_input`), the outputs (:mod:`.outputs`), the estimate services
 (:mod:`.estimate_services`) and the fail-safe guards (:mod:`rcac_ros.nodes.safety.failsafe`).
 doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/parameters.md.
@@ -28,7 +29,8 @@ from rcac_ros.nodes.controller.starvation import Starvation
 from rcac_ros.nodes.controller.state_input import StateInput
 from rcac_ros.nodes.controller.outputs import ControllerOutputs
 from rcac_ros.nodes.controller.params import read_parameters
-from rcac_ros.nodes.controller.trajectory_input import ActionSink, TrajectoryInput
+from rcac_ros.nodes.controller.motion import ControllerMotion
+from rcac_ros.nodes.controller.trajectory_input import TrajectoryInput
 from rcac_ros.nodes.safety.watchdog import Watchdog
 from rcac_ros.nodes.controller.estimate_services import EstimateServices
 from rcac_ros.nodes.safety.failsafe import ControllerGuards
@@ -36,7 +38,6 @@ from rcac_ros.nodes.fjt.server import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.controller.lookahead import StatePredictor
 from rcac_ros.nodes.runtime.managed import ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
-from rcac_ros.nodes.msgs.trajectory import DesiredMotion
 
 
 class ControllerNode(ManagedNode):
@@ -48,7 +49,8 @@ class ControllerNode(ManagedNode):
 
     Attributes: ``config`` (:class:`~.params.ControllerConfig`, frozen), ``ctrl`` (the core
     controller), ``counts`` (what its loop counted), ``states`` (:class:`StateInput`, the
-    latest valid state), ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the
+    latest valid state), ``motion`` (:class:`ControllerMotion`, the desired motion),
+    ``watchdog``, ``failsafe`` (the guards), ``filters_stale`` (the
     filters of eqs 21-24 missed states: the next control step restarts them).
     """
 
@@ -91,14 +93,18 @@ class ControllerNode(ManagedNode):
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
             restarted=self._stream_restarted, control=self._control))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
+        self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
+            paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
+            limiter=self.failsafe.limiter, check_goal=self.failsafe.check_goal,
+            now_ns=self.time_now_ns, is_running=lambda: self.running,
+            position=lambda: self.states.q)
         self._reset_motion()
         self._fjt = None                    # the FollowJointTrajectory server, if any
         if cfg.trajectory_source == "topic":    # checked aside, applied in this thread
             self.inputs.append(self.keep(TrajectoryInput.close, TrajectoryInput(
                 self, joint_names=self.model.joint_names, guards=self.failsafe,
-                warn=self._throttle.warn, now_ns=self.time_now_ns, follow=self.follow,
-                hold=self.hold_position, replaced=self._abort_goal)))
-            self._fjt = create_server(self, ActionSink(self), defaults=cfg.tolerances)
+                warn=self._throttle.warn, motion=self.motion, replaced=self._abort_goal)))
+            self._fjt = create_server(self, self.motion, defaults=cfg.tolerances)
             if self._fjt is not None:
                 self.keep(FollowJointTrajectoryServer.destroy, self._fjt)
         timer = self.destroy_timer
@@ -123,7 +129,7 @@ class ControllerNode(ManagedNode):
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
-        self.restart_motion(self.config.paper_q0)
+        self.motion.restart()
         self.states.reset()
         self.watchdog.reset()
         self._last_tick = None
@@ -134,7 +140,7 @@ class ControllerNode(ManagedNode):
 
     def _stream_restarted(self):
         """The state stream restarted: the motion starts at the new state, the filters too."""
-        self.restart_motion(self.config.paper_q0)
+        self.motion.restart()
         self.filters_stale = self.counts.steps > 0
 
     def _filters_missed(self):          # the watchdog's: eqs 21-24 missed states
@@ -145,7 +151,7 @@ class ControllerNode(ManagedNode):
 
     def _replan(self, held):
         """The watchdog held the safe effort ``held`` s: the motion restarts from the arm."""
-        self.restart_motion()
+        self.motion.restart(at_arm=True)
         self._abort_goal(f"the controller sent the safe effort for {held:.3f} s")
 
     def _abort_goal(self, text):
@@ -157,11 +163,6 @@ class ControllerNode(ManagedNode):
         """The watchdog's steady timer (lockstep, or timer mode on /clock)."""
         if self.running:
             self.watchdog.check()
-
-    def restart_motion(self, q0=None):
-        """The desired motion starts again, from ``q0`` or the measured state."""
-        self._motion = DesiredMotion(self.config.paper, q0)
-        self.failsafe.limiter.reset()       # the new motion starts at the measured state
 
     def _activate(self):
         """Efforts on; the motion starts again from the next valid state."""
@@ -185,28 +186,6 @@ class ControllerNode(ManagedNode):
         if self.running:
             self.running = False
             self._deactivate()
-
-    def follow(self, parsed):
-        """Follow a parsed trajectory (:func:`parse_trajectory`) from the desired state now.
-
-        The entry point of every trajectory source (the topic, an action server). Returns
-        ``False`` (nothing started) before the first joint state or when not active.
-        """
-        if not self.running:
-            return False
-        return self._motion.follow(parsed, self.time_now_ns(), self.states.q)
-
-    @property
-    def active_trajectory(self):
-        """The trajectory being followed (:class:`ActiveTrajectory`), or ``None``."""
-        return self._motion.active
-
-    def hold_position(self):
-        """Stop any trajectory and hold the measured position (``False``: no state yet)."""
-        if not self.running or self.states.q is None:
-            return False
-        self._motion.hold(self.states.q)
-        return True
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, changed):
@@ -238,7 +217,7 @@ class ControllerNode(ManagedNode):
             self.ctrl.restart_filters()
         if self._lookahead is not None:     # timer mode: the state when the effort acts
             q, qd = self._lookahead(q, qd, time.monotonic_ns() - state.received)
-        q_d, qd_d, qdd_d = self.failsafe.limiter(*self._motion.sample(t_ns, q))
+        q_d, qd_d, qdd_d = self.motion.sample(t_ns, q)      # limited
         start = time.perf_counter()
         theta_before = self.ctrl.theta_hat
         friction_before = self.ctrl.friction_hat        # None without joint_friction

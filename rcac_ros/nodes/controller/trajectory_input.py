@@ -1,18 +1,14 @@
-"""The controller's trajectory sources (``trajectory: topic``): the topic and the action.
+"""The controller's ``~/joint_trajectory`` topic (``trajectory: topic``).
 
-Both feed the node's desired motion through :meth:`ControllerNode.follow` and
-:meth:`ControllerNode.hold_position`, and both change it only in the node's executor
-thread (the control thread), where the FollowJointTrajectory server also runs:
-
-* :class:`TrajectoryInput` (``~/joint_trajectory``): the message is deserialised, parsed
-  and checked (size cap, joints, times, the model's limits, an end in the past) in its own
-  thread (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`, doc/failsafe.md); only the result
-  crosses
-  over, through a guard condition whose callback runs in the executor. There it starts
-  (or, empty, holds) the motion and aborts a running goal, as a goal does in the action
-  server's callbacks.
-* :class:`ActionSink`: what the
-  :class:`~rcac_ros.nodes.fjt.server.FollowJointTrajectoryServer` drives.
+It feeds the controller's desired motion
+(:class:`~rcac_ros.nodes.controller.motion.ControllerMotion`) through its ``follow`` and
+``hold``, and changes it only in the node's executor thread (the control thread), where
+the FollowJointTrajectory server, the motion's other source, also runs: the message is
+deserialised, parsed and checked (size cap, joints, times, the model's limits, an end in
+the past) in its own thread (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`,
+doc/failsafe.md); only the result crosses over, through a guard condition whose callback
+runs in the executor. There it starts (or, empty, holds) the motion and aborts a running
+goal, as a goal does in the action server's callbacks.
 """
 
 from collections import deque
@@ -41,18 +37,17 @@ class TrajectoryInput:
         ``max_trajectory_bytes`` and ``check_goal`` (the model's limits).
     warn : callable
         ``warn(kind, text)``: a throttled warning.
-    now_ns : callable
-        The time base of trajectories.
-    follow, hold : callable
-        ``follow(parsed)`` and ``hold()`` start the motion (``False``: not started).
+    motion : ControllerMotion
+        What the trajectories drive: its ``follow(parsed)`` and ``hold()`` (falsy: not
+        started) and ``now_ns()``, the time base of trajectories.
     replaced : callable
         ``replaced(text)``: a new trajectory replaced any action goal.
     """
 
-    def __init__(self, node, *, joint_names, guards, warn, now_ns, follow, hold, replaced):
+    def __init__(self, node, *, joint_names, guards, warn, motion, replaced):
         self.node = node
         self.joint_names, self.guards, self.warn = joint_names, guards, warn
-        self.now_ns, self.follow, self.hold, self.replaced = now_ns, follow, hold, replaced
+        self.motion, self.replaced = motion, replaced
         self._pending = deque(maxlen=1)     # the latest checked trajectory (atomic ops)
         self._wake = node.create_guard_condition(self._apply)
         self._side = SideInput(
@@ -73,7 +68,7 @@ class TrajectoryInput:
         if msg.points:
             try:
                 parsed = parse_trajectory(msg, self.joint_names)
-                self.guards.check_goal(parsed, self.now_ns())
+                self.guards.check_goal(parsed, self.motion.now_ns())
             except (TrajectoryRejected, Rejected) as err:
                 return self._warn(err.kind, str(err))
         self._pending.append(parsed)        # a newer one replaces one not yet applied
@@ -85,7 +80,7 @@ class TrajectoryInput:
             parsed = self._pending.popleft()
         except IndexError:
             return
-        started = self.hold() if parsed is _HOLD else self.follow(parsed)
+        started = self.motion.hold() if parsed is _HOLD else self.motion.follow(parsed)
         if not started:
             return self._warn("early", "no joint state received yet")
         self.replaced("replaced by a ~/joint_trajectory message")
@@ -94,29 +89,3 @@ class TrajectoryInput:
         """Stop the side thread and remove the guard condition (cleanup)."""
         self._side.close()
         self.node.destroy_guard_condition(self._wake)
-
-
-class ActionSink:
-    """What the FollowJointTrajectory server drives: the controller's desired motion."""
-
-    def __init__(self, node):
-        self.node = node
-        self.joint_names = node.model.joint_names
-
-    def refusal(self):
-        if not self.node.running:
-            return "the controller is not active"
-        return None if self.node.states.q is not None else "no joint state received yet"
-
-    def now_ns(self):
-        return self.node.time_now_ns()
-
-    def check(self, parsed):
-        """The model's limits, as for ``~/joint_trajectory`` (the server checks the end)."""
-        self.node.failsafe.check_goal(parsed, None)
-
-    def follow(self, parsed):
-        return self.node.active_trajectory if self.node.follow(parsed) else None
-
-    def hold(self):
-        self.node.hold_position()
