@@ -87,7 +87,7 @@ class FollowJointTrajectoryServer:
         the end itself); ``follow(parsed)``: follow the output of
         ``parse_trajectory`` as the topic does and return the
         :class:`~rcac_ros.nodes.msgs.trajectory.ActiveTrajectory`; ``hold()``: stop and hold
-        the current position. The sink calls :meth:`update` every control
+        the current position. The controller calls :meth:`update` every control
         step.
     name : str
         Action name.
