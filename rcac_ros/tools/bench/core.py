@@ -77,6 +77,87 @@ def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
     return float(np.median([_timed(fa, reps) / _timed(fb, reps) for _ in range(blocks)]))
 
 
+def recorded_inputs(model, seconds=2.0, offset=0.1):
+    """The inputs ``(q, qd, q_d, qd_d, qdd_d)`` of every period of a closed loop: the
+    Euclidean law run by the general kernel from the natural geometry's default start
+    (:func:`~rcac_ros.core.pseudo_inertia.default_start`) on the built-in simulator, tracking
+    the paper's trajectory from ``offset`` rad off it (the paper's start, repeated along the
+    chain)."""
+    from rcac_ros.core import PaperTrajectory
+    from rcac_ros.core.model import PAPER_Q0
+    q0 = np.resize(np.array(PAPER_Q0), model.n)
+    ctrl = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()))
+    ctrl.use_fused_kernel(False)
+    traj = PaperTrajectory(q0)
+    sim = Simulator(model, dt=ctrl.h, q0=q0 + offset)
+    out = []
+    for k in range(int(round(seconds / ctrl.h))):
+        desired = tuple(np.ascontiguousarray(a) for a in traj(k * ctrl.h))
+        args = (sim.q.copy(), sim.qd.copy()) + desired
+        out.append(args)
+        sim.step(ctrl.step(*args))
+    return out
+
+
+class Replay:
+    """``ctrl.step`` along recorded inputs, one period per call, from the start again after
+    the last one (:func:`recorded_inputs`)."""
+
+    def __init__(self, ctrl, inputs):
+        self.ctrl, self.inputs, self.k = ctrl, inputs, 0
+
+    def __call__(self):
+        self.ctrl.step(*self.inputs[self.k])
+        self.k = (self.k + 1) % len(self.inputs)
+
+
+def natural_over_general_replayed(n=7, budget_s=1.0, seconds=2.0):
+    """The natural law (doc/design.md §8) over the Euclidean law run by the same general
+    kernel, both from the natural default start, timed side by side
+    (:func:`interleaved_ratio`) replaying the same recorded closed loop
+    (:func:`recorded_inputs`): the estimates each law reaches on a real run."""
+    model = css_arm().repeated(n // 7)
+    inputs = recorded_inputs(model, seconds)
+    start = default_start(model.theta())
+    general = RecursiveCompositeController(model, theta_hat0=start)
+    general.use_fused_kernel(False)
+    nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural")
+    return interleaved_ratio(Replay(nat, inputs), Replay(general, inputs), budget_s)
+
+
+def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
+    """The natural geometry's cost goal (doc/design.md §8), ``runs`` times back to back,
+    medians: per n, the natural law over the Euclidean general kernel along a recorded
+    closed loop (:func:`natural_over_general_replayed`) and the natural step's µs along it;
+    at n = 7, the worst case (one random state repeated: the estimates on the floor)."""
+    rng = np.random.default_rng(0)
+    model = css_arm()
+    args = tuple(rng.normal(size=(5, 7)) * 0.1)
+    general = RecursiveCompositeController(model, theta_hat0=model.theta())
+    general.use_fused_kernel(False)
+    worst = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
+                                         geometry="natural")
+    loops = {}
+    for n in sizes:
+        m = css_arm().repeated(n // 7)
+        nat = RecursiveCompositeController(m, theta_hat0=default_start(m.theta()),
+                                           geometry="natural")
+        gen = RecursiveCompositeController(m, theta_hat0=default_start(m.theta()))
+        gen.use_fused_kernel(False)
+        inputs = recorded_inputs(m)
+        loops[n] = (Replay(nat, inputs), Replay(gen, inputs))
+    figures = {}
+    for _ in range(runs):
+        for n, (fa, fb) in loops.items():
+            figures.setdefault(f"closed_loop_ratio_n{n}", []).append(
+                interleaved_ratio(fa, fb, budget_s))
+            figures.setdefault(f"closed_loop_natural_us_n{n}", []).append(
+                median_us(fa, budget_s / 2))
+        figures.setdefault("worst_case_ratio_n7", []).append(
+            interleaved_ratio(lambda: worst.step(*args), lambda: general.step(*args), budget_s))
+    return {k: float(np.median(v)) for k, v in figures.items()}
+
+
 def goal_ratios(budget_s=1.0):
     """The cost goals of doc/tools.md ("The channels, least squares and the cost goals"),
     each measured side by side (:func:`interleaved_ratio`)."""
@@ -105,12 +186,16 @@ def goal_ratios(budget_s=1.0):
                     out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
                         lambda: c.step(*args), lambda: paper.step(*args), budget_s)
             # the natural geometry against the same Euclidean law run by the general kernel
-            # (the paper's law alone has a fused kernel of its own)
+            # (the paper's law alone has a fused kernel of its own): along a recorded closed
+            # loop (the goal's figure), and at one random state repeated, which drives the
+            # estimates onto the floor of the retraction (its worst case: every step halved)
+            out["natural_over_general_kernel_closed_loop_n7"] = natural_over_general_replayed(
+                7, budget_s)
             general = RecursiveCompositeController(model, theta_hat0=model.theta())
             general.use_fused_kernel(False)
             nat = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
                                                geometry="natural")
-            out["natural_over_general_kernel_n7"] = interleaved_ratio(
+            out["natural_over_general_kernel_worst_case_n7"] = interleaved_ratio(
                 lambda: nat.step(*args), lambda: general.step(*args), budget_s)
         else:
             sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
@@ -248,8 +333,16 @@ def _format_row(r):
             + "".join(f"     {f(r[k])}" for k in VARIANTS))
 
 
-def main(budget=0.3, json_path=None):
-    """``rcac bench core``: print the table, the ratios and the operation counts."""
+def main(budget=0.3, json_path=None, natural=False):
+    """``rcac bench core``: print the table, the ratios and the operation counts
+    (``natural``: only the natural geometry's cost, :func:`natural_cost`)."""
+    if natural:
+        figures = natural_cost()
+        print("natural geometry over the Euclidean general kernel (target <= 1.3 at n = 7 "
+              "along a closed loop, linear in n), 3 runs, medians:")
+        for k, v in figures.items():
+            print(f"  {k:40s} {v:8.3f}")
+        return 0
     try:
         import pinocchio  # noqa: F401
     except ImportError:
@@ -263,7 +356,8 @@ def main(budget=0.3, json_path=None):
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
     print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2, "
-          "friction/paper <= 1.3 at n = 7; all/SlotineLi <= 0.1 at n = 56; friction linear "
+          "friction/paper <= 1.3, natural/general kernel <= 1.3 along a closed loop at n = 7; "
+          "all/SlotineLi <= 0.1 at n = 56; friction linear "
           "in n: n224/n28 <= 10):")
     for k, v in result["goals"].items():
         print(f"  {k:40s} {v:8.3f}")
