@@ -252,8 +252,6 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     state = data[:n, CONST_COLS:]
     scal = data[n]
     chan = filt[:, n]
-    if is_paper_law(chan, scal):
-        return paper_step(data, filt, q, qd, q_d, qd_d, qdd_d)
     err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
     if err != 0:
         scal[I_ERR] = err

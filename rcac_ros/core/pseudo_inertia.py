@@ -146,29 +146,101 @@ def cholesky4(J, L):
 
 
 @njit(cache=True, inline="always")
+def pseudo_entries(th, o):
+    """The 10 entries ``(J00, J11, J22, J33, J01, J02, J12, J03, J13, J23)`` of ``J(theta)``
+    (:func:`pseudo_inertia_into`, the same operations) as scalars."""
+    t11, t12, t13 = th[o + 10], th[o + 11], th[o + 12]
+    return (th[o + 4] + 0.5 * (-t11 + t12 + t13), th[o + 5] + 0.5 * (t11 - t12 + t13),
+            th[o + 6] + 0.5 * (t11 + t12 - t13), th[o], th[o + 7], th[o + 8], th[o + 9],
+            th[o + 1], th[o + 2], th[o + 3])
+
+
+@njit(cache=True, inline="always")
+def theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, n0, n1, n2, out, o):
+    """:func:`theta_from_pseudo` (the same operations) from J's 10 entries as scalars."""
+    a, b, c = j00 - n0, j11 - n1, j22 - n2
+    out[o] = j33
+    out[o + 1], out[o + 2], out[o + 3] = j03, j13, j23
+    out[o + 4], out[o + 5], out[o + 6] = n0, n1, n2
+    out[o + 7], out[o + 8], out[o + 9] = j01, j02, j12
+    out[o + 10], out[o + 11], out[o + 12] = b + c, a + c, a + b
+
+
+@njit(cache=True, inline="always")
+def cholesky_entries(a00, a11, a22, a33, a01, a02, a12, a03, a13, a23):
+    """:func:`cholesky4` (the same operations, the same verdict) of the symmetric 4x4 with
+    these 10 entries, unrolled on scalars: ``(ok, l00, l10, l11, l20, l21, l22, l30, l31,
+    l32, l33)``, the factor's entries 0 past the first pivot that is not > 0."""
+    l00 = l10 = l11 = l20 = l21 = l22 = l30 = l31 = l32 = l33 = 0.0
+    ok = False
+    d = a00
+    if d > 0.0:
+        l00 = math.sqrt(d)
+        l10, l20, l30 = a01 / l00, a02 / l00, a03 / l00
+        d = a11 - l10 * l10
+        if d > 0.0:
+            l11 = math.sqrt(d)
+            l21 = (a12 - l20 * l10) / l11
+            l31 = (a13 - l30 * l10) / l11
+            d = a22 - l20 * l20 - l21 * l21
+            if d > 0.0:
+                l22 = math.sqrt(d)
+                l32 = (a23 - l30 * l20 - l31 * l21) / l22
+                d = a33 - l30 * l30 - l31 * l31 - l32 * l32
+                if d > 0.0:
+                    l33 = math.sqrt(d)
+                    ok = True
+    return ok, l00, l10, l11, l20, l21, l22, l30, l31, l32, l33
+
+
+@njit(cache=True, inline="always")
 def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
     """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §8).
 
     ``th[o:o+13]`` is theta_hat, ``k`` the natural gain, ``Pnu[po:po+9]`` the 3x3 gain on nu
-    (row-major); ``J``, ``G``, ``T`` are 4x4 scratch. ``g . out = k tr(G J G J) + u_nu^T P_nu
-    u_nu >= 0``: P_eff is symmetric positive semi-definite (definite where J is).
+    (row-major). ``g . out = k tr(G J G J) + u_nu^T P_nu u_nu >= 0``: P_eff is symmetric
+    positive semi-definite (definite where J is). ``g`` is read whole before ``out`` is
+    written (they may share an array). ``J``, ``G``, ``T`` (4x4 scratch) are not used: the
+    4x4 algebra is unrolled on the 10 entries of the symmetric matrices and the 16 of
+    ``T = G J``, in the operations and order of :func:`pseudo_inertia_into`,
+    :func:`dual_into` and ``k J (G J)``.
     """
-    pseudo_inertia_into(th, o, J)
-    u0, u1, u2 = dual_into(g, go, G)
-    for i in range(4):                              # T = G J
-        for j in range(4):
-            T[i, j] = G[i, 0] * J[0, j] + G[i, 1] * J[1, j] + G[i, 2] * J[2, j] \
-                + G[i, 3] * J[3, j]
-    for i in range(4):                              # G <- k J G J = k J T (symmetric)
-        for j in range(i, 4):
-            v = k * (J[i, 0] * T[0, j] + J[i, 1] * T[1, j] + J[i, 2] * T[2, j]
-                     + J[i, 3] * T[3, j])
-            G[i, j] = v
-            G[j, i] = v
+    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(th, o)
+    h10, h11, h12 = g[go + 10], g[go + 11], g[go + 12]        # dual_into: G(g) and u_nu
+    g00, g11, g22, g33 = h11 + h12, h10 + h12, h10 + h11, g[go]
+    g01, g02, g12 = 0.5 * g[go + 7], 0.5 * g[go + 8], 0.5 * g[go + 9]
+    g03, g13, g23 = 0.5 * g[go + 1], 0.5 * g[go + 2], 0.5 * g[go + 3]
+    u0, u1, u2 = g[go + 4] - h11 - h12, g[go + 5] - h10 - h12, g[go + 6] - h10 - h11
+    t00 = g00 * j00 + g01 * j01 + g02 * j02 + g03 * j03       # T = G J
+    t01 = g00 * j01 + g01 * j11 + g02 * j12 + g03 * j13
+    t02 = g00 * j02 + g01 * j12 + g02 * j22 + g03 * j23
+    t03 = g00 * j03 + g01 * j13 + g02 * j23 + g03 * j33
+    t10 = g01 * j00 + g11 * j01 + g12 * j02 + g13 * j03
+    t11 = g01 * j01 + g11 * j11 + g12 * j12 + g13 * j13
+    t12 = g01 * j02 + g11 * j12 + g12 * j22 + g13 * j23
+    t13 = g01 * j03 + g11 * j13 + g12 * j23 + g13 * j33
+    t20 = g02 * j00 + g12 * j01 + g22 * j02 + g23 * j03
+    t21 = g02 * j01 + g12 * j11 + g22 * j12 + g23 * j13
+    t22 = g02 * j02 + g12 * j12 + g22 * j22 + g23 * j23
+    t23 = g02 * j03 + g12 * j13 + g22 * j23 + g23 * j33
+    t30 = g03 * j00 + g13 * j01 + g23 * j02 + g33 * j03
+    t31 = g03 * j01 + g13 * j11 + g23 * j12 + g33 * j13
+    t32 = g03 * j02 + g13 * j12 + g23 * j22 + g33 * j23
+    t33 = g03 * j03 + g13 * j13 + g23 * j23 + g33 * j33
+    p00 = k * (j00 * t00 + j01 * t10 + j02 * t20 + j03 * t30)  # k J T (symmetric)
+    p01 = k * (j00 * t01 + j01 * t11 + j02 * t21 + j03 * t31)
+    p02 = k * (j00 * t02 + j01 * t12 + j02 * t22 + j03 * t32)
+    p03 = k * (j00 * t03 + j01 * t13 + j02 * t23 + j03 * t33)
+    p11 = k * (j01 * t01 + j11 * t11 + j12 * t21 + j13 * t31)
+    p12 = k * (j01 * t02 + j11 * t12 + j12 * t22 + j13 * t32)
+    p13 = k * (j01 * t03 + j11 * t13 + j12 * t23 + j13 * t33)
+    p22 = k * (j02 * t02 + j12 * t12 + j22 * t22 + j23 * t32)
+    p23 = k * (j02 * t03 + j12 * t13 + j22 * t23 + j23 * t33)
+    p33 = k * (j03 * t03 + j13 * t13 + j23 * t23 + j33 * t33)
     n0 = Pnu[po] * u0 + Pnu[po + 1] * u1 + Pnu[po + 2] * u2
     n1 = Pnu[po + 3] * u0 + Pnu[po + 4] * u1 + Pnu[po + 5] * u2
     n2 = Pnu[po + 6] * u0 + Pnu[po + 7] * u1 + Pnu[po + 8] * u2
-    theta_from_pseudo(G, n0, n1, n2, out, oo)
+    theta_from_entries(p00, p11, p22, p33, p01, p02, p12, p03, p13, p23, n0, n1, n2, out, oo)
 
 
 @njit(cache=True, inline="always")
@@ -178,7 +250,10 @@ def retract(old, oo, new, on, J, D, L, K):
     ``J_hat = J(old)`` must be positive definite. With ``Delta = J(new) - J_hat``, ``new``
     becomes the parameters of ``J_hat + a Delta + a^2/2 Delta J_hat^-1 Delta`` (its nu
     unchanged), ``a = min(1, 1/||Z||_F)``, ``Z = L^-1 Delta L^-T`` (module docstring).
-    ``J``, ``D``, ``L``, ``K`` are 4x4 scratch. Returns ``a`` (1: the step was not shortened).
+    Returns ``a`` (1: the step was not shortened). ``old`` and ``new`` may share an array.
+    ``J``, ``D``, ``L``, ``K`` (4x4 scratch) are not used: the 4x4 algebra is unrolled on
+    the 10 entries of each symmetric matrix (J_hat, Delta, J_hat^-1, Delta J_hat^-1 Delta,
+    the trial J+), the 16 of ``J_hat^-1 Delta`` and the factor's 10, in registers.
 
     Floating point: ``a`` is halved (at most :data:`HALVINGS` times) until ``J+ - FLOOR
     tr(J+) 1`` passes a Cholesky factorisation, so every stored J stays clear of rounding
@@ -186,61 +261,78 @@ def retract(old, oo, new, on, J, D, L, K):
     (``a = 0``) and only nu moves; a step that is not finite is not taken at all. ``nu`` is
     clipped to ``|nu_k| <= NU_RATIO tr(J+)`` (:data:`NU_RATIO`).
     """
-    pseudo_inertia_into(old, oo, J)
-    pseudo_inertia_into(new, on, D)
-    for i in range(4):
-        for j in range(4):
-            D[i, j] -= J[i, j]
-    if not cholesky4(J, L):                        # never, from a checked start
-        theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
+    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(old, oo)
+    e00, e11, e22, e33, e01, e02, e12, e03, e13, e23 = pseudo_entries(new, on)
+    n0, n1, n2 = new[on + 4], new[on + 5], new[on + 6]
+    d00, d11, d22, d33 = e00 - j00, e11 - j11, e22 - j22, e33 - j33    # Delta
+    d01, d02, d12, d03, d13, d23 = e01 - j01, e02 - j02, e12 - j12, e03 - j03, e13 - j13, \
+        e23 - j23
+    ok, l00, l10, l11, l20, l21, l22, l30, l31, l32, l33 = cholesky_entries(
+        j00, j11, j22, j33, j01, j02, j12, j03, j13, j23)
+    if not ok:                                     # never, from a checked start
+        theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, n0, n1, n2,
+                           new, on)
         return 0.0
-    d0, d1, d2, d3 = 1.0 / L[0, 0], 1.0 / L[1, 1], 1.0 / L[2, 2], 1.0 / L[3, 3]
-    for j in range(4):                              # L <- L^-1 in place (lower triangular)
-        dj = d0 if j == 0 else d1 if j == 1 else d2 if j == 2 else d3
-        for i in range(j + 1, 4):
-            acc = L[i, j] * dj
-            for m in range(j + 1, i):
-                acc += L[i, m] * L[m, j]
-            L[i, j] = -acc * (d1 if i == 1 else d2 if i == 2 else d3)
-        L[j, j] = dj
-    for i in range(4):                              # K <- J^-1 = L^-T L^-1
-        for j in range(i, 4):
-            acc = 0.0
-            for m in range(j, 4):
-                acc += L[m, i] * L[m, j]
-            K[i, j] = acc
-            K[j, i] = acc
-    tr_inv = K[0, 0] + K[1, 1] + K[2, 2] + K[3, 3]  # >= 1 / lambda_min(J)
-    for i in range(4):                              # L <- J^-1 D
-        for j in range(4):
-            L[i, j] = K[i, 0] * D[0, j] + K[i, 1] * D[1, j] + K[i, 2] * D[2, j] \
-                + K[i, 3] * D[3, j]
-    z2 = 0.0                                       # ||Z||_F^2 = tr(J^-1 D J^-1 D)
-    for i in range(4):
-        for j in range(4):
-            z2 += L[i, j] * L[j, i]
-    if not (math.isfinite(z2) and math.isfinite(new[on + 4] + new[on + 5] + new[on + 6])):
-        for k in range(13):                         # a step that is not finite: no step
-            new[on + k] = old[oo + k]
+    i00, i11, i22, i33 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33    # L^-1 (lower)
+    i10 = -(l10 * i00) * i11
+    i20 = -(l20 * i00 + l21 * i10) * i22
+    i30 = -(l30 * i00 + l31 * i10 + l32 * i20) * i33
+    i21 = -(l21 * i11) * i22
+    i31 = -(l31 * i11 + l32 * i21) * i33
+    i32 = -(l32 * i22) * i33
+    k00 = 0.0 + i00 * i00 + i10 * i10 + i20 * i20 + i30 * i30    # J_hat^-1 = L^-T L^-1
+    k01 = 0.0 + i10 * i11 + i20 * i21 + i30 * i31
+    k02 = 0.0 + i20 * i22 + i30 * i32
+    k03 = 0.0 + i30 * i33
+    k11 = 0.0 + i11 * i11 + i21 * i21 + i31 * i31
+    k12 = 0.0 + i21 * i22 + i31 * i32
+    k13 = 0.0 + i31 * i33
+    k22 = 0.0 + i22 * i22 + i32 * i32
+    k23 = 0.0 + i32 * i33
+    k33 = 0.0 + i33 * i33
+    tr_inv = k00 + k11 + k22 + k33                # >= 1 / lambda_min(J_hat)
+    # J_hat^-1 Delta
+    m00 = k00 * d00 + k01 * d01 + k02 * d02 + k03 * d03
+    m01 = k00 * d01 + k01 * d11 + k02 * d12 + k03 * d13
+    m02 = k00 * d02 + k01 * d12 + k02 * d22 + k03 * d23
+    m03 = k00 * d03 + k01 * d13 + k02 * d23 + k03 * d33
+    m10 = k01 * d00 + k11 * d01 + k12 * d02 + k13 * d03
+    m11 = k01 * d01 + k11 * d11 + k12 * d12 + k13 * d13
+    m12 = k01 * d02 + k11 * d12 + k12 * d22 + k13 * d23
+    m13 = k01 * d03 + k11 * d13 + k12 * d23 + k13 * d33
+    m20 = k02 * d00 + k12 * d01 + k22 * d02 + k23 * d03
+    m21 = k02 * d01 + k12 * d11 + k22 * d12 + k23 * d13
+    m22 = k02 * d02 + k12 * d12 + k22 * d22 + k23 * d23
+    m23 = k02 * d03 + k12 * d13 + k22 * d23 + k23 * d33
+    m30 = k03 * d00 + k13 * d01 + k23 * d02 + k33 * d03
+    m31 = k03 * d01 + k13 * d11 + k23 * d12 + k33 * d13
+    m32 = k03 * d02 + k13 * d12 + k23 * d22 + k33 * d23
+    m33 = k03 * d03 + k13 * d13 + k23 * d23 + k33 * d33
+    z2 = (0.0 + m00 * m00 + m01 * m10 + m02 * m20 + m03 * m30      # ||Z||_F^2 = tr((J^-1 D)^2)
+          + m10 * m01 + m11 * m11 + m12 * m21 + m13 * m31
+          + m20 * m02 + m21 * m12 + m22 * m22 + m23 * m32
+          + m30 * m03 + m31 * m13 + m32 * m23 + m33 * m33)
+    if not (math.isfinite(z2) and math.isfinite(n0 + n1 + n2)):
+        for c in range(13):                         # a step that is not finite: no step
+            new[on + c] = old[oo + c]
         return 0.0
-    for i in range(4):                              # K <- Q = D J^-1 D (upper, mirrored)
-        for j in range(i, 4):
-            v = D[i, 0] * L[0, j] + D[i, 1] * L[1, j] + D[i, 2] * L[2, j] + D[i, 3] * L[3, j]
-            K[i, j] = v
-            K[j, i] = v
-    for i in range(4):                              # L <- Q (K is the trial's scratch)
-        for j in range(4):
-            L[i, j] = K[i, j]
+    # Q = Delta J_hat^-1 Delta (symmetric)
+    q00 = d00 * m00 + d01 * m10 + d02 * m20 + d03 * m30
+    q01 = d00 * m01 + d01 * m11 + d02 * m21 + d03 * m31
+    q02 = d00 * m02 + d01 * m12 + d02 * m22 + d03 * m32
+    q03 = d00 * m03 + d01 * m13 + d02 * m23 + d03 * m33
+    q11 = d01 * m01 + d11 * m11 + d12 * m21 + d13 * m31
+    q12 = d01 * m02 + d11 * m12 + d12 * m22 + d13 * m32
+    q13 = d01 * m03 + d11 * m13 + d12 * m23 + d13 * m33
+    q22 = d02 * m02 + d12 * m12 + d22 * m22 + d23 * m32
+    q23 = d02 * m03 + d12 * m13 + d22 * m23 + d23 * m33
+    q33 = d03 * m03 + d13 * m13 + d23 * m23 + d33 * m33
     a = 1.0 if z2 <= 1.0 else 1.0 / math.sqrt(z2)
     for h in range(HALVINGS):
-        half = 0.5 * a * a
-        tr = 0.0
-        for i in range(4):                          # K <- J + a D + a^2/2 Q
-            for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * L[i, j]
-                K[i, j] = v
-                K[j, i] = v
-            tr += K[i, i]
+        half = 0.5 * a * a                          # J+ = J_hat + a Delta + a^2/2 Q
+        c00, c11 = j00 + a * d00 + half * q00, j11 + a * d11 + half * q11
+        c22, c33 = j22 + a * d22 + half * q22, j33 + a * d33 + half * q33
+        tr = 0.0 + c00 + c11 + c22 + c33
         # the numerical floor (module docstring). Shortcut: lambda_min(J+) >= (1 - r + r^2/2)
         # lambda_min(J) >= lambda_min(J) / 2 (r = a ||Z||_F <= 1) and lambda_min(J) >= 1 /
         # tr(J^-1), so J+ clears the floor when tr(J+) tr(J^-1) < 1 / (2 FLOOR) = 5e11; at
@@ -248,23 +340,25 @@ def retract(old, oo, new, on, J, D, L, K):
         # step) the factorisation would pass: it is skipped.
         if h == 0 and tr * tr_inv <= COND_SHORTCUT:
             break
-        for i in range(4):
-            K[i, i] -= FLOOR * tr
-        if cholesky4(K, K):
+        f = FLOOR * tr
+        if cholesky_entries(c00 - f, c11 - f, c22 - f, c33 - f,
+                            j01 + a * d01 + half * q01, j02 + a * d02 + half * q02,
+                            j12 + a * d12 + half * q12, j03 + a * d03 + half * q03,
+                            j13 + a * d13 + half * q13, j23 + a * d23 + half * q23)[0]:
             break
         a *= 0.5
     else:
         a = 0.0                                     # keep J_hat (it passed before)
     if a > 0.0:
-        for i in range(4):
-            for j in range(i, 4):
-                v = J[i, j] + a * D[i, j] + half * L[i, j]
-                J[i, j] = v
-                J[j, i] = v
-    bound = NU_RATIO * (J[0, 0] + J[1, 1] + J[2, 2] + J[3, 3])
-    theta_from_pseudo(J, min(max(new[on + 4], -bound), bound),
-                      min(max(new[on + 5], -bound), bound),
-                      min(max(new[on + 6], -bound), bound), new, on)
+        j00, j11, j22, j33 = c00, c11, c22, c33
+        j01, j02, j12 = j01 + a * d01 + half * q01, j02 + a * d02 + half * q02, \
+            j12 + a * d12 + half * q12
+        j03, j13, j23 = j03 + a * d03 + half * q03, j13 + a * d13 + half * q13, \
+            j23 + a * d23 + half * q23
+    bound = NU_RATIO * (j00 + j11 + j22 + j33)
+    theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23,
+                       min(max(n0, -bound), bound), min(max(n1, -bound), bound),
+                       min(max(n2, -bound), bound), new, on)
     return a
 
 

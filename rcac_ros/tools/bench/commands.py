@@ -28,6 +28,9 @@ def add_core(p):
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     p.add_argument("--budget", type=positive_float, default=0.3,
                    help="seconds of timing per cell (default 0.3)")
+    p.add_argument("--natural", action="store_true",
+                   help="only the natural geometry's cost against the Euclidean law, along "
+                        "a recorded closed loop (n = 7, 14, 28) and at its worst case")
 
 
 #: the controller's real-time options of ``--rt``
@@ -157,7 +160,7 @@ def add_noise(p):
 
 def run_core(args):
     from rcac_ros.tools.bench.core import main
-    return main(budget=args.budget, json_path=args.json)
+    return main(budget=args.budget, json_path=args.json, natural=args.natural)
 
 
 def run_ros(args):

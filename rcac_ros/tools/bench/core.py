@@ -42,12 +42,12 @@ def start_for(model, kwargs):
     return model.theta()
 
 
-def _timed(fn, reps):
-    """Seconds for ``reps`` calls of ``fn()``."""
-    t0 = time.perf_counter()
+def _timed(fn, reps, clock=time.perf_counter):
+    """Seconds (of ``clock``) for ``reps`` calls of ``fn()``."""
+    t0 = clock()
     for _ in range(reps):
         fn()
-    return time.perf_counter() - t0
+    return clock() - t0
 
 
 def _reps(budget_s, blocks, *fns):
@@ -67,14 +67,98 @@ def median_us(fn, budget_s=0.3, blocks=7):
     return float(np.median([_timed(fn, reps) / reps * 1e6 for _ in range(blocks)]))
 
 
-def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15):
+def interleaved_ratio(fa, fb, budget_s=1.0, blocks=15, clock=time.perf_counter):
     """Median over blocks of ``time(fa) / time(fb)``, the two timed alternately.
 
     On a shared machine the load changes between cells; timed side by side, block by
-    block, the ratio is far steadier than the ratio of two medians.
+    block, the ratio is far steadier than the ratio of two medians. ``clock``:
+    ``time.process_time`` leaves out the time the process waits for a core.
     """
     reps = _reps(budget_s, blocks, fa, fb)
-    return float(np.median([_timed(fa, reps) / _timed(fb, reps) for _ in range(blocks)]))
+    return float(np.median([_timed(fa, reps, clock) / _timed(fb, reps, clock)
+                            for _ in range(blocks)]))
+
+
+def recorded_inputs(model, seconds=2.0, offset=0.1):
+    """The inputs ``(q, qd, q_d, qd_d, qdd_d)`` of every period of a closed loop: the
+    Euclidean paper law from the natural geometry's default start
+    (:func:`~rcac_ros.core.pseudo_inertia.default_start`) on the built-in simulator, tracking
+    the paper's trajectory from ``offset`` rad off it (the paper's start, repeated along the
+    chain)."""
+    from rcac_ros.core import PaperTrajectory
+    from rcac_ros.core.model import PAPER_Q0
+    q0 = np.resize(np.array(PAPER_Q0), model.n)
+    ctrl = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()))
+    traj = PaperTrajectory(q0)
+    sim = Simulator(model, dt=ctrl.h, q0=q0 + offset)
+    out = []
+    for k in range(int(round(seconds / ctrl.h))):
+        desired = tuple(np.ascontiguousarray(a) for a in traj(k * ctrl.h))
+        args = (sim.q.copy(), sim.qd.copy()) + desired
+        out.append(args)
+        sim.step(ctrl.step(*args))
+    return out
+
+
+class Replay:
+    """``ctrl.step`` along recorded inputs, one period per call, from the start again after
+    the last one (:func:`recorded_inputs`)."""
+
+    def __init__(self, ctrl, inputs):
+        self.ctrl, self.inputs, self.k = ctrl, inputs, 0
+
+    def __call__(self):
+        self.ctrl.step(*self.inputs[self.k])
+        self.k = (self.k + 1) % len(self.inputs)
+
+
+def natural_baselines(model):
+    """The natural law (doc/design.md §8) and two Euclidean baselines, all from the natural
+    default start: the paper's law as a user runs it (its fused kernel,
+    :func:`~rcac_ros.core.composite_kernels.paper_step`, which the general kernel itself
+    dispatches to) and the same law forced through the general kernel's path by a
+    projection onto infinite bounds (the same estimates, bit for bit, plus 13 n clips)."""
+    start = default_start(model.theta())
+    nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural")
+    paper = RecursiveCompositeController(model, theta_hat0=start)
+    inf = np.full((model.n, 13), np.inf)
+    general = RecursiveCompositeController(model, theta_hat0=start, theta_bounds=(-inf, inf))
+    return nat, paper, general
+
+
+def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
+    """The natural geometry's cost goal (doc/design.md §8), ``runs`` times back to back,
+    medians of CPU-time ratios (``time.process_time``, :func:`interleaved_ratio`): per n,
+    along a recorded closed loop (:func:`recorded_inputs`, the same inputs replayed by
+    every law), the natural law over the Euclidean paper law (the goal's ratio) and over
+    the same law on the general kernel's path (:func:`natural_baselines`), and the natural
+    step's µs; at n = 7 the worst case: one random state repeated, which drives the
+    estimates onto the retraction's floor (every step halved 30 times)."""
+    clock = time.process_time
+    loops = {}
+    for n in sizes:
+        model = css_arm().repeated(n // 7)
+        inputs = recorded_inputs(model)
+        loops[n] = [Replay(c, inputs) for c in natural_baselines(model)]
+    rng = np.random.default_rng(0)
+    args = tuple(rng.normal(size=(5, 7)) * 0.1)
+    nat, paper, general = natural_baselines(css_arm())
+    figures = {}
+
+    def add(key, value):
+        figures.setdefault(key, []).append(value)
+    for _ in range(runs):
+        for n, (fn, fp, fg) in loops.items():
+            add(f"closed_loop_natural_over_paper_n{n}",
+                interleaved_ratio(fn, fp, budget_s, clock=clock))
+            add(f"closed_loop_natural_over_general_n{n}",
+                interleaved_ratio(fn, fg, budget_s, clock=clock))
+            reps = _reps(budget_s / 4, 1, fn)
+            add(f"closed_loop_natural_us_n{n}", _timed(fn, reps, clock) / reps * 1e6)
+        for key, base in (("paper", paper), ("general", general)):
+            add(f"worst_case_natural_over_{key}_n7", interleaved_ratio(
+                lambda: nat.step(*args), lambda: base.step(*args), budget_s, clock=clock))
+    return {k: float(np.median(v)) for k, v in figures.items()}
 
 
 def goal_ratios(budget_s=1.0):
@@ -104,14 +188,15 @@ def goal_ratios(budget_s=1.0):
                                                      **kwargs)
                     out[f"{key[:-3]}_over_paper_n7"] = interleaved_ratio(
                         lambda: c.step(*args), lambda: paper.step(*args), budget_s)
-            # the natural geometry against the same Euclidean law run by the general kernel
-            # (the paper's law alone has a fused kernel of its own)
-            general = RecursiveCompositeController(model, theta_hat0=model.theta())
-            general.use_fused_kernel(False)
-            nat = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
-                                               geometry="natural")
-            out["natural_over_general_kernel_n7"] = interleaved_ratio(
-                lambda: nat.step(*args), lambda: general.step(*args), budget_s)
+            # the natural geometry against the Euclidean paper law from the same start, along
+            # a recorded closed loop (the goal's figure) and at one random state repeated,
+            # which drives the estimates onto the retraction's floor (its worst case)
+            nat, paper_b, _ = natural_baselines(model)
+            loop = recorded_inputs(model)
+            out["natural_over_paper_closed_loop_n7"] = interleaved_ratio(
+                Replay(nat, loop), Replay(paper_b, loop), budget_s)
+            out["natural_over_paper_worst_case_n7"] = interleaved_ratio(
+                lambda: nat.step(*args), lambda: paper_b.step(*args), budget_s)
         else:
             sl = SlotineLiCompositeController(model, theta_hat0=model.theta())
             out["all_over_slotine_li_n56"] = interleaved_ratio(
@@ -248,8 +333,16 @@ def _format_row(r):
             + "".join(f"     {f(r[k])}" for k in VARIANTS))
 
 
-def main(budget=0.3, json_path=None):
-    """``rcac bench core``: print the table, the ratios and the operation counts."""
+def main(budget=0.3, json_path=None, natural=False):
+    """``rcac bench core``: print the table, the ratios and the operation counts
+    (``natural``: only the natural geometry's cost, :func:`natural_cost`)."""
+    if natural:
+        figures = natural_cost()
+        print("natural geometry over the Euclidean law (target <= 1.3 at n = 7 over the paper "
+              "law, linear in n), CPU time, 3 runs, medians:")
+        for k, v in figures.items():
+            print(f"  {k:40s} {v:8.3f}")
+        return 0
     try:
         import pinocchio  # noqa: F401
     except ImportError:
@@ -263,7 +356,8 @@ def main(budget=0.3, json_path=None):
     for k, v in result["ratios"].items():
         print(f"  {k:40s} {v:8.2f}")
     print("\ncost goals, each timed side by side (targets: paper/pin.rnea <= 3, all/paper <= 2, "
-          "friction/paper <= 1.3 at n = 7; all/SlotineLi <= 0.1 at n = 56; friction linear "
+          "friction/paper <= 1.3, natural/paper <= 1.3 along a closed loop at n = 7; "
+          "all/SlotineLi <= 0.1 at n = 56; friction linear "
           "in n: n224/n28 <= 10):")
     for k, v in result["goals"].items():
         print(f"  {k:40s} {v:8.3f}")

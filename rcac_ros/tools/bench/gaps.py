@@ -80,7 +80,7 @@ def main(argv=None):
         sentinel(args.sentinel)
         return 0
     from rcac_ros.tools.bench import ros
-    from rcac_ros.tools.bench.core import RT_OPTIONS
+    from rcac_ros.tools.bench.commands import RT_OPTIONS
     probes = []
 
     class Probe(ros.Probe):                 # keeps the probe: its stamps are needed here
