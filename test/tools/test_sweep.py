@@ -431,3 +431,32 @@ def test_friction_campaign_pairs_the_joint_terms_across_laws():
     assert ctrl.joint_friction == (inputs["law"] == "composite_friction")
     row = cp.input_columns(inputs)
     assert row["joint_friction_7"] == inputs["joint_friction"][6]
+
+
+def test_paired_campaign_gives_every_grid_cell_the_same_draws():
+    """``paired: true`` (doc/campaigns.md): both geometries of a sample of
+    campaigns/consistency.yaml get the same start and payload, the next sample others; the
+    same file unpaired draws each run anew (the runs of one sample then differ)."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    path = os.path.join(root, "campaigns", "consistency.yaml")
+    paired = cp.load(path)
+    assert paired["paired"] and cp.run_count(paired) == 2 * paired["samples"]
+    a, b, c = cp.sample(paired, 0), cp.sample(paired, 1), cp.sample(paired, 2)
+    assert {a["geometry"], b["geometry"]} == {"euclidean", "natural"}
+    assert dict(a, geometry=None) == dict(b, geometry=None)
+    assert a["payload_mass"] != c["payload_mass"] and a["start_com_shift"] != c["start_com_shift"]
+    doc = yaml.safe_load(open(path, encoding="utf-8"))
+    doc.pop("paired")
+    unpaired = cp.validate(doc)
+    assert "paired" not in unpaired                       # the default: older results resume
+    u0, u1 = cp.sample(unpaired, 0), cp.sample(unpaired, 1)
+    assert u0 == a and u1["payload_mass"] != u0["payload_mass"]
+    with pytest.raises(RcacError, match="^paired: expected true or false"):
+        cp.validate(dict(doc, paired="yes"))
+    from rcac_ros.tools.scenarios import find_panda_urdf
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data's panda.urdf not installed")
+    (_, ctrl_a, kw_a), (_, ctrl_b, kw_b) = cp.setup(paired, 0), cp.setup(paired, 1)
+    np.testing.assert_array_equal(kw_a["theta_hat0"], kw_b["theta_hat0"])
+    np.testing.assert_array_equal(kw_a["events"][0][1].theta(), kw_b["events"][0][1].theta())
+    assert {ctrl_a.geometry, ctrl_b.geometry} == {"euclidean", "natural"}

@@ -7,7 +7,8 @@ the implicit and the explicit update, the power channel, fixed-m channel sets,
 least-squares variants, the non-recursive Slotine-Li law, the direct, paper and
 ``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7), and the natural
 geometry (``*_natural``, doc/design.md §8: estimates that stay physical bodies) with the
-Euclidean paper law from the same start (``paper_nat_start``). Scenarios
+Euclidean paper and ``"all"`` laws from the same start (``paper_nat_start``,
+``all_nat_start``). Scenarios
 (:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
@@ -91,9 +92,11 @@ LAWS = {
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
     "slotine_li_natural": ("slotine_li", dict(geometry="natural")),
-    # doc/design.md §8: estimates kept physically consistent; "paper_nat_start" is the
-    # Euclidean paper law from the natural geometry's default start (the same start)
+    # doc/design.md §8: estimates kept physically consistent; "paper_nat_start" and
+    # "all_nat_start" are the Euclidean laws from the natural geometry's default start (the
+    # same start: the paired comparison)
     "paper_nat_start": ("rcac", dict(theta_hat0=NATURAL_START)),
+    "all_nat_start": ("rcac", dict(channels="all", theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
     # with the joint terms: on a plant with dry friction the rigid-body natural law's J_hat

@@ -22,7 +22,10 @@ A campaign (YAML, see ``doc/campaigns.md``) is a ``scenario`` (the fixed part) a
 Runs: the grids make a Cartesian product of cells; run ``i`` is in cell
 ``i % cells`` and its random draws come from ``numpy.random.default_rng([seed, i, 0])``
 (inputs) and ``[seed, i, 1]`` (sensor noise, initial-estimate error), so every run
-is reproducible from (campaign, index) alone, whatever ran before it or where.
+is reproducible from (campaign, index) alone, whatever ran before it or where. With
+``paired: true`` the draws come from ``[seed, i // cells, 0]`` and ``[seed, i // cells,
+1]`` instead: the runs of one sample draw the same inputs in every grid cell (a paired
+comparison of the grid's values).
 """
 
 import copy
@@ -97,7 +100,7 @@ MODEL_DEFAULTS = {
 }
 SCENARIO_KEYS = ("model", "law", "trajectory", "duration", "gains", "substeps", "error_limit",
                  "initial_estimate", "payload_time", "engine", "adapt_all")
-TOP_KEYS = ("name", "seed", "samples", "scenario", "vary")
+TOP_KEYS = ("name", "seed", "samples", "paired", "scenario", "vary")
 TRAJECTORY_KEYS = {"paper": ("type", "reading", "amplitude", "period"),
                    "sinusoid": ("type", "offset", "amplitude", "frequency")}
 
@@ -259,6 +262,11 @@ def validate(doc, source="campaign"):
     out = {"name": str(doc.get("name", "campaign")),
            "seed": number(doc["seed"], "seed", 0, integer=True),
            "samples": number(doc.get("samples", 1), "samples", 1, integer=True)}
+    paired = doc.get("paired", False)
+    if not isinstance(paired, bool):
+        fail("paired", f"expected true or false, got {paired!r}")
+    if paired:                  # recorded only when set: older results resume
+        out["paired"] = True
     sc = mapping(doc["scenario"], "scenario", SCENARIO_KEYS + tuple(
         q for q in QUANTITIES if q not in GAINS and q != "law"), ("model",))
     model = sc["model"]
@@ -343,12 +351,18 @@ def draw(spec, rng, size):
     return float(v) if size == 1 else [float(x) for x in v]
 
 
+def draw_index(campaign, index):
+    """The index that seeds run ``index``'s draws: ``index`` itself, or with ``paired`` its
+    sample ``index // cells`` (the same draws in every grid cell)."""
+    return index // len(grid_cells(campaign)) if campaign.get("paired") else index
+
+
 def sample(campaign, index):
     """The inputs of run ``index``: every quantity's value (fixed, grid or drawn)."""
     cells = grid_cells(campaign)
     inputs = copy.deepcopy(campaign["scenario"]["fixed"])
     inputs.update(copy.deepcopy(cells[index % len(cells)]))
-    rng = np.random.default_rng([campaign["seed"], index, 0])
+    rng = np.random.default_rng([campaign["seed"], draw_index(campaign, index), 0])
     paired = np.random.default_rng([campaign["seed"], index // len(cells), 2])
     for q in QUANTITIES:                       # canonical order, whatever the file's
         spec = campaign["vary"].get(q)
@@ -453,7 +467,7 @@ def setup(campaign, index):
         return m.replace(**terms) if joints else m
     loaded = plant_of(loaded)
     trajectory, q0, qd0 = trajectory_for(campaign, inputs, model)
-    rng = np.random.default_rng([campaign["seed"], index, 1])
+    rng = np.random.default_rng([campaign["seed"], draw_index(campaign, index), 1])
     theta = model.theta()
     base = np.zeros_like(theta) if sc["initial_estimate"] == "zero" else \
         shifted_start(theta, inputs["start_mass_scale"], inputs["start_com_shift"])

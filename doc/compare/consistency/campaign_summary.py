@@ -1,0 +1,68 @@
+"""doc/compare/consistency/campaign_summary.json from the results of campaigns/consistency.yaml
+(doc/design.md §8, "Measured"). Run from the repository root::
+
+    rcac sweep campaigns/consistency.yaml --workers 1 --out results/consistency
+    PYTHONPATH=$PWD python doc/compare/consistency/campaign_summary.py results/consistency
+
+Per geometry: runs, consistency and RMS figures. The campaign is paired (``paired: true``,
+doc/campaigns.md): runs ``2 s`` and ``2 s + 1`` are sample ``s`` with the two geometries on
+the same start and payload, so the natural law's RMS is also compared run by run (the ratio
+natural / Euclidean per sample).
+"""
+import json
+import os
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from rcac_ros.tools.sweep import campaign as cp
+
+
+def by_geometry(rows):
+    """The figures of one geometry's runs (a DataFrame)."""
+    rms = rows.rms_tracking_error[rows.status == "ok"]
+    return dict(runs=int(len(rows)),
+                consistent_every_step_runs=int(rows.consistent_every_step.sum()),
+                consistent_link_steps=float(rows.consistent_link_steps.mean()),
+                min_lambda_min=float(rows.min_lambda_min.min()),
+                rms_median=float(rms.median()), rms_mean=float(rms.mean()),
+                rms_p90=float(rms.quantile(0.9)), diverged=int((rows.status != "ok").sum()),
+                diverged_runs=[int(r) for r in rows.run[rows.status != "ok"]])
+
+
+def paired_ratio(frame, cells):
+    """Natural / Euclidean RMS per sample (diverged runs included: their RMS up to the stop)."""
+    frame = frame.assign(sample=frame.run // cells)
+    e = frame[frame.geometry == "euclidean"].set_index("sample").rms_tracking_error
+    n = frame[frame.geometry == "natural"].set_index("sample").rms_tracking_error
+    r = (n / e).dropna()
+    q = np.quantile(r, [0.1, 0.5, 0.9])
+    return dict(samples=int(len(r)), rms_ratio_median=float(q[1]), rms_ratio_p10=float(q[0]),
+                rms_ratio_p90=float(q[2]), rms_ratio_min=float(r.min()),
+                rms_ratio_max=float(r.max()), share_within_1_1=float(np.mean(r <= 1.1)))
+
+
+def summary(out_dir):
+    with open(os.path.join(out_dir, "campaign.json"), encoding="utf-8") as f:
+        campaign = json.load(f)
+    frame = pq.read_table(os.path.join(out_dir, "results.parquet")).to_pandas()
+    cells = len(cp.grid_cells(campaign))
+    return {"campaign": "campaigns/consistency.yaml", "samples": campaign["samples"],
+            "paired": bool(campaign.get("paired", False)),
+            "by_geometry": {g: by_geometry(frame[frame.geometry == g])
+                            for g in ("euclidean", "natural")},
+            "paired_natural_over_euclidean": paired_ratio(frame, cells)}
+
+
+def main(out_dir, target=os.path.join("doc", "compare", "consistency",
+                                      "campaign_summary.json")):
+    data = summary(out_dir)
+    with open(target, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=2)
+        f.write("\n")
+    print(json.dumps(data, indent=2))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
