@@ -262,7 +262,8 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 148 + m * (m + 29), q.dtype)
+    # the implicit solve's scratch: with the joint terms, 2 + m, else 29 + m per channel
+    work = np.empty(n * 41 + 148 + m * (m + (2 if joint else 29)), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -275,10 +276,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     o = 41 * n + 148                              # the implicit solve's scratch:
     A = work[o:o + m * m]                         # the m x m system (flat),
     z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
-    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels by first link,
-    start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
-    Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at link i
-    Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # as columns
+    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels (by first link)
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -350,6 +348,9 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
         if joint:
             implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, order, scal)
         else:
+            start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
+            Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at
+            Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # link i, columns
             implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
     else:
         for i in range(n):
