@@ -39,11 +39,11 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
                        new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
-from .composite_kernels import is_paper_law, paper_friction_step, paper_step, rcac_step_kernel
+from .composite_kernels import (friction_step_kernel, is_paper_law, paper_friction_step,
+                                paper_step, rcac_step_kernel)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, friction_natural_gain, friction_step_kernel,
-                             natural_friction_start)
+                             friction_gain, friction_natural_gain, natural_friction_start)
 from .least_squares import initial_factor
 from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
 
@@ -244,8 +244,8 @@ class RecursiveCompositeController:
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
         through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
-        :func:`~rcac_ros.core.joint_friction.paper_friction_step` or
-        :func:`~rcac_ros.core.joint_friction.friction_step_kernel`."""
+        :func:`~rcac_ros.core.composite_kernels.paper_friction_step` or
+        :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`."""
         fused = self._fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:
             kernel = paper_friction_step if fused else friction_step_kernel

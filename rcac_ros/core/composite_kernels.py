@@ -10,9 +10,10 @@ Two compiled bodies of one law, tested against each other bit for bit
   ``rcac bench``).
 
 With the joint terms (doc/design.md §7) the general kernel is
-:func:`~rcac_ros.core.joint_friction.friction_step_kernel`, the fused one
-:func:`paper_friction_step`: the same loop body as :func:`paper_step`
-(:func:`paper_law`), its joint terms switched on by a constant.
+:func:`friction_step_kernel`, the same body as :func:`rcac_step_kernel`
+(:func:`general_law`), and the fused one :func:`paper_friction_step`, the same loop body
+as :func:`paper_step` (:func:`paper_law`): each with its joint terms switched on by a
+constant.
 
 All read and write the packed arrays of :mod:`rcac_ros.core._packing`; the controller
 (:class:`~rcac_ros.core.composite.RecursiveCompositeController`) chooses one.
@@ -27,14 +28,16 @@ from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
-                       I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
-                       PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+                       I_PROJECT, I_P_DIAG, I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F,
+                       PHI_PREV, PSI_F, PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
                          update_least_squares)
 from .channels import (axis_terms, close_channels, filter_step, filtered_output, predict_link,
                        start_channels)
-from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
-                             JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)
+from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
+                             FRICTION_SIGNATURE, JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW,
+                             adapt_joint, implicit_solve_joint, predict_joint, retract_term,
+                             term_gain)
 from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
@@ -236,16 +239,18 @@ def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
 
 @njit(FRICTION_SIGNATURE, cache=True)
 def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
-    """:func:`~rcac_ros.core.joint_friction.friction_step_kernel` for the paper's law
+    """:func:`friction_step_kernel` for the paper's law
     (:func:`is_paper_law`): :func:`paper_law` with the joint terms (doc/design.md §7)."""
     return paper_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)
 
 
-@njit(RCAC_SIGNATURE, cache=True)
-def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
-    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
-
-    ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`.
+@njit(cache=True, inline="always")
+def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
+    """The one body of :func:`rcac_step_kernel` and :func:`friction_step_kernel`: one control
+    period of eqs 18-24, any channels, any option of the adaptation step, with joint i's
+    terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true, else without
+    them (``jdata``, ``jfilt`` unread). Each caller passes ``joint`` as a constant, so the
+    compiler keeps one branch. Returns tau (empty on bad input, code in scal[I_ERR]).
     """
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
@@ -257,7 +262,8 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
     m = chan.shape[0]
-    work = np.empty(n * 41 + 148 + m * (m + 29), q.dtype)
+    # the implicit solve's scratch: with the joint terms, 2 + m, else 29 + m per channel
+    work = np.empty(n * 41 + 148 + m * (m + (2 if joint else 29)), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
@@ -270,10 +276,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     o = 41 * n + 148                              # the implicit solve's scratch:
     A = work[o:o + m * m]                         # the m x m system (flat),
     z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
-    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels by first link,
-    start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
-    Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at link i
-    Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # as columns
+    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels (by first link)
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -301,6 +304,15 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
                       dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
                       wx, wy, wz, gx, gy, gz)
         predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
+        if joint:    # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri), its share
+            jrow = jdata[i]
+            qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
+            sig = math.tanh(qd[i] / jrow[F_VC])
+            jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qd[i] - qd_d[i])
+            jrow[F_Y + 1] = qdr
+            jrow[F_Y + 2] = sig
+            jrow[F_SQ] = qd[i] - qdr
+            predict_joint(chan, jfilt, i, qd[i], sig, jrow, coef, first)
     close_channels(chan, scal)
     frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
     tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
@@ -315,25 +327,77 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
                 C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
         feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
-        tau[i] = F[5]                                                              # eq 20
         if not frozen:
             adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
+        if joint:
+            jrow = jdata[i]
+            tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                             + jrow[F_Y + 2] * jrow[F_HAT + 2])                    # eq 20
+            if not frozen:
+                if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
+                    for k in range(3):
+                        x = jrow[F_HAT + k]
+                        jrow[F_PREV + k] = x
+                        jrow[F_GAIN + k] = term_gain(jrow[F_K + k], jrow[F_CAP + k], x)
+                adapt_joint(chan, jfilt, i, jrow, scal, tracking)
+        else:
+            tau[i] = F[5]                                                          # eq 20
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
+        if joint:
+            implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, order, scal)
+        else:
+            start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
+            Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at
+            Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # link i, columns
+            implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
     else:
         for i in range(n):
             for k in range(13):
                 state[i, THETA_HAT + k] = R[i, k]
+            if joint:
+                for k in range(3):
+                    jdata[i, F_HAT + k] = jdata[i, F_R + k]
     if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
         update_least_squares(chan, filt, const, state, scal, grad, Pg)
     if not frozen and scal[I_PROJECT] != 0.0:
         project(const, state)
+        if joint:
+            for i in range(n):
+                for k in range(3):
+                    jdata[i, F_HAT + k] = max(jdata[i, F_HAT + k], 0.0)
     if not frozen and scal[I_NATURAL] != 0.0:
         retract_links(state, scal, M4)                # doc/design.md §8
+        if joint:
+            a_min = scal[I_RETRACT_MIN]
+            for i in range(n):
+                for k in range(3):
+                    a_min = min(a_min, retract_term(jdata[i], F_PREV + k, F_HAT + k))
+            scal[I_RETRACT_MIN] = a_min
     for i in range(n):
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
     scal[I_K] += 1.0
     return tau
+
+
+@njit(RCAC_SIGNATURE, cache=True)
+def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
+    """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
+
+    ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`:
+    :func:`general_law` without the joint terms.
+    """
+    return general_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
+
+
+@njit(FRICTION_SIGNATURE, cache=True)
+def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
+    """One control period of the law with joint terms (doc/design.md §7); returns tau.
+
+    ``data``, ``filt`` as :func:`rcac_step_kernel`'s; ``jdata`` (n, JOINT_COLS) and
+    ``jfilt`` (m, n, JFILT_COLS) of :mod:`rcac_ros.core.joint_friction` hold the joint
+    terms: :func:`general_law` with them. Empty on bad input (code in ``scal[I_ERR]``).
+    """
+    return general_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)

@@ -37,17 +37,10 @@ from numba import njit
 
 from ._validate import numeric
 from rcac_ros.errors import GainError
-from ._blocks import VEC, check_vectors, cholesky_solve, feedback_wrench, reference_motion
-from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, I_ADAPT,
-                       I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA, I_H, I_IMPLICIT, I_K,
-                       I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, LAMBDA,
-                       POWER, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import (adapt_link, project, retract_links, tracking_active,
-                         update_least_squares)
-from .channels import (channel_start, close_channels, filter_step, predict_link,
-                       start_channels)
-from .regressor import reference_wrench, regressor_row
-from .spatial import P0, transform_force_T
+from ._blocks import VEC, cholesky_solve
+from ._packing import (CH_ACTIVE, CH_E, CH_JOINT, CH_Y, I_GAMMA, I_H, I_IMPLICIT, POWER,
+                       THETA_HAT, U_ROW, W_ROW)
+from .channels import channel_start, filter_step
 
 # ---- joint j: jdata[j, :] ------------------------------------------------------------------
 F_HAT = 0           #: theta_f_hat_j = (armature, damping, friction) estimates (3)
@@ -233,129 +226,6 @@ def implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal):
             if sees(chan[ca, CH_JOINT], i):
                 for k in range(3):
                     jdata[i, F_HAT + k] -= zc * jfilt[ca, i, JU + k]
-
-
-@njit(FRICTION_SIGNATURE, cache=True)
-def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
-    """One control period of the law with joint terms (module docstring); returns tau.
-
-    ``data``, ``filt`` as the general kernel's (:mod:`rcac_ros.core.composite_kernels`);
-    ``jdata`` (n, JOINT_COLS) and ``jfilt`` (m, n, JFILT_COLS) hold the joint terms.
-    Empty on bad input (code in ``scal[I_ERR]``).
-    """
-    n = data.shape[0] - 1
-    const = data[:n, :CONST_COLS]
-    state = data[:n, CONST_COLS:]
-    scal = data[n]
-    chan = filt[:, n]
-    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
-    if err != 0:
-        scal[I_ERR] = err
-        return np.empty(0, q.dtype)
-    m = chan.shape[0]
-    work = np.empty(n * 41 + 84 + m * (m + 2) + 64, q.dtype)
-    M4 = work[-64:].reshape((4, 4, 4))       # the natural geometry's scratch (unused here)
-    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
-    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
-    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
-    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
-    pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
-    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
-        work[41 * n + 65:41 * n + 78]
-    F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
-    o = 41 * n + 84
-    A = work[o:o + m * m]
-    z = work[o + m * m:o + m * (m + 1)]
-    idx = work[o + m * (m + 1):o + m * (m + 2)]
-    coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
-    tau = np.empty(n, q.dtype)
-    first = scal[I_K] == 0.0
-    start_channels(chan, state, scal, q, first)
-    zero = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    V, Vr, Vdr = zero, zero, zero
-    g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
-    for i in range(n):
-        row = const[i]
-        st = state[i]
-        jrow = jdata[i]
-        V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qd[i], q_d[i], qd_d[i], qdd_d[i],
-                                         V, Vr, Vdr, g)
-        vx, vy, vz, wx, wy, wz = V
-        rvx, rvy, rvz, rwx, rwy, rwz = Vr
-        dvx, dvy, dvz, dwx, dwy, dwz = Vdr
-        gx, gy, gz = g
-        st[S_LINK], st[S_LINK + 1], st[S_LINK + 2] = vx - rvx, vy - rvy, vz - rvz
-        st[S_LINK + 3], st[S_LINK + 4], st[S_LINK + 5] = wx - rwx, wy - rwy, wz - rwz
-        f = reference_wrench(st, THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy,
-                             rwz, wx, wy, wz, gx, gy, gz)
-        for k in range(6):
-            Fs[i, k] = f[k]
-        regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
-                      dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
-                      wx, wy, wz, gx, gy, gz)
-        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
-        # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri), its share of the channels
-        qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
-        sig = math.tanh(qd[i] / jrow[F_VC])
-        jrow[F_Y] = qdd_d[i] - row[LAMBDA] * (qd[i] - qd_d[i])
-        jrow[F_Y + 1] = qdr
-        jrow[F_Y + 2] = sig
-        jrow[F_SQ] = qd[i] - qdr
-        predict_joint(chan, jfilt, i, qd[i], sig, jrow, coef, first)
-    close_channels(chan, scal)
-    frozen = scal[I_FROZEN] != 0.0
-    tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
-    scal[I_TRACKING] = 1.0 if tracking else 0.0
-    for k in range(6):
-        F[k] = 0.0
-    for i in range(n - 1, -1, -1):
-        row = const[i]
-        st = state[i]
-        jrow = jdata[i]
-        if i < n - 1:
-            r = const[i + 1]
-            F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
-                C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
-        feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
-        tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                         + jrow[F_Y + 2] * jrow[F_HAT + 2])                        # eq 20
-        if not frozen:
-            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
-            if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
-                for k in range(3):
-                    x = jrow[F_HAT + k]
-                    jrow[F_PREV + k] = x
-                    jrow[F_GAIN + k] = term_gain(jrow[F_K + k], jrow[F_CAP + k], x)
-            adapt_joint(chan, jfilt, i, jrow, scal, tracking)
-    if frozen:
-        pass
-    elif scal[I_IMPLICIT] != 0.0:
-        implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, idx, scal)
-    else:
-        for i in range(n):
-            for k in range(13):
-                state[i, THETA_HAT + k] = R[i, k]
-            for k in range(3):
-                jdata[i, F_HAT + k] = jdata[i, F_R + k]
-    if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
-        update_least_squares(chan, filt, const, state, scal, grad, Pg)
-    if not frozen and scal[I_PROJECT] != 0.0:
-        project(const, state)
-        for i in range(n):
-            for k in range(3):
-                jdata[i, F_HAT + k] = max(jdata[i, F_HAT + k], 0.0)
-    if not frozen and scal[I_NATURAL] != 0.0:
-        retract_links(state, scal, M4)                # doc/design.md §8
-        a_min = scal[I_RETRACT_MIN]
-        for i in range(n):
-            for k in range(3):
-                a_min = min(a_min, retract_term(jdata[i], F_PREV + k, F_HAT + k))
-        scal[I_RETRACT_MIN] = a_min
-    for i in range(n):
-        state[i, TAU] = tau[i]
-        state[i, Q_PREV] = q[i]
-    scal[I_K] += 1.0
-    return tau
 
 
 @njit(cache=True)

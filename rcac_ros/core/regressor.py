@@ -17,21 +17,28 @@ from numba import njit
 from ._validate import as_array
 
 
-@njit(cache=True)
-def fill_regressor(Y, k, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz,
-                   wx, wy, wz, gx, gy, gz):
-    """Write ``Y(Vdot_r, V_r, w, g)`` (6x13) into ``Y[k]`` (eq 14 made linear in theta)."""
-    # a = vdot_r + w x v_r - g ; c = w x w_r ; d = alpha_r + c
+@njit(cache=True, inline="always")
+def motion_terms(vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz,
+                 gx, gy, gz):
+    """Eq 14's motion terms of one link: ``a = vdot_r + w x v_r - g``, ``c = w x w_r``,
+    ``d = alpha_r + c`` and ``w . w_r``, as the 10-tuple ``(a, c, d, w . w_r)``."""
     ax = vdx + wy * vrz - wz * vry - gx
     ay = vdy + wz * vrx - wx * vrz - gy
     az = vdz + wx * vry - wy * vrx - gz
     cx = wy * wrz - wz * wry
     cy = wz * wrx - wx * wrz
     cz = wx * wry - wy * wrx
-    dx = alx + cx
-    dy = aly + cy
-    dz = alz + cz
     ww = wx * wrx + wy * wry + wz * wrz
+    return ax, ay, az, cx, cy, cz, alx + cx, aly + cy, alz + cz, ww
+
+
+@njit(cache=True)
+def fill_regressor(Y, k, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz,
+                   wx, wy, wz, gx, gy, gz):
+    """Write ``Y(Vdot_r, V_r, w, g)`` (6x13) into ``Y[k]`` (eq 14 made linear in theta)."""
+    # a = vdot_r + w x v_r - g ; c = w x w_r ; d = alpha_r + c
+    ax, ay, az, cx, cy, cz, dx, dy, dz, ww = motion_terms(
+        vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz)
     # column 1: mass
     Y[k, 0, 0] = ax
     Y[k, 1, 0] = ay
@@ -247,15 +254,9 @@ def reference_wrench(th, o, vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wr
     Ixx = th[o + 10] + t6 + t7
     Iyy = th[o + 11] + t5 + t7
     Izz = th[o + 12] + t5 + t6
-    ax = vdx + wy * vrz - wz * vry - gx
-    ay = vdy + wz * vrx - wx * vrz - gy
-    az = vdz + wx * vry - wy * vrx - gz
-    cx = wy * wrz - wz * wry
-    cy = wz * wrx - wx * wrz
-    cz = wx * wry - wy * wrx
-    dx, dy, dz = alx + cx, aly + cy, alz + cz
+    ax, ay, az, cx, cy, cz, dx, dy, dz, ww = motion_terms(
+        vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz)
     hw = hx * wx + hy * wy + hz * wz
-    ww = wx * wrx + wy * wry + wz * wrz
     # I_o d and I_o w_r
     idx = Ixx * dx - t8 * dy - t9 * dz
     idy = -t8 * dx + Iyy * dy - t10 * dz
@@ -281,17 +282,12 @@ def regressor_terms(svx, svy, svz, swx, swy, swz, vdx, vdy, vdz, alx, aly, alz,
 
     The gradient in theta of ``s^T`` (the wrench of :func:`reference_wrench`).
     """
-    ax = vdx + wy * vrz - wz * vry - gx
-    ay = vdy + wz * vrx - wx * vrz - gy
-    az = vdz + wx * vry - wy * vrx - gz
-    cx = wy * wrz - wz * wry
-    cy = wz * wrx - wx * wrz
-    cz = wx * wry - wy * wrx
-    ww = wx * wrx + wy * wry + wz * wrz
+    ax, ay, az, cx, cy, cz, dx, dy, dz, ww = motion_terms(
+        vdx, vdy, vdz, alx, aly, alz, vrx, vry, vrz, wrx, wry, wrz, wx, wy, wz, gx, gy, gz)
     sw_r = svx * wrx + svy * wry + svz * wrz
     # h . (s_v x alpha_r - (w . w_r) s_v + (s_v . w_r) w + a x s_w)
     # s_w . I_o (alpha_r + c) + (s_w x w) . I_o w_r - (t5 + t6 + t7) s_w . c
-    a = inertia_row(swx, swy, swz, alx + cx, aly + cy, alz + cz)
+    a = inertia_row(swx, swy, swz, dx, dy, dz)
     b = inertia_row(swy * wz - swz * wy, swz * wx - swx * wz, swx * wy - swy * wx,
                     wrx, wry, wrz)
     sc = swx * cx + swy * cy + swz * cz

@@ -3,7 +3,8 @@ same equations written with 4x4 arrays and loops, bit for bit.
 
 Reference: :func:`reference_gain` and :func:`reference_retract` below, the 4x4 loops of
 the first implementation (through :func:`pseudo_inertia_into`, :func:`dual_into`,
-:func:`cholesky4` and :func:`theta_from_pseudo`), the same operations in the same order.
+:func:`cholesky4`, :func:`inverse_cholesky4` and :func:`theta_from_pseudo`), the same
+operations in the same order.
 Every branch of the retraction is reached: a full step, a step shortened to ``||Z|| = 1``,
 halvings and the floor's factorisation, a step kept out (``a = 0``), a start that is not
 positive definite and a step that is not finite; ``old`` and ``new`` share one array as in
@@ -18,9 +19,9 @@ from numba import njit
 
 from rcac_ros.core import theta_from_inertia
 from rcac_ros.core.pseudo_inertia import (COND_SHORTCUT, FLOOR, HALVINGS, NU_RATIO,
-                                          cholesky4, dual_into, natural_gain_apply,
-                                          pseudo_inertia, pseudo_inertia_into, retract,
-                                          theta_from_pseudo)
+                                          cholesky4, dual_into, inverse_cholesky4,
+                                          natural_gain_apply, pseudo_inertia,
+                                          pseudo_inertia_into, retract, theta_from_pseudo)
 
 
 @njit(cache=False)
@@ -53,18 +54,9 @@ def reference_retract(old, oo, new, on, J, D, L, K):
     for i in range(4):
         for j in range(4):
             D[i, j] -= J[i, j]
-    if not cholesky4(J, L):
+    if not inverse_cholesky4(J, L):
         theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
         return 0.0
-    d0, d1, d2, d3 = 1.0 / L[0, 0], 1.0 / L[1, 1], 1.0 / L[2, 2], 1.0 / L[3, 3]
-    for j in range(4):
-        dj = d0 if j == 0 else d1 if j == 1 else d2 if j == 2 else d3
-        for i in range(j + 1, 4):
-            acc = L[i, j] * dj
-            for m in range(j + 1, i):
-                acc += L[i, m] * L[m, j]
-            L[i, j] = -acc * (d1 if i == 1 else d2 if i == 2 else d3)
-        L[j, j] = dj
     for i in range(4):
         for j in range(i, 4):
             acc = 0.0
