@@ -366,12 +366,14 @@ class RecursiveCompositeController:
 
         Returns
         -------
-        ndarray, shape (n,)
+        tau : ndarray, shape (n,)
+            The joint torques of eq 20 (before any effort limit: the caller clips).
 
         Raises
         ------
         InputError
-            If a vector has the wrong length or holds NaN/Inf (the state is left untouched).
+            A vector of the wrong length or with NaN/Inf: the estimates, the filters and
+            the prediction errors are left as they were.
         """
         try:
             tau = self._kernel(self._data, self._buf, q, qd, q_d, qd_d, qdd_d)
