@@ -242,8 +242,8 @@ class RecursiveCompositeController:
         self._jfilt = np.zeros((m, n, JFILT_COLS))
 
     def _choose_kernel(self):
-        """The compiled step: :func:`paper_step` for the paper's law (saves the dispatch
-        through :func:`rcac_step_kernel`), else the general kernel; with the joint terms,
+        """The compiled step: :func:`paper_step`, the paper's law's fused body (faster), for
+        that law, else the general kernel :func:`rcac_step_kernel`; with the joint terms,
         :func:`~rcac_ros.core.composite_kernels.paper_friction_step` or
         :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`."""
         fused = self._fused and is_paper_law(self._chan, self._scal)

@@ -48,7 +48,7 @@ RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC
 def is_paper_law(chan, scal):
     """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
     update, no dead zone, no projection, no leakage, the Euclidean geometry, adapting.
-    :func:`paper_step` then runs it."""
+    The controller then runs :func:`paper_step` or :func:`paper_friction_step`."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
             and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0
@@ -232,8 +232,7 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
 @njit(RCAC_SIGNATURE, cache=True)
 def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`): :func:`paper_law`
-    without the joint terms. The controller calls it directly for that law: one compiled
-    call, as the kernel's."""
+    without the joint terms, bit for bit the general kernel's results."""
     return paper_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
 
 

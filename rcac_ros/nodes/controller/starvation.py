@@ -29,7 +29,9 @@ def feedback_bandwidth(ctrl, q, eps=1e-4):
     ``D = -d tau / d qd`` of eqs 19-20 at rest on the desired state (``qd_d = qdd_d = 0``,
     ``q_d = q``): ``sum_i J_i^T K_Di J_i`` plus ``Lambda M`` through ``qdd_r`` (with the
     estimates ``theta_hat``), by central differences on a new controller with ``ctrl``'s
-    gains and estimates and its adaptation frozen (``ctrl`` itself is not stepped);
+    gains and estimates and its adaptation frozen (``ctrl`` itself is not stepped; only the
+    feedback gains and the estimates are copied, deliberately: the geometry and the
+    adaptation do not enter a frozen law's feedback);
     ``M(q)`` is the model's joint-space inertia (the joint terms are left out).
     """
     probe = RecursiveCompositeController(
