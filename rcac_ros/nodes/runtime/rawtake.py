@@ -154,24 +154,25 @@ class RawReader:
                             "not logged)")
 
     def _take_failed(self, ret):
-        """``rcl_take_serialized_message`` returned ``ret``, neither taken nor nothing to take."""
+        """``rcl_take_serialized_message`` returned ``ret``, neither taken nor nothing to take;
+        True: back off before the next wait (outside the handle, so a destroy need not wait)."""
         message = self._rcutils.rcutils_get_error_string().str.decode(errors="replace")
         self._rcutils.rcutils_reset_error()
         if self._stop.is_set() or not self._context.ok():
-            return                          # shutting down: the handle is going away
+            return False                    # shutting down: the handle is going away
         self._error("take", f"rcl_take_serialized_message returned {ret} ({message}): the "
                     "sample, if any, is lost")
-        self._stop.wait(ERROR_BACKOFF)
+        return True
 
     def _take_all(self):
-        """Take every sample waiting; hand over the small ones."""
+        """Take every sample waiting; hand over the small ones. True after a failed take."""
         with self._sub.handle:
             pointer = self._sub.handle.pointer
             while not self._stop.is_set():
                 ret = self._rcl.rcl_take_serialized_message(
                     pointer, ctypes.byref(self._msg), ctypes.byref(self._info), None)
                 if ret == RCL_RET_SUBSCRIPTION_TAKE_FAILED:     # nothing left
-                    return
+                    return False
                 if ret != RCL_RET_OK:
                     return self._take_failed(ret)
                 size = self._msg.buffer_length
@@ -195,8 +196,9 @@ class RawReader:
                     wait_set.clear_entities()
                     wait_set.add_subscription(self._sub.handle)
                     wait_set.wait(50_000_000)               # 50 ms, without the lock
-                if self._sub.handle.pointer in wait_set.get_ready_entities("subscription"):
-                    self._take_all()
+                if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
+                        and self._take_all():
+                    self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
         except Exception:               # noqa: BLE001 -- the context or the handle went down
             if not self._stop.is_set() and self._context.ok():
                 raise
