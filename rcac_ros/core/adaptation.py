@@ -151,8 +151,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     if mode == ADAPT_GRADIENT:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
         if natural:
-            natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU,
-                               M4[0], M4[1], M4[2])
+            natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
             for k in range(13):
                 R[i, k] = st[THETA_HAT + k] - h * Pg[k]
         else:
@@ -181,7 +180,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
             continue
         if mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
             natural_gain_apply(st, THETA_HAT, filt[c, i], W_ROW, filt[c, i], U_ROW, row[NAT_K],
-                               row, NAT_P_NU, M4[0], M4[1], M4[2])
+                               row, NAT_P_NU)
         elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
             if p_diag:
                 for a in range(13):
@@ -203,14 +202,14 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
 
 
 @njit(cache=True, inline="always")
-def retract_links(state, scal, M4):
+def retract_links(state, scal):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
     consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`
     (doc/design.md §8); the smallest step length goes to ``scal[I_RETRACT_MIN]``."""
     a_min = 1.0
     for i in range(state.shape[0]):
         st = state[i]
-        a = retract(st, THETA_PREV, st, THETA_HAT, M4[0], M4[1], M4[2], M4[3])
+        a = retract(st, THETA_PREV, st, THETA_HAT)
         a_min = min(a_min, a)
     scal[I_RETRACT_MIN] = a_min
 

@@ -194,14 +194,14 @@ def cholesky_entries(a00, a11, a22, a33, a01, a02, a12, a03, a13, a23):
 
 
 @njit(cache=True, inline="always")
-def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
+def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po):
     """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §8).
 
     ``th[o:o+13]`` is theta_hat, ``k`` the natural gain, ``Pnu[po:po+9]`` the 3x3 gain on nu
     (row-major). ``g . out = k tr(G J G J) + u_nu^T P_nu u_nu >= 0``: P_eff is symmetric
     positive semi-definite (definite where J is). ``g`` is read whole before ``out`` is
-    written (they may share an array). ``J``, ``G``, ``T`` (4x4 scratch) are not used: the
-    4x4 algebra is unrolled on the 10 entries of the symmetric matrices and the 16 of
+    written (they may share an array). The 4x4 algebra is unrolled on the 10 entries of the
+    symmetric matrices and the 16 of
     ``T = G J``, in the operations and order of :func:`pseudo_inertia_into`,
     :func:`dual_into` and ``k J (G J)``.
     """
@@ -244,16 +244,16 @@ def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
 
 
 @njit(cache=True, inline="always")
-def retract(old, oo, new, on, J, D, L, K):
+def retract(old, oo, new, on):
     """Make the step ``old -> new`` (13 parameters each) consistent, in place in ``new``.
 
     ``J_hat = J(old)`` must be positive definite. With ``Delta = J(new) - J_hat``, ``new``
     becomes the parameters of ``J_hat + a Delta + a^2/2 Delta J_hat^-1 Delta`` (its nu
     unchanged), ``a = min(1, 1/||Z||_F)``, ``Z = L^-1 Delta L^-T`` (module docstring).
     Returns ``a`` (1: the step was not shortened). ``old`` and ``new`` may share an array.
-    ``J``, ``D``, ``L``, ``K`` (4x4 scratch) are not used: the 4x4 algebra is unrolled on
-    the 10 entries of each symmetric matrix (J_hat, Delta, J_hat^-1, Delta J_hat^-1 Delta,
-    the trial J+), the 16 of ``J_hat^-1 Delta`` and the factor's 10, in registers.
+    The 4x4 algebra is unrolled on the 10 entries of each symmetric matrix (J_hat, Delta,
+    J_hat^-1, Delta J_hat^-1 Delta, the trial J+), the 16 of ``J_hat^-1 Delta`` and the
+    factor's 10, in registers.
 
     Floating point: ``a`` is halved (at most :data:`HALVINGS` times) until ``J+ - FLOOR
     tr(J+) 1`` passes a Cholesky factorisation, so every stored J stays clear of rounding
@@ -366,13 +366,12 @@ def retract(old, oo, new, on, J, D, L, K):
 def natural_gains_into(theta, k, Pnu, out):
     """``out[i]`` (169, row-major) = ``P_eff(theta_i)`` for every link (the non-recursive
     law's explicit gains, doc/design.md §8); ``theta`` (n, 13), ``k`` (n,), ``Pnu`` (n, 9)."""
-    M = np.empty((3, 4, 4))
     e = np.zeros(13)
     col = np.empty(13)
     for i in range(theta.shape[0]):
         for c in range(13):
             e[c] = 1.0
-            natural_gain_apply(theta[i], 0, e, 0, col, 0, k[i], Pnu[i], 0, M[0], M[1], M[2])
+            natural_gain_apply(theta[i], 0, e, 0, col, 0, k[i], Pnu[i], 0)
             e[c] = 0.0
             for r in range(13):
                 out[i, 13 * r + c] = col[r]
@@ -382,10 +381,9 @@ def natural_gains_into(theta, k, Pnu, out):
 def retract_rows(prev, theta):
     """:func:`retract` of every link's step ``prev[i] -> theta[i]``, in place; the smallest
     step length."""
-    M = np.empty((4, 4, 4))
     a_min = 1.0
     for i in range(theta.shape[0]):
-        a_min = min(a_min, retract(prev[i], 0, theta[i], 0, M[0], M[1], M[2], M[3]))
+        a_min = min(a_min, retract(prev[i], 0, theta[i], 0))
     return a_min
 
 

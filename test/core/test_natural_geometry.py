@@ -92,9 +92,8 @@ def assert_retracted_step(nat, euc, args, rtol, atol_J=0.0, atol_D=0.0, nu_rtol=
 def p_eff(theta, k, Pnu):
     """The natural gain P_eff(theta) (13 x 13) of one link, column by column."""
     out = np.zeros((13, 13))
-    scratch = np.zeros((3, 4, 4))
     for c, e in enumerate(np.eye(13)):
-        natural_gain_apply(theta, 0, e, 0, out[:, c], 0, k, Pnu.ravel(), 0, *scratch)
+        natural_gain_apply(theta, 0, e, 0, out[:, c], 0, k, Pnu.ravel(), 0)
     return 0.5 * (out + out.T)
 
 
