@@ -99,6 +99,28 @@ def test_the_side_thread_hands_over_a_snapshot_and_the_control_thread_tells_the_
             node.destroy_node()
 
 
+def test_after_a_trip_only_the_first_state_may_go_back_in_time_until_the_control_thread_takes():
+    """The watchdog hears of a state when the control thread takes it: until then, a second
+    state going back in time is a stale message, not a second restart."""
+    with ros_context() as (ctx, _):
+        watchdog, restarts = Watchdog(), []
+        node, states, warnings = state_input(ctx, StampGate(), watchdog,
+                                             lambda: restarts.append(1))
+        try:
+            in_thread(states._on_state, state(5_000_000_000, [0.1, 0.2])).join()
+            states.take()
+            watchdog.tripped = True                 # no valid state for a while
+            in_thread(states._on_state, state(1_000_000_000, [0.3, 0.4])).join()  # restart
+            in_thread(states._on_state, state(2_000_000, [0.5, 0.6])).join()      # stale
+            assert [kind for kind, _ in warnings] == [StampGate.BACKWARDS]
+            taken = states.take()
+            assert taken.stamp == 1_000_000_000 and restarts == [1]
+            np.testing.assert_array_equal(taken.q, [0.3, 0.4])
+        finally:
+            states.close()
+            node.destroy_node()
+
+
 def test_a_reset_waits_for_a_state_being_read_and_none_from_before_survives_it():
     with ros_context() as (ctx, _):
         gate = PausingGate()

@@ -151,8 +151,8 @@ class StateInput:
             self._taken_restarts = sample.restarts
             self.restarted()
         if sample is not self._taken:
+            self.watchdog.valid_state(sample.unbroken)  # first: see _stale
             self._taken = sample
-            self.watchdog.valid_state(sample.unbroken)
         return sample
 
     def close(self):
@@ -194,6 +194,15 @@ class StateInput:
         if answer is not None:              # lockstep: the step, out of the lock
             self.control(*answer)
 
+    def _stale(self, last):
+        """The watchdog has tripped and no state is waiting for the control thread: a
+        backward stamp is then a restart (the stamp gate). The watchdog hears of a state
+        only when the control thread takes it, up to a period later; in between, a second
+        state going back in time is not a restart but a stale message (refused). ``take``
+        tells the watchdog before it marks the state taken, so no order of the two threads
+        reads a taken state beside a watchdog not yet told."""
+        return self.watchdog.tripped and (last is None or last is self._taken)
+
     def _hand_over(self, msg, q, qd):
         """Judge a read state and hand it over (under the lock); lockstep: returns the
         arguments of ``control``, or ``None``."""
@@ -209,7 +218,7 @@ class StateInput:
             self.latest = last._replace(received=now)
             self._taken = self.latest
             return None
-        verdict = self.gate.check(stamp, now, stale=self.watchdog.tripped)
+        verdict = self.gate.check(stamp, now, stale=self._stale(last))
         if verdict in (StampGate.BACKWARDS, StampGate.FUTURE):
             self.warn(verdict, f"JointState: stamp {stamp * 1e-9:.6f} s "
                       f"after {self.stamp * 1e-9:.6f} s")
