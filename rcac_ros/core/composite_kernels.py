@@ -42,6 +42,9 @@ from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
 RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
+#: general_law's: rcac_step_kernel passes data, filt as jdata, jfilt (same types)
+GENERAL_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
+                     f"float64[:, :, ::1], boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
 
 
 @njit(cache=True, inline="always")
@@ -243,13 +246,17 @@ def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     return paper_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)
 
 
-@njit(cache=True, inline="always")
+@njit(GENERAL_SIGNATURE, cache=True)
 def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`rcac_step_kernel` and :func:`friction_step_kernel`: one control
     period of eqs 18-24, any channels, any option of the adaptation step, with joint i's
     terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true, else without
-    them (``jdata``, ``jfilt`` unread). Each caller passes ``joint`` as a constant, so the
-    compiler keeps one branch. Returns tau (empty on bad input, code in scal[I_ERR]).
+    them (``jdata``, ``jfilt`` unread). Returns tau (empty on bad input, code in scal[I_ERR]).
+
+    Compiled once, eagerly, with ``joint`` a run-time flag (``GENERAL_SIGNATURE``), and
+    called, not inlined, by both entries: inlining it into each, with ``joint`` a constant,
+    compiled the body twice and tripled the cold compile (about 200 s against 75 s on the
+    2-core VM) for no measurable gain per step (same-process A/B, 1.01-1.04).
     """
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
