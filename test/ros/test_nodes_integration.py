@@ -109,6 +109,28 @@ def test_sigint_publishes_one_zero_effort_and_exits_zero():
     assert "Traceback" not in out
 
 
+def test_sigint_in_timer_mode_joins_the_input_threads_and_exits_zero():
+    """Timer mode reads its states and trajectories in threads of their own, waiting in rcl:
+    a SIGINT must end them before the interpreter exits (a thread still waiting there is
+    ended inside C++ code and the process aborts, exit 134)."""
+    with ros_context() as (ctx, ex):
+        probe = Probe(ctx)
+        ex.add_node(probe)
+        ctrl = start("controller_node", "mode:=timer", "trajectory:=topic",
+                     params_file=os.path.join(CONFIG, "controller.yaml"))
+        try:
+            matched(ex, [probe.subs["efforts"]])
+            assert spin_until(ex, lambda: len(probe.efforts) > 10, timeout=60.0)
+            # the input threads have work: states come while the signal arrives
+            for k in range(50):
+                probe.state(k * 2_000_000, PAPER_Q0, np.zeros(7))
+                ex.spin_once(timeout_sec=0.002)
+        finally:
+            code, out = stop(ctrl)
+    assert code == 0, out
+    assert "terminate called" not in out and "Traceback" not in out, out
+
+
 @pytest.mark.parametrize("module, text, name", [
     ("controller_node", "    K_D: -5.0\n", "K_D"),
     ("controller_node", "    model: nonsense_arm\n", "model"),

@@ -193,7 +193,16 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
             destroy(entity)
 
     def destroy_node(self):
-        """Destroy the node and its lifecycle state machine (which holds the node's handle:
-        without this, the node's name keeps its /rosout publisher in the process)."""
+        """Destroy what configure made, then the node and its lifecycle state machine (which
+        holds the node's handle: without this, the node's name keeps its /rosout publisher
+        in the process).
+
+        What configure made goes first, whatever the state: it includes the input threads
+        (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`), joined here. A thread still
+        waiting in ``rcl`` when the interpreter exits is ended inside C++ code, and the
+        process aborts ("terminate called without an active exception", exit 134: a
+        controller in timer mode stopped by SIGINT did).
+        """
+        self._destroy_entities()
         super().destroy_node()
         release_state_machine(self)
