@@ -45,11 +45,11 @@ step, which needs ``h sigma_0 lambda_max(P_i) < 1`` (checked).
 import numpy as np
 from numba import njit
 
-from ._packing import (ADAPT_GRADIENT, ADAPT_LS, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT,
-                       I_DZ_S, I_FORGET, I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG,
-                       I_RETRACT_MIN, LAMBDA, LEAK_M0, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU,
-                       P_FACTOR, THETA_0, THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX,
-                       U_ROW, W_ROW)
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
+                       CH_Y, GAIN_P, I_ADAPT, I_BARRIER_C, I_DZ_S, I_FORGET, I_GAMMA, I_H,
+                       I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG, I_RETRACT_MIN, LAMBDA, LEAK_M0,
+                       NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_0, THETA_HAT,
+                       THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
 from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update
@@ -134,13 +134,18 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
     (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction;
     with least squares the gain is ``(H(theta_hat_i) / k_i + Gamma_i)^-1``
-    (:func:`natural_ls_factor`).
+    (:func:`natural_ls_factor`); with the metric ``"barrier"`` (``scal[I_BARRIER_C] = c >
+    0``) it is ``P_mix = (H(theta_hat_i) / (c k_i) + P_i^-1)^-1``, the same factorisation
+    with the fixed ``P_i``'s Cholesky factor (kept at ``P_FACTOR``, never updated without
+    least squares) and ``c k_i`` in place of ``k_i``.
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     mode = scal[I_ADAPT]
     p_diag = scal[I_P_DIAG] != 0.0
     natural = scal[I_NATURAL] != 0.0
+    # the gain S K^-1 S^T of natural_ls_factor: natural least squares, or the barrier metric
+    factored = natural and (mode == ADAPT_LS or scal[I_BARRIER_C] > 0.0)
     for k in range(13):
         grad[k] = G[i, k] if tracking else 0.0
     if natural:
@@ -148,8 +153,15 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
             st[THETA_PREV + k] = st[THETA_HAT + k]
     if scal[I_LEAK] > 0.0:
         leakage_gradient(row, st, scal, grad)
-    if mode == ADAPT_GRADIENT:
+    if mode != ADAPT_LS_PREDICTION:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
+    if factored:    # (H / k_i + Gamma_i)^-1 or (H / (c k_i) + P_i^-1)^-1, doc/design.md §8
+        k_metric = row[NAT_K] if mode == ADAPT_LS else scal[I_BARRIER_C] * row[NAT_K]
+        natural_ls_factor(st, k_metric, Pg, M4)
+        natural_ls_apply(st, grad, 0, Pg, 0, t)
+        for k in range(13):
+            R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+    elif mode == ADAPT_GRADIENT:
         if natural:
             natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
             for k in range(13):
@@ -157,12 +169,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
         else:
             gain_step(row, p_diag, st, grad, h, R, i)
     elif mode == ADAPT_LS:
-        prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        if natural:                     # (H(theta_hat_i) / k_i + Gamma_i)^-1, doc/design.md §8
-            natural_ls_factor(st, row[NAT_K], Pg, M4)
-            natural_ls_apply(st, grad, 0, Pg, 0, t)
-        else:
-            apply_factored(st, P_FACTOR, grad, Pg, t)
+        apply_factored(st, P_FACTOR, grad, Pg, t)
         for k in range(13):
             R[i, k] = st[THETA_HAT + k] - h * Pg[k]
     else:                               # fixed P on the tracking term, least squares on E
@@ -178,7 +185,9 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     for c in range(chan.shape[0]):
         if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
+        if factored:                            # U_ci = S K^-1 S^T W_ci^T
+            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t)
+        elif mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
             natural_gain_apply(st, THETA_HAT, filt[c, i], W_ROW, filt[c, i], U_ROW, row[NAT_K],
                                row, NAT_P_NU)
         elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
@@ -191,8 +200,6 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
                     for k in range(13):
                         acc += row[GAIN_P + 13 * a + k] * filt[c, i, W_ROW + k]
                     filt[c, i, U_ROW + a] = acc
-        elif natural:                           # U_ci = (H / k + Gamma)^-1 W_ci^T
-            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t)
         else:
             for k in range(13):
                 grad[k] = filt[c, i, W_ROW + k]
