@@ -15,7 +15,7 @@ import pytest
 from chains import random_chain
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core._packing import P_FACTOR, STATE_COLS, THETA_HAT
-from rcac_ros.core.adaptation import natural_ls_apply, natural_ls_factor
+from rcac_ros.core.adaptation import diagonal_factor, natural_ls_apply, natural_ls_factor
 from rcac_ros.core.model import PAPER_GAINS
 from rcac_ros.core.pseudo_inertia import default_start
 
@@ -54,41 +54,67 @@ def p_mix(theta, k, c, P):
     return np.linalg.inv(A.T @ H @ A / (c * k) + np.linalg.inv(P))
 
 
+def kernel_gain(theta, S, kk, diag):
+    """The kernel's gain (the functions adapt_link calls) as a function of g: the factor of
+    ``K = I + S^T H S / kk`` (closed form for a diagonal S, else by whitening), then
+    ``S K^-1 S^T g``."""
+    st = np.zeros(STATE_COLS)
+    st[THETA_HAT:THETA_HAT + 13] = theta
+    st[P_FACTOR:P_FACTOR + 169] = S.ravel()
+    if diag:
+        diagonal_factor(st, kk, np.empty((4, 4, 4)))
+    else:
+        natural_ls_factor(st, kk, np.empty(13), np.empty((4, 4, 4)))
+
+    def apply(g):
+        out = np.empty(13)
+        natural_ls_apply(st, g, 0, out, 0, np.empty(13), diag)
+        return out
+    return apply
+
+
 def test_the_kernel_gain_is_numpys_solve_and_below_p():
-    """The kernel's factor and application (the functions adapt_link calls, with the fixed
-    P's Cholesky factor where the state keeps it) against ``np.linalg.solve(A^T H A / (c k)
-    + diag(P)^-1, g)`` on random bodies, diagonal gains over four decades, k and c over
-    several: the residual of the system at rounding (1e-15 of ``||M|| ||out||``) and the
-    two solutions within 1e-12 relative, or within ``eps cond(M)`` times a small factor
-    where ``M`` is worse conditioned (then neither solver is closer); and ``g^T P_mix g <=
-    g^T P g``."""
+    """The kernel's gain against ``np.linalg.solve(A^T H A / (c k) + P^-1, g)`` on random
+    bodies, diagonal gains over four decades (both factorisations: the closed form the
+    kernel runs for a diagonal P, the whitening otherwise) and full random gains, k and c
+    over several: the residual of the system at rounding (1e-15 of ``||M|| ||out||``) and
+    the two solutions within 1e-12 relative, or within ``eps cond(M)`` times a small factor
+    where ``M`` is worse conditioned (then neither solver is closer: the share within 1e-12
+    is checked too); and ``g^T P_mix g <= g^T P g``."""
     rng = np.random.default_rng(3)
     worst = worst_residual = 0.0
+    errors = []
     for seed in range(4):
         for theta in random_chain(np.random.default_rng(seed), 5).theta():
-            p = 10.0 ** rng.uniform(-2.0, 2.0, 13)
             Ji = np.linalg.inv(J_of(theta))
             H = np.array([[np.trace(Ji @ entry_basis(a) @ Ji @ entry_basis(b))
                            for b in range(10)] for a in range(10)])
-            for k in (1e-3, 0.3, 50.0):
-                for c in (1.0, 100.0, 1e4):
-                    st = np.zeros(STATE_COLS)
-                    st[THETA_HAT:THETA_HAT + 13] = theta
-                    st[P_FACTOR:P_FACTOR + 169] = np.diag(np.sqrt(p)).ravel()
-                    natural_ls_factor(st, c * k, np.empty(13), np.empty((4, 4, 4)))
-                    M = A.T @ H @ A / (c * k) + np.diag(1.0 / p)
-                    tol = max(1e-12, 20.0 * np.finfo(float).eps * np.linalg.cond(M))
-                    for g in rng.normal(size=(3, 13)) * 10.0 ** rng.uniform(-3, 3, (3, 1)):
-                        out = np.empty(13)
-                        natural_ls_apply(st, g, 0, out, 0, np.empty(13))
-                        want = np.linalg.solve(M, g)
-                        err = np.linalg.norm(out - want) / np.linalg.norm(want)
-                        assert err < tol
-                        worst = max(worst, err / tol)
-                        worst_residual = max(worst_residual, np.linalg.norm(M @ out - g)
-                                             / (np.linalg.norm(M, 2) * np.linalg.norm(out)))
-                        assert g @ out <= (g * p) @ g * (1.0 + 1e-12)      # P_mix <= P
+            X = rng.normal(size=(13, 13))
+            gains = [(np.diag(10.0 ** rng.uniform(-2.0, 2.0, 13)), True),
+                     (X @ X.T + np.eye(13), False)]
+            for P, diag in gains:
+                for k in (1e-3, 0.3, 50.0):
+                    for c in (1.0, 100.0, 1e4):
+                        M = A.T @ H @ A / (c * k) + np.linalg.inv(P)
+                        tol = max(1e-12, 20.0 * np.finfo(float).eps * np.linalg.cond(M))
+                        S = np.linalg.cholesky(P)
+                        fns = [kernel_gain(theta, S, c * k, diag)]
+                        if diag:                     # the whitening agrees on diagonal S
+                            fns.append(kernel_gain(theta, S, c * k, False))
+                        for g in rng.normal(size=(3, 13)) * 10.0 ** rng.uniform(-3, 3, (3, 1)):
+                            want = np.linalg.solve(M, g)
+                            for fn in fns:
+                                out = fn(g)
+                                err = np.linalg.norm(out - want) / np.linalg.norm(want)
+                                assert err < tol
+                                errors.append(err)
+                                worst = max(worst, err / tol)
+                                worst_residual = max(worst_residual, np.linalg.norm(M @ out - g)
+                                                     / (np.linalg.norm(M, 2)
+                                                        * np.linalg.norm(out)))
+                                assert g @ out <= g @ P @ g * (1.0 + 1e-12)   # P_mix <= P
     assert worst_residual < 1e-15 and worst > 0.0
+    assert np.mean(np.array(errors) < 1e-12) > 0.5
 
 
 def step_args(n, rng):
