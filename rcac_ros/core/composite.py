@@ -536,8 +536,8 @@ class RecursiveCompositeController:
     def gain(self):
         """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares (with
         ``geometry="natural"``: the fixed ``P_i`` the natural gain was matched to, or the
-        least-squares ``P_ls,i = Gamma_i^-1`` of the metric ``H / k_i + Gamma_i``,
-        doc/design.md §8)."""
+        least-squares ``P_ls,i = Gamma_i^-1`` of the metric ``H / k_i + Gamma_i``; with
+        ``natural_metric="barrier"`` the fixed ``P_i`` of ``P_mix``, doc/design.md §8)."""
         if self.adaptation == "gradient":
             return self.P.copy()
         S = self._state[:, P_FACTOR:P_FACTOR + 169].reshape(self.n, 13, 13)
