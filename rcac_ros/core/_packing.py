@@ -79,7 +79,8 @@ I_TRACKING = 22     #: 1 if the tracking term adapted at the last step (dead zon
 I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
 I_NATURAL = 24      #: 1: natural geometry, estimates kept consistent (doc/design.md §8)
 I_RETRACT_MIN = 25  #: the smallest step length a of the retraction at the last step
-SCAL_LEN = 26
+I_BARRIER_C = 26    #: natural geometry, metric "barrier": c of P_mix (0: "log_det"), §8
+SCAL_LEN = 27
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 

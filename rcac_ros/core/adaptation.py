@@ -45,11 +45,11 @@ step, which needs ``h sigma_0 lambda_max(P_i) < 1`` (checked).
 import numpy as np
 from numba import njit
 
-from ._packing import (ADAPT_GRADIENT, ADAPT_LS, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT,
-                       I_DZ_S, I_FORGET, I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG,
-                       I_RETRACT_MIN, LAMBDA, LEAK_M0, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU,
-                       P_FACTOR, THETA_0, THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX,
-                       U_ROW, W_ROW)
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CH_ACTIVE, CH_E, CH_JOINT,
+                       CH_Y, GAIN_P, I_ADAPT, I_BARRIER_C, I_DZ_S, I_FORGET, I_GAMMA, I_H,
+                       I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG, I_RETRACT_MIN, LAMBDA, LEAK_M0,
+                       NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_0, THETA_HAT,
+                       THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
 from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update
@@ -134,13 +134,19 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
     (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction;
     with least squares the gain is ``(H(theta_hat_i) / k_i + Gamma_i)^-1``
-    (:func:`natural_ls_factor`).
+    (:func:`natural_ls_factor`); with the metric ``"barrier"`` (``scal[I_BARRIER_C] = c >
+    0``) it is ``P_mix = (H(theta_hat_i) / (c k_i) + P_i^-1)^-1``, the same factorisation
+    with the fixed ``P_i``'s Cholesky factor (kept at ``P_FACTOR``, never updated without
+    least squares) and ``c k_i`` in place of ``k_i``.
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     mode = scal[I_ADAPT]
     p_diag = scal[I_P_DIAG] != 0.0
     natural = scal[I_NATURAL] != 0.0
+    # the gain S K^-1 S^T of natural_ls_factor: natural least squares, or the barrier metric
+    factored = natural and (mode == ADAPT_LS or scal[I_BARRIER_C] > 0.0)
+    s_diag = p_diag and mode == ADAPT_GRADIENT      # S = chol(P), fixed: diagonal with P
     for k in range(13):
         grad[k] = G[i, k] if tracking else 0.0
     if natural:
@@ -148,8 +154,18 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
             st[THETA_PREV + k] = st[THETA_HAT + k]
     if scal[I_LEAK] > 0.0:
         leakage_gradient(row, st, scal, grad)
-    if mode == ADAPT_GRADIENT:
+    if mode != ADAPT_LS_PREDICTION:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
+    if factored:    # (H / k_i + Gamma_i)^-1 or (H / (c k_i) + P_i^-1)^-1, doc/design.md §8
+        k_metric = row[NAT_K] if mode == ADAPT_LS else scal[I_BARRIER_C] * row[NAT_K]
+        if s_diag:
+            diagonal_factor(st, k_metric, M4)
+        else:
+            natural_ls_factor(st, k_metric, Pg, M4)
+        natural_ls_apply(st, grad, 0, Pg, 0, t, s_diag)
+        for k in range(13):
+            R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+    elif mode == ADAPT_GRADIENT:
         if natural:
             natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
             for k in range(13):
@@ -157,12 +173,7 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
         else:
             gain_step(row, p_diag, st, grad, h, R, i)
     elif mode == ADAPT_LS:
-        prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        if natural:                     # (H(theta_hat_i) / k_i + Gamma_i)^-1, doc/design.md §8
-            natural_ls_factor(st, row[NAT_K], Pg, M4)
-            natural_ls_apply(st, grad, 0, Pg, 0, t)
-        else:
-            apply_factored(st, P_FACTOR, grad, Pg, t)
+        apply_factored(st, P_FACTOR, grad, Pg, t)
         for k in range(13):
             R[i, k] = st[THETA_HAT + k] - h * Pg[k]
     else:                               # fixed P on the tracking term, least squares on E
@@ -178,7 +189,9 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     for c in range(chan.shape[0]):
         if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
+        if factored:                            # U_ci = S K^-1 S^T W_ci^T
+            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t, s_diag)
+        elif mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
             natural_gain_apply(st, THETA_HAT, filt[c, i], W_ROW, filt[c, i], U_ROW, row[NAT_K],
                                row, NAT_P_NU)
         elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
@@ -191,8 +204,6 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
                     for k in range(13):
                         acc += row[GAIN_P + 13 * a + k] * filt[c, i, W_ROW + k]
                     filt[c, i, U_ROW + a] = acc
-        elif natural:                           # U_ci = (H / k + Gamma)^-1 W_ci^T
-            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t)
         else:
             for k in range(13):
                 grad[k] = filt[c, i, W_ROW + k]
@@ -352,6 +363,72 @@ def project(const, state):
                                           const[i, THETA_MAX + k])
 
 
+#: the entry (row, column) of J that theta_0 .. theta_9 each set alone (doc/design.md §8)
+_J_ROW = (3, 0, 1, 2, 0, 1, 2, 0, 0, 1)
+_J_COL = (3, 3, 3, 3, 0, 1, 2, 1, 2, 2)
+#: theta_10, theta_11, theta_12 set (J00, J11, J22) by these, i.e. J(e_10+r) = sum_m
+#: _MIX[r][m] J(e_4+m)
+_MIX = ((-0.5, 0.5, 0.5), (0.5, -0.5, 0.5), (0.5, 0.5, -0.5))
+
+
+@njit(cache=True)
+def diagonal_factor(st, k, M4):
+    """:func:`natural_ls_factor` for a diagonal ``S`` (the barrier metric with a diagonal
+    fixed ``P_i``, doc/design.md §8), with the same result up to rounding: the Cholesky
+    factor of ``K = I + S H S / k`` into ``st[NAT_LS_CHOL]``, ``H`` the Hessian of ``-log
+    det J`` in the 13 parameters from its closed form ``tr(J^-1 E_p J^-1 E_q) = 2 w_p w_q
+    (Ji_il Ji_jk + Ji_ik Ji_jl)`` between the unit symmetric 4x4s ``E_p`` (entries (i, j)
+    and (j, i); ``w = 1/2`` on the diagonal) that theta_0 .. theta_9 move, and its
+    combinations for theta_10 .. theta_12. ``M4``: 4x4 scratch. Not inlined (compile time).
+    """
+    J, R, Ji = M4[0], M4[1], M4[2]
+    C = NAT_LS_CHOL
+    pseudo_inertia_into(st, THETA_HAT, J)
+    if not inverse_cholesky4(J, R):     # never: theta_hat_i is a body after every step
+        for a in range(13):
+            for b in range(13):
+                st[C + 13 * a + b] = 1.0 if a == b else 0.0
+        return
+    for p in range(4):                  # J^-1 = R^T R (R lower)
+        for q in range(p + 1):
+            acc = 0.0
+            for m in range(p, 4):
+                acc += R[m, p] * R[m, q]
+            Ji[p, q] = acc
+            Ji[q, p] = acc
+    for a in range(10):                 # H between theta_0 .. theta_9 (lower triangle)
+        i, j = _J_ROW[a], _J_COL[a]
+        wa = 0.5 if i == j else 1.0
+        for b in range(a + 1):
+            u, v = _J_ROW[b], _J_COL[b]
+            wb = 0.5 if u == v else 1.0
+            st[C + 13 * a + b] = 2.0 * wa * wb * (Ji[i, v] * Ji[j, u] + Ji[i, u] * Ji[j, v])
+    for r in range(3):                  # rows 10 .. 12: combinations of rows 4 .. 6
+        a = 10 + r
+        for b in range(a + 1):
+            acc = 0.0
+            for m in range(3):
+                if b < 10:
+                    x, y = max(4 + m, b), min(4 + m, b)
+                    acc += _MIX[r][m] * st[C + 13 * x + y]
+                else:
+                    for q in range(3):
+                        x, y = max(4 + m, 4 + q), min(4 + m, 4 + q)
+                        acc += _MIX[r][m] * _MIX[b - 10][q] * st[C + 13 * x + y]
+            st[C + 13 * a + b] = acc
+    inv_k = 1.0 / k
+    for a in range(13):                 # K = I + S H S / k, then Cholesky in place
+        sa = st[P_FACTOR + 14 * a] * inv_k
+        for b in range(a + 1):
+            v = st[C + 13 * a + b] * sa * st[P_FACTOR + 14 * b] + (1.0 if a == b else 0.0)
+            for m in range(b):
+                v -= st[C + 13 * a + m] * st[C + 13 * b + m]
+            if a == b:
+                st[C + 14 * a] = np.sqrt(v)
+            else:
+                st[C + 13 * a + b] = v / st[C + 14 * b]
+
+
 @njit(cache=True, inline="always")
 def natural_ls_factor(st, k, col, M4):
     """The natural least-squares gain of link i (doc/design.md §8), factored:
@@ -397,14 +474,19 @@ def natural_ls_factor(st, k, col, M4):
 
 
 @njit(cache=True, inline="always")
-def natural_ls_apply(st, x, xo, out, oo, t):
+def natural_ls_apply(st, x, xo, out, oo, t, diag):
     """``out[oo:oo+13] = S_i K_i^-1 S_i^T x[xo:xo+13]``: the natural least-squares gain of
-    :func:`natural_ls_factor` applied to x (``t``: 13 scratch)."""
-    for c in range(13):                 # t = S^T x
-        acc = 0.0
-        for r in range(13):
-            acc += st[P_FACTOR + 13 * r + c] * x[xo + r]
-        t[c] = acc
+    :func:`natural_ls_factor` applied to x (``t``: 13 scratch). ``diag``: S is diagonal
+    (the barrier metric with a diagonal fixed P), its products read the diagonal only."""
+    if diag:
+        for c in range(13):
+            t[c] = st[P_FACTOR + 14 * c] * x[xo + c]
+    else:
+        for c in range(13):             # t = S^T x
+            acc = 0.0
+            for r in range(13):
+                acc += st[P_FACTOR + 13 * r + c] * x[xo + r]
+            t[c] = acc
     for a in range(13):                 # K^-1 t: forward, then backward substitution
         acc = t[a]
         for b in range(a):
@@ -415,6 +497,10 @@ def natural_ls_apply(st, x, xo, out, oo, t):
         for b in range(a + 1, 13):
             acc -= st[NAT_LS_CHOL + 13 * b + a] * t[b]
         t[a] = acc / st[NAT_LS_CHOL + 14 * a]
+    if diag:
+        for r in range(13):
+            out[oo + r] = st[P_FACTOR + 14 * r] * t[r]
+        return
     for r in range(13):                 # out = S t
         acc = 0.0
         for c in range(13):

@@ -32,11 +32,11 @@ import numpy as np
 
 from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS, CH_ACTIVE, CH_E,
-                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_DZ_E, I_DZ_S,
-                       I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK, I_NATURAL,
-                       I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K, NAT_P_NU,
-                       P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block,
-                       new_data)
+                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_BARRIER_C,
+                       I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK,
+                       I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K,
+                       NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
+                       block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
 from .composite_kernels import (friction_step_kernel, is_paper_law, paper_friction_step,
@@ -49,6 +49,11 @@ from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matche
 
 UPDATES = ("implicit", "explicit")
 GEOMETRIES = ("euclidean", "natural")
+#: the natural geometry's metrics (doc/design.md §8): k_i times the log-det Hessian, or the
+#: barrier plus the Euclidean quadratic
+NATURAL_METRICS = ("log_det", "barrier")
+#: default c of the metric "barrier" (doc/design.md §8: from the prototype's 1, 100, 1e4)
+BARRIER_C = 100.0
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
@@ -120,6 +125,15 @@ class RecursiveCompositeController:
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
+    natural_metric : {"log_det", "barrier"}
+        The natural geometry's gain with ``adaptation="gradient"``: ``"log_det"`` (default)
+        ``k_i H^-1`` on J and ``P_nu`` on nu, as above; ``"barrier"``: ``P_mix = (H / (c
+        k_i) + P_i^-1)^-1 <= P_i``, the inverse Hessian of ``-(1/(c k_i)) log det J + 1/2
+        theta^T P_i^-1 theta`` (the Euclidean gain away from the cone's boundary, the
+        barrier's near it; doc/design.md §8). Only with ``geometry="natural"`` and
+        ``adaptation="gradient"``.
+    barrier_c : float, optional
+        ``c > 0`` of the metric ``"barrier"`` (default :data:`BARRIER_C`).
         scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
         joint terms >= 0 with ``joint_friction``).
     joint_friction : bool
@@ -149,7 +163,8 @@ class RecursiveCompositeController:
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
                  joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
-                 geometry="euclidean", natural_gain=None):
+                 geometry="euclidean", natural_gain=None, natural_metric="log_det",
+                 barrier_c=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -174,6 +189,7 @@ class RecursiveCompositeController:
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
         self._geometry(geometry, natural_gain, theta_hat0)
+        self._metric(natural_metric, barrier_c)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
         self._choose_kernel()               # after every scalar the choice reads
@@ -227,6 +243,26 @@ class RecursiveCompositeController:
             self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
+
+    def _metric(self, natural_metric, barrier_c):
+        """The natural geometry's metric (doc/design.md §8): ``c`` into the scalars."""
+        if natural_metric not in NATURAL_METRICS:
+            raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
+                            f"{natural_metric!r}")
+        if natural_metric == "barrier" and self.geometry != "natural":
+            raise GainError("natural_metric: 'barrier' only with geometry='natural'")
+        if natural_metric == "barrier" and self.adaptation != "gradient":
+            raise GainError(f"natural_metric: 'barrier' needs adaptation='gradient', got "
+                            f"{self.adaptation!r} (natural least squares has its own metric, "
+                            f"doc/design.md §8)")
+        if barrier_c is not None and natural_metric != "barrier":
+            raise GainError("barrier_c: only with natural_metric='barrier'")
+        self.natural_metric = natural_metric
+        self.barrier_c = None
+        if natural_metric == "barrier":
+            self.barrier_c = scalar(BARRIER_C if barrier_c is None else barrier_c,
+                                    "barrier_c", GainError, minimum=0.0, strict=True)
+            self._scal[I_BARRIER_C] = self.barrier_c
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
@@ -500,8 +536,8 @@ class RecursiveCompositeController:
     def gain(self):
         """The adaptation gain ``P_i`` in use, (n, 13, 13): fixed, or least squares (with
         ``geometry="natural"``: the fixed ``P_i`` the natural gain was matched to, or the
-        least-squares ``P_ls,i = Gamma_i^-1`` of the metric ``H / k_i + Gamma_i``,
-        doc/design.md §8)."""
+        least-squares ``P_ls,i = Gamma_i^-1`` of the metric ``H / k_i + Gamma_i``; with
+        ``natural_metric="barrier"`` the fixed ``P_i`` of ``P_mix``, doc/design.md §8)."""
         if self.adaptation == "gradient":
             return self.P.copy()
         S = self._state[:, P_FACTOR:P_FACTOR + 169].reshape(self.n, 13, 13)

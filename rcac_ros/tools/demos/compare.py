@@ -8,7 +8,7 @@ least-squares variants, the non-recursive Slotine-Li law, the direct, paper and
 ``"all"`` laws with the joint terms (``*_friction``, doc/design.md §7), and the natural
 geometry (``*_natural``, doc/design.md §8: estimates that stay physical bodies) with the
 Euclidean paper and ``"all"`` laws from the same start (``paper_nat_start``,
-``all_nat_start``). Scenarios
+``all_nat_start``), and its barrier-plus-quadratic metric (``*_barrier``, on request). Scenarios
 (:data:`SCENARIOS`):
 
 - ``paper``: Section 4, the CSS arm (g = 0), paper gains, ``theta_hat(0) = 0``, the
@@ -99,6 +99,10 @@ LAWS = {
     "all_nat_start": ("rcac", dict(channels="all", theta_hat0=NATURAL_START)),
     "paper_natural": ("rcac", dict(geometry="natural")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural")),
+    # the barrier-plus-quadratic metric of the natural geometry (doc/design.md §8): run on
+    # request only (not in DEFAULT_LAWS)
+    "paper_barrier": ("rcac", dict(geometry="natural", natural_metric="barrier")),
+    "all_barrier": ("rcac", dict(channels="all", geometry="natural", natural_metric="barrier")),
     # with the joint terms: on a plant with dry friction the rigid-body natural law's J_hat
     # escapes to infinity (doc/design.md §8, "Unmodelled joint effects"); this one is bounded
     "paper_natural_friction": ("rcac", dict(geometry="natural", joint_friction=True,
@@ -114,9 +118,10 @@ LAWS = {
     "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
 }
 
-#: The laws the paper and payload scenarios run by default (every law but ``fixed`` and the
-#: ``*_friction`` ones).
-DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed" and not law.endswith("_friction"))
+#: The laws the paper and payload scenarios run by default (every law but ``fixed``, the
+#: ``*_friction`` and the ``*_barrier`` ones).
+DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed"
+                     and not law.endswith(("_friction", "_barrier")))
 
 #: The laws of the joint-friction scenarios (the rows of doc/tools.md's table); a law added
 #: to :data:`LAWS` and to this list joins the table.

@@ -1,0 +1,269 @@
+"""The recursive law with ``geometry="natural"`` and ``natural_metric="barrier"``: the gain
+``P_mix = (A^T H A / (c k) + P^-1)^-1`` (doc/design.md §8).
+
+References: numpy's solve with the Hessian of ``-log det J`` built here from its trace
+formula ``H_ab = tr(J^-1 E_a J^-1 E_b)`` on J's 10 entries (J from the 13 parameters by
+the closed form of doc/design.md §8, written out below); the Euclidean law with the fixed
+gain ``P_mix`` (the same step before the retraction, whose closed form is then checked);
+the Euclidean law's step followed by that closed form (``c`` huge); numpy's eigenvalues of
+every J at every step; the log-det metric's own runs (the default, bit for bit).
+"""
+
+import numpy as np
+import pytest
+
+from chains import random_chain
+from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
+from rcac_ros.core._packing import P_FACTOR, STATE_COLS, THETA_HAT
+from rcac_ros.core.adaptation import diagonal_factor, natural_ls_apply, natural_ls_factor
+from rcac_ros.core.model import PAPER_GAINS
+from rcac_ros.core.pseudo_inertia import default_start
+
+from test_natural_geometry import assert_retracted_step, euclidean_twin, run
+
+BARRIER = dict(geometry="natural", natural_metric="barrier")
+#: J's 10 entries, in the order of A's rows
+ENTRIES = ((0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3))
+
+
+def J_of(t):
+    """J(theta) written out from doc/design.md §8 (0-based t)."""
+    return np.array([[t[4] + (-t[10] + t[11] + t[12]) / 2, t[7], t[8], t[1]],
+                     [t[7], t[5] + (t[10] - t[11] + t[12]) / 2, t[9], t[2]],
+                     [t[8], t[9], t[6] + (t[10] + t[11] - t[12]) / 2, t[3]],
+                     [t[1], t[2], t[3], t[0]]])
+
+
+#: theta -> J's 10 entries (10 x 13)
+A = np.array([[J_of(e)[i, j] for e in np.eye(13)] for i, j in ENTRIES])
+
+
+def entry_basis(a):
+    """E_a: the symmetric 4x4 whose entry a (both halves) is 1."""
+    i, j = ENTRIES[a]
+    E = np.zeros((4, 4))
+    E[i, j] = E[j, i] = 1.0
+    return E
+
+
+def p_mix(theta, k, c, P):
+    """``(A^T H A / (c k) + P^-1)^-1`` by numpy, H from the trace formula."""
+    Ji = np.linalg.inv(J_of(theta))
+    H = np.array([[np.trace(Ji @ entry_basis(a) @ Ji @ entry_basis(b)) for b in range(10)]
+                  for a in range(10)])
+    return np.linalg.inv(A.T @ H @ A / (c * k) + np.linalg.inv(P))
+
+
+def kernel_gain(theta, S, kk, diag):
+    """The kernel's gain (the functions adapt_link calls) as a function of g: the factor of
+    ``K = I + S^T H S / kk`` (closed form for a diagonal S, else by whitening), then
+    ``S K^-1 S^T g``."""
+    st = np.zeros(STATE_COLS)
+    st[THETA_HAT:THETA_HAT + 13] = theta
+    st[P_FACTOR:P_FACTOR + 169] = S.ravel()
+    if diag:
+        diagonal_factor(st, kk, np.empty((4, 4, 4)))
+    else:
+        natural_ls_factor(st, kk, np.empty(13), np.empty((4, 4, 4)))
+
+    def apply(g):
+        out = np.empty(13)
+        natural_ls_apply(st, g, 0, out, 0, np.empty(13), diag)
+        return out
+    return apply
+
+
+def test_the_kernel_gain_is_numpys_solve_and_below_p():
+    """The kernel's gain against ``np.linalg.solve(A^T H A / (c k) + P^-1, g)`` on random
+    bodies, diagonal gains over four decades (both factorisations: the closed form the
+    kernel runs for a diagonal P, the whitening otherwise) and full random gains, k and c
+    over several: the residual of the system at rounding (1e-15 of ``||M|| ||out||``) and
+    the two solutions within 1e-12 relative, or within ``eps cond(M)`` times a small factor
+    where ``M`` is worse conditioned (then neither solver is closer: the share within 1e-12
+    is checked too); and ``g^T P_mix g <= g^T P g``."""
+    rng = np.random.default_rng(3)
+    worst = worst_residual = 0.0
+    errors = []
+    for seed in range(4):
+        for theta in random_chain(np.random.default_rng(seed), 5).theta():
+            Ji = np.linalg.inv(J_of(theta))
+            H = np.array([[np.trace(Ji @ entry_basis(a) @ Ji @ entry_basis(b))
+                           for b in range(10)] for a in range(10)])
+            X = rng.normal(size=(13, 13))
+            gains = [(np.diag(10.0 ** rng.uniform(-2.0, 2.0, 13)), True),
+                     (X @ X.T + np.eye(13), False)]
+            for P, diag in gains:
+                for k in (1e-3, 0.3, 50.0):
+                    for c in (1.0, 100.0, 1e4):
+                        M = A.T @ H @ A / (c * k) + np.linalg.inv(P)
+                        tol = max(1e-12, 20.0 * np.finfo(float).eps * np.linalg.cond(M))
+                        S = np.linalg.cholesky(P)
+                        fns = [kernel_gain(theta, S, c * k, diag)]
+                        if diag:                     # the whitening agrees on diagonal S
+                            fns.append(kernel_gain(theta, S, c * k, False))
+                        for g in rng.normal(size=(3, 13)) * 10.0 ** rng.uniform(-3, 3, (3, 1)):
+                            want = np.linalg.solve(M, g)
+                            for fn in fns:
+                                out = fn(g)
+                                err = np.linalg.norm(out - want) / np.linalg.norm(want)
+                                assert err < tol
+                                errors.append(err)
+                                worst = max(worst, err / tol)
+                                worst_residual = max(worst_residual, np.linalg.norm(M @ out - g)
+                                                     / (np.linalg.norm(M, 2)
+                                                        * np.linalg.norm(out)))
+                                assert g @ out <= g @ P @ g * (1.0 + 1e-12)   # P_mix <= P
+    assert worst_residual < 1e-15 and worst > 0.0
+    assert np.mean(np.array(errors) < 1e-12) > 0.5
+
+
+def step_args(n, rng):
+    q = rng.uniform(-0.5, 0.5, n)
+    return (q, rng.uniform(-0.3, 0.3, n), q + 0.05, np.zeros(n), np.full(n, 0.2))
+
+
+@pytest.mark.parametrize("channels", [[1], "all"])
+def test_barrier_step_is_the_euclidean_step_with_p_mix_then_the_retraction(channels):
+    """Three steps on a random 5-link body from 0.9x its parameters (the later ones with
+    live prediction terms: the implicit solve's columns U = P_mix W^T): the Euclidean law
+    with the fixed gain P_mix(theta_hat) gives theta_lin, the barrier law the parameters of
+    ``J + D + 1/2 D J^-1 D`` and nu(theta_lin) (doc/design.md §8)."""
+    rng = np.random.default_rng(2)
+    model = random_chain(rng, 5)
+    kw = dict(K_D=50.0, P=0.5, gamma=1.0, Lambda=5.0, channels=channels,
+              theta_hat0=0.9 * model.theta())
+    nat = RecursiveCompositeController(model, barrier_c=30.0, **BARRIER, **kw)
+    euc = RecursiveCompositeController(model, **kw)
+    args = step_args(model.n, rng)
+    for step in range(3):
+        th = nat.theta_hat
+        P = np.array([p_mix(th[i], nat.natural_gain[i], 30.0, nat.P[i])
+                      for i in range(model.n)])
+        euclidean_twin(euc, nat, P, filters=step >= 1)
+        assert_retracted_step(nat, euc, args, rtol=1e-9, atol_J=1e-10, atol_D=1e-8,
+                              nu_rtol=1e-9, nu_atol_step=1e-9)
+
+
+def retracted(th, lin):
+    """The retraction's closed form of the step th -> lin (doc/design.md §8), per link."""
+    out = []
+    for a, b in zip(th, lin):
+        J, D = J_of(a), J_of(b - a)
+        out.append((J + D + 0.5 * D @ np.linalg.solve(J, D), b[4:7]))
+    return out
+
+
+def test_huge_c_gives_the_euclidean_step_then_the_retraction():
+    """One step from the same state: as c grows, the barrier law's step tends to the
+    Euclidean law's (fixed P) followed by the retraction's closed form: the gap falls
+    monotonically, as 1/c once the barrier's share of the metric is small everywhere (the
+    matched k leaves it up to 1e3 times the quadratic's along J's thin directions), to
+    rounding at c = 1e16."""
+    rng = np.random.default_rng(4)
+    model = random_chain(rng, 5)
+    kw = dict(K_D=50.0, P=0.5, gamma=1.0, Lambda=5.0, channels="all",
+              theta_hat0=0.9 * model.theta())
+    args = step_args(model.n, rng)
+    warm = RecursiveCompositeController(model, **BARRIER, **kw)
+    for _ in range(3):                               # live filters and prediction errors
+        warm.step(*args)
+    th = warm.theta_hat
+    euc = RecursiveCompositeController(model, **kw)
+    euclidean_twin(euc, warm, euc.P, filters=True)
+    euc._scal[12] = 1.0                              # P is diagonal
+    euc.step(*args)
+    want = retracted(th, euc.theta_hat)
+    move = max(np.abs(w[0] - J_of(t)).max() for w, t in zip(want, th))
+    gaps = []
+    for c in (1e2, 1e4, 1e6, 1e8, 1e12, 1e16):
+        nat = RecursiveCompositeController(model, barrier_c=c, **BARRIER, **kw)
+        euclidean_twin(nat, warm, nat.P, filters=True)   # the state of `warm`, its own gain
+        nat._scal[12] = 1.0
+        nat.step(*args)
+        assert nat.retraction_length == 1.0
+        gaps.append(max(max(np.abs(J_of(t) - w[0]).max(), np.abs(t[4:7] - w[1]).max())
+                        for t, w in zip(nat.theta_hat, want)))
+    gaps = np.array(gaps) / move
+    assert np.all(np.diff(gaps) < 0.0) and gaps[0] > 0.1
+    assert 1e-5 < gaps[4] / gaps[3] < 1e-3           # 1/c once H / (c k) << P^-1
+    assert gaps[-1] < 1e-11
+
+
+@pytest.mark.parametrize("channels", [[1], "all"])
+def test_consistent_at_every_step_under_huge_gains_errors_and_noise(channels):
+    """Gains 1e4 x the paper's, gamma 1000x, a 0.5 rad start error, noisy measurements,
+    starts 1e3 and 1e-3 times the default body, c from 1 to 1e12 (the Euclidean gain plus
+    the retraction): every link's J is positive definite (Cholesky, and numpy's eigenvalues)
+    after every step, for as long as the loop runs."""
+    model = css_arm()
+    rng = np.random.default_rng(7)
+    gains = dict(PAPER_GAINS, P=1e6, gamma=100.0)
+    start = default_start(model.theta())
+    lam = []
+
+    def check(ctrl):
+        assert ctrl.consistent.all() and np.all(np.isfinite(ctrl.theta_hat))
+        lam.append(min(np.linalg.eigvalsh(J_of(t))[0] for t in ctrl.theta_hat))
+        assert lam[-1] > 0.0
+    for scale in (1.0, 1e3, 1e-3):
+        for c in (1.0, 100.0, 1e12):
+            ctrl = RecursiveCompositeController(model, channels=channels, barrier_c=c,
+                                                theta_hat0=scale * start, **BARRIER, **gains)
+            assert run(ctrl, model, 200, noise=1e-2, rng=rng, check=check) > 10
+
+
+def test_default_metric_is_log_det_bit_for_bit():
+    """Without ``natural_metric`` the natural law is the log-det metric's, to the last bit
+    (gradient and least squares; the option changes nothing in its scalars)."""
+    model = css_arm()
+    for extra in (dict(channels="all"), dict(adaptation="least_squares", forgetting=1.0)):
+        a = RecursiveCompositeController(model, geometry="natural", **extra)
+        b = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                         **extra)
+        assert np.array_equal(a._data, b._data)
+        ta, tb = [], []
+        run(a, model, 100, check=lambda c: ta.append(c.theta_hat))
+        run(b, model, 100, check=lambda c: tb.append(c.theta_hat))
+        assert len(ta) == 100 and np.array_equal(np.array(ta), np.array(tb))
+        assert a.natural_metric == "log_det" and a.barrier_c is None
+
+
+def test_bad_options_are_one_line_gain_errors():
+    model = css_arm()
+    cases = [(dict(geometry="natural", natural_metric="quadratic"), "natural_metric: expected"),
+             (dict(natural_metric="barrier"), "only with geometry='natural'"),
+             (dict(BARRIER, adaptation="least_squares"), "needs adaptation='gradient'"),
+             (dict(BARRIER, barrier_c=0.0), "barrier_c: must be > 0"),
+             (dict(BARRIER, barrier_c=-1.0), "barrier_c: must be > 0"),
+             (dict(BARRIER, barrier_c=np.inf), "barrier_c: must be finite"),
+             (dict(BARRIER, barrier_c="big"), "barrier_c: expected a number"),
+             (dict(geometry="natural", barrier_c=10.0), "barrier_c: only with")]
+    for kw, msg in cases:
+        with pytest.raises(GainError, match=msg) as e:
+            RecursiveCompositeController(model, **kw)
+        assert "\n" not in str(e.value)
+    ctrl = RecursiveCompositeController(model, **BARRIER)
+    assert ctrl.barrier_c == 100.0 and ctrl.natural_metric == "barrier"
+
+
+def test_barrier_tracks_a_body_and_stays_consistent():
+    """A random 5-link body, 4 s of sines from 0.5x its parameters: the barrier law's
+    estimates stay bodies at every step (numpy's eigenvalues) and it tracks (final error
+    below the start's)."""
+    rng = np.random.default_rng(6)
+    model = random_chain(rng, 5)
+    n, h = model.n, 0.002
+    ctrl = RecursiveCompositeController(model, K_D=50.0, P=0.5, gamma=1.0, Lambda=5.0,
+                                        channels="all", theta_hat0=0.5 * model.theta(),
+                                        **BARRIER)
+    sim = Simulator(model, dt=h, q0=np.full(n, 0.2))
+    w = 0.7 * np.arange(1, n + 1)
+    err = []
+    for k in range(2000):
+        t = k * h
+        tau = ctrl.step(sim.q, sim.qd, 0.3 * np.sin(w * t), 0.3 * w * np.cos(w * t),
+                        -0.3 * w * w * np.sin(w * t))
+        sim.step(tau)
+        assert all(np.linalg.eigvalsh(J_of(th))[0] > 0.0 for th in ctrl.theta_hat)
+        err.append(np.abs(sim.q - 0.3 * np.sin(w * (t + h))).max())
+    assert max(err[-250:]) < 0.2 * max(err[:250])
