@@ -212,6 +212,13 @@ CONTROLLER = _robot("controller") + (
     Param("natural_gain", "double", None,
           "geometry 'natural': gain k_i of every link (unset: matched to P at the start, "
           "doc/design.md §8)", lo=0.0, hi=BIG, strict=True),
+    Param("natural_metric", "string", "log_det",
+          "geometry 'natural' with adaptation 'gradient': 'log_det' (k_i times the inverse "
+          "Hessian of -log det J) or 'barrier' (that barrier plus the Euclidean quadratic: a "
+          "gain never above P; doc/design.md §8)", choices=("log_det", "barrier")),
+    Param("barrier_c", "double", None,
+          "natural_metric 'barrier': c, the quadratic's curvature over the barrier's at the "
+          "start (unset: 100, doc/design.md §8)", lo=0.0, hi=BIG, strict=True),
     Param("joint_friction", "bool", False,
           "also estimate each joint's armature, viscous and Coulomb friction "
           "(doc/design.md §7), published on ~/friction_estimates"),

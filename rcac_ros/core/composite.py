@@ -111,7 +111,8 @@ class RecursiveCompositeController:
         none from channel c while ``|E_c| <= dead_zone_E`` (0: no dead zone).
     theta_bounds : None, "mass" or (theta_min, theta_max)
         Projection after each step: none (default), mass >= 0, or a box (each bound a
-        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too.
+        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
+        joint terms >= 0 with ``joint_friction``).
     geometry : {"euclidean", "natural"}
         ``"euclidean"`` (default): eq 24 as written. ``"natural"``: every link's estimates
         stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
@@ -134,8 +135,6 @@ class RecursiveCompositeController:
         ``adaptation="gradient"``.
     barrier_c : float, optional
         ``c > 0`` of the metric ``"barrier"`` (default :data:`BARRIER_C`).
-        scalar, (13,) or (n, 13); ``-inf``/``inf`` for none), with mass >= 0 too (and the
-        joint terms >= 0 with ``joint_friction``).
     joint_friction : bool
         Also estimate each joint's armature, viscous and Coulomb friction
         (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).

@@ -11,6 +11,7 @@ from rclpy.exceptions import ParameterUninitializedException  # noqa: E402  (aft
 from rclpy.parameter import Parameter  # noqa: E402
 
 from rcac_ros import params  # noqa: E402
+from rcac_ros.errors import ConfigError  # noqa: E402
 from rcac_ros.nodes.controller.node import ControllerNode  # noqa: E402
 from rcac_ros.nodes.simulator.node import SimulatorNode  # noqa: E402
 
@@ -86,3 +87,23 @@ def test_controller_config_is_frozen_and_read_only():
                                                          "channel_names", "_out", "_order"))
         finally:
             n.destroy_node()
+
+
+def test_controller_natural_metric_reaches_the_core_and_a_misuse_is_one_line():
+    """``natural_metric``/``barrier_c`` (doc/design.md §8) configure the core law; the
+    barrier without the natural geometry is refused at start-up with one line naming it."""
+    with ros_context() as (ctx, _):
+        n = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("geometry", value="natural"), Parameter("natural_metric", value="barrier"),
+            Parameter("barrier_c", value=10.0)])
+        try:
+            assert (n.ctrl.geometry, n.ctrl.natural_metric, n.ctrl.barrier_c) == \
+                ("natural", "barrier", 10.0)
+        finally:
+            n.destroy_node()
+        with pytest.raises(ConfigError) as err:
+            ControllerNode(context=ctx, parameter_overrides=[
+                Parameter("natural_metric", value="barrier")])
+        text = str(err.value)
+        assert "natural_metric: 'barrier' only with geometry='natural'" in text, text
+        assert "\n" not in text, text

@@ -161,7 +161,8 @@ def adaptation_options(v, channels):
                 dead_zone_E=v["dead_zone_E"],
                 theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"],
                 leakage=v["leakage"], leakage_bound=v["leakage_bound"],
-                geometry=v["geometry"], natural_gain=v["natural_gain"])
+                geometry=v["geometry"], natural_gain=v["natural_gain"],
+                natural_metric=v["natural_metric"], barrier_c=v["barrier_c"])
 
 
 def channel_names(channels):
