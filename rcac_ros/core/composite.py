@@ -54,6 +54,8 @@ GEOMETRIES = ("euclidean", "natural")
 NATURAL_METRICS = ("log_det", "barrier")
 #: default c of the metric "barrier" (doc/design.md §8: from the prototype's 1, 100, 1e4)
 BARRIER_C = 100.0
+#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
+BARRIER_C_MIN = 1e-6
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
 
@@ -261,6 +263,10 @@ class RecursiveCompositeController:
         if natural_metric == "barrier":
             self.barrier_c = scalar(BARRIER_C if barrier_c is None else barrier_c,
                                     "barrier_c", GainError, minimum=0.0, strict=True)
+            if self.barrier_c < BARRIER_C_MIN:     # H / (c k_i) must stay finite
+                raise GainError(f"barrier_c: must be >= {BARRIER_C_MIN:g} (the barrier's "
+                                f"curvature at the start at most {1 / BARRIER_C_MIN:g} times "
+                                f"the quadratic's), got {self.barrier_c:g}")
             self._scal[I_BARRIER_C] = self.barrier_c
 
     def _joint_terms(self, friction_hat0, P_friction, m):

@@ -231,6 +231,7 @@ def test_default_metric_is_log_det_bit_for_bit():
 def test_bad_options_are_one_line_gain_errors():
     model = css_arm()
     cases = [(dict(geometry="natural", natural_metric="quadratic"), "natural_metric: expected"),
+             (dict(BARRIER, barrier_c=1e-300), "barrier_c: must be >= 1e-06"),
              (dict(natural_metric="barrier"), "only with geometry='natural'"),
              (dict(BARRIER, adaptation="least_squares"), "needs adaptation='gradient'"),
              (dict(BARRIER, barrier_c=0.0), "barrier_c: must be > 0"),

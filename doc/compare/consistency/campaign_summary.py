@@ -4,6 +4,9 @@
     rcac sweep campaigns/consistency.yaml --workers 1 --out results/consistency
     PYTHONPATH=$PWD python doc/compare/consistency/campaign_summary.py results/consistency
 
+or, for campaigns/consistency_barrier.yaml (the three geometries), with the target
+``doc/compare/consistency/campaign_barrier_summary.json`` as a second argument.
+
 Per geometry: runs, consistency and RMS figures. The campaign is paired (``paired: true``,
 doc/campaigns.md): runs ``2 s`` and ``2 s + 1`` are sample ``s`` with the two geometries on
 the same start and payload, so the natural law's RMS is also compared run by run (the ratio
@@ -31,11 +34,12 @@ def by_geometry(rows):
                 diverged_runs=[int(r) for r in rows.run[rows.status != "ok"]])
 
 
-def paired_ratio(frame, cells):
-    """Natural / Euclidean RMS per sample (diverged runs included: their RMS up to the stop)."""
+def paired_ratio(frame, cells, geometry="natural"):
+    """``geometry`` / Euclidean RMS per sample (diverged runs included: their RMS up to the
+    stop)."""
     frame = frame.assign(sample=frame.run // cells)
     e = frame[frame.geometry == "euclidean"].set_index("sample").rms_tracking_error
-    n = frame[frame.geometry == "natural"].set_index("sample").rms_tracking_error
+    n = frame[frame.geometry == geometry].set_index("sample").rms_tracking_error
     r = (n / e).dropna()
     q = np.quantile(r, [0.1, 0.5, 0.9])
     return dict(samples=int(len(r)), rms_ratio_median=float(q[1]), rms_ratio_p10=float(q[0]),
@@ -48,11 +52,13 @@ def summary(out_dir):
         campaign = json.load(f)
     frame = pq.read_table(os.path.join(out_dir, "results.parquet")).to_pandas()
     cells = len(cp.grid_cells(campaign))
-    return {"campaign": "campaigns/consistency.yaml", "samples": campaign["samples"],
+    geometries = [g for g in cp.GEOMETRIES if (frame.geometry == g).any()]
+    data = {"campaign": f"campaigns/{campaign['name']}.yaml", "samples": campaign["samples"],
             "paired": bool(campaign.get("paired", False)),
-            "by_geometry": {g: by_geometry(frame[frame.geometry == g])
-                            for g in ("euclidean", "natural")},
-            "paired_natural_over_euclidean": paired_ratio(frame, cells)}
+            "by_geometry": {g: by_geometry(frame[frame.geometry == g]) for g in geometries}}
+    for g in geometries[1:]:
+        data[f"paired_{g}_over_euclidean"] = paired_ratio(frame, cells, g)
+    return data
 
 
 def main(out_dir, target=os.path.join("doc", "compare", "consistency",
@@ -65,4 +71,4 @@ def main(out_dir, target=os.path.join("doc", "compare", "consistency",
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(*sys.argv[1:3])

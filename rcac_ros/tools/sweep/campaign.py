@@ -50,7 +50,9 @@ from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_fo
 from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
-GEOMETRIES = ("euclidean", "natural")
+#: the law's geometry: "natural_barrier" is the natural one with natural_metric="barrier"
+#: (doc/design.md §8), on the recursive laws
+GEOMETRIES = ("euclidean", "natural", "natural_barrier")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
 MODELS = ("css_arm", "panda")
@@ -423,6 +425,8 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
         g["gamma"] = gamma
         g.pop("theta_hat0")
     g.update(theta_hat0=theta_hat0, geometry=inputs["geometry"])
+    if law != "slotine_li" and g["geometry"] == "natural_barrier":
+        g.update(geometry="natural", natural_metric="barrier")
     if law == "slotine_li":
         return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
