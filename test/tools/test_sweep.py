@@ -460,3 +460,24 @@ def test_paired_campaign_gives_every_grid_cell_the_same_draws():
     np.testing.assert_array_equal(kw_a["theta_hat0"], kw_b["theta_hat0"])
     np.testing.assert_array_equal(kw_a["events"][0][1].theta(), kw_b["events"][0][1].theta())
     assert {ctrl_a.geometry, ctrl_b.geometry} == {"euclidean", "natural"}
+
+
+def test_barrier_campaign_runs_the_three_geometries_on_the_same_draws():
+    """campaigns/consistency_barrier.yaml: a sample's three runs share start and payload with
+    campaigns/consistency.yaml's; ``natural_barrier`` builds the natural law with the
+    barrier metric; Slotine-Li refuses it (one line)."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    three = cp.load(os.path.join(root, "campaigns", "consistency_barrier.yaml"))
+    two = cp.load(os.path.join(root, "campaigns", "consistency.yaml"))
+    assert cp.run_count(three) == 3 * three["samples"]
+    runs = [cp.sample(three, k) for k in range(3)]
+    assert [r["geometry"] for r in runs] == ["euclidean", "natural", "natural_barrier"]
+    assert dict(runs[2], geometry=None) == dict(cp.sample(two, 0), geometry=None)
+    from rcac_ros.tools.scenarios import find_panda_urdf
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data's panda.urdf not installed")
+    _, ctrl, _ = cp.setup(three, 2)
+    assert (ctrl.geometry, ctrl.natural_metric, ctrl.barrier_c) == ("natural", "barrier", 100.0)
+    with pytest.raises(RcacError, match="^geometry: expected 'euclidean' or 'natural'"):
+        cp.controller_for(three, dict(runs[2], law="slotine_li"),
+                          cp.nominal_model("panda"))
