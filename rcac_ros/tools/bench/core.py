@@ -115,15 +115,17 @@ class Replay:
 def natural_baselines(model):
     """The natural law (doc/design.md §8) and two Euclidean baselines, all from the natural
     default start: the paper's law as a user runs it (its fused kernel,
-    :func:`~rcac_ros.core.composite_kernels.paper_step`, which the general kernel itself
-    dispatches to) and the same law forced through the general kernel's path by a
-    projection onto infinite bounds (the same estimates, bit for bit, plus 13 n clips)."""
+    :func:`~rcac_ros.core.composite_kernels.paper_step`) and the same law on the general
+    kernel's path by a projection onto infinite bounds (the same estimates, bit for bit,
+    plus 13 n clips); last, the natural law with the barrier metric."""
     start = default_start(model.theta())
     nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural")
     paper = RecursiveCompositeController(model, theta_hat0=start)
     inf = np.full((model.n, 13), np.inf)
     general = RecursiveCompositeController(model, theta_hat0=start, theta_bounds=(-inf, inf))
-    return nat, paper, general
+    barrier = RecursiveCompositeController(model, theta_hat0=start, geometry="natural",
+                                           natural_metric="barrier")
+    return nat, paper, general, barrier
 
 
 def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
@@ -131,9 +133,10 @@ def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
     medians of CPU-time ratios (``time.process_time``, :func:`interleaved_ratio`): per n,
     along a recorded closed loop (:func:`recorded_inputs`, the same inputs replayed by
     every law), the natural law over the Euclidean paper law (the goal's ratio) and over
-    the same law on the general kernel's path (:func:`natural_baselines`), and the natural
-    step's µs; at n = 7 the worst case: one random state repeated, which drives the
-    estimates onto the retraction's floor (every step halved 30 times)."""
+    the same law on the general kernel's path (:func:`natural_baselines`), the barrier
+    metric over the paper law, and the µs of a natural and a barrier step; at n = 7 the
+    worst case: one random state repeated, which drives the estimates onto the
+    retraction's floor (every step halved 30 times)."""
     clock = time.process_time
     loops = {}
     for n in sizes:
@@ -142,19 +145,22 @@ def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
         loops[n] = [Replay(c, inputs) for c in natural_baselines(model)]
     rng = np.random.default_rng(0)
     args = tuple(rng.normal(size=(5, 7)) * 0.1)
-    nat, paper, general = natural_baselines(css_arm())
+    nat, paper, general, _ = natural_baselines(css_arm())
     figures = {}
 
     def add(key, value):
         figures.setdefault(key, []).append(value)
     for _ in range(runs):
-        for n, (fn, fp, fg) in loops.items():
+        for n, (fn, fp, fg, fb) in loops.items():
             add(f"closed_loop_natural_over_paper_n{n}",
                 interleaved_ratio(fn, fp, budget_s, clock=clock))
             add(f"closed_loop_natural_over_general_n{n}",
                 interleaved_ratio(fn, fg, budget_s, clock=clock))
-            reps = _reps(budget_s / 4, 1, fn)
-            add(f"closed_loop_natural_us_n{n}", _timed(fn, reps, clock) / reps * 1e6)
+            add(f"closed_loop_barrier_over_paper_n{n}",
+                interleaved_ratio(fb, fp, budget_s, clock=clock))
+            for name, f in (("natural", fn), ("barrier", fb)):
+                reps = _reps(budget_s / 4, 1, f)
+                add(f"closed_loop_{name}_us_n{n}", _timed(f, reps, clock) / reps * 1e6)
         for key, base in (("paper", paper), ("general", general)):
             add(f"worst_case_natural_over_{key}_n7", interleaved_ratio(
                 lambda: nat.step(*args), lambda: base.step(*args), budget_s, clock=clock))
@@ -191,7 +197,7 @@ def goal_ratios(budget_s=1.0):
             # the natural geometry against the Euclidean paper law from the same start, along
             # a recorded closed loop (the goal's figure) and at one random state repeated,
             # which drives the estimates onto the retraction's floor (its worst case)
-            nat, paper_b, _ = natural_baselines(model)
+            nat, paper_b, _, _ = natural_baselines(model)
             loop = recorded_inputs(model)
             out["natural_over_paper_closed_loop_n7"] = interleaved_ratio(
                 Replay(nat, loop), Replay(paper_b, loop), budget_s)
