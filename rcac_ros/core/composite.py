@@ -557,6 +557,9 @@ class RecursiveCompositeController:
         """Eqs 25-26: ``sum_i (s_i^T M_i s_i + theta_tilde_i^T P_i^-1 theta_tilde_i) / 2``.
 
         Uses the link velocity errors of the last step and the true parameters ``theta`` (n, 13).
+        This is the Euclidean law's V, with the fixed ``P_i``: with ``geometry="natural"``
+        the V of doc/design.md §8 has a Bregman divergence in place of the second term,
+        which is not computed here.
         """
         from .regressor import link_matrices
         theta = as_array(theta, (self.n, 13), "theta")
