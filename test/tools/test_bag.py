@@ -1,6 +1,7 @@
 """Bags: ``rcac inspect`` on a synthetic bag, ``rcac record`` during a two-node run, SIGINT."""
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -317,8 +318,13 @@ def test_sigint_during_recording_leaves_a_readable_bag(tmp_path, procs):
     ctrl = procs.start("controller", _node("controller", mode="lockstep", state_timeout=1.0))
     _wait_controller_matched(rec, ctrl)
     procs.start("simulator", _node("simulator", mode="lockstep", duration=0.0))
-    # mid-stream: the recorder reports messages every 5 s
-    wait_for(lambda: " messages, sim time" in _output(rec), 90, "messages recorded", [rec])
+    # mid-stream: the recorder reports every 5 s; wait for a report of 0.1 s of sim time or
+    # more (the first /clock message alone can come just before a report)
+
+    def recorded():
+        times = re.findall(r"messages, sim time (\d+\.\d+) s", _output(rec))
+        return bool(times) and float(times[-1]) >= 0.1
+    wait_for(recorded, 90, "0.1 s of sim time recorded", [rec])
     rec.send_signal(signal.SIGINT)
     assert rec.wait(30) == 0, _output(rec)
     assert "closed" in _output(rec)

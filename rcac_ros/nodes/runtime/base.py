@@ -230,7 +230,7 @@ def run(node_factory, prog, args=None):
         return 2
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)
-    node = rt = None
+    node = rt = executor = None
     code = 0
     try:
         node = node_factory()
@@ -255,6 +255,11 @@ def run(node_factory, prog, args=None):
         gcwatch.WATCH.close()
         if rt is not None:
             rt.release()
+        if executor is not None:
+            # its guard conditions now, while the context lives: the node and the executor
+            # refer to each other, so the collector could otherwise destroy them after the
+            # shutdown below ("Exception ignored in: Executor.__del__", a traceback at exit)
+            executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
