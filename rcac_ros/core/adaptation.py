@@ -363,6 +363,34 @@ def project(const, state):
                                           const[i, THETA_MAX + k])
 
 
+@njit(cache=True, inline="always")
+def factor_start(st, J, R):
+    """The start of :func:`diagonal_factor` and :func:`natural_ls_factor`: ``J = J(theta_hat_i)``
+    and its inverse Cholesky factor into ``R``; True. False if ``theta_hat_i`` is not a body
+    (never: it is one after every step), with ``K = I`` in ``st[NAT_LS_CHOL]`` (the gain
+    ``S S^T``)."""
+    pseudo_inertia_into(st, THETA_HAT, J)
+    if inverse_cholesky4(J, R):
+        return True
+    for a in range(13):
+        for b in range(13):
+            st[NAT_LS_CHOL + 13 * a + b] = 1.0 if a == b else 0.0
+    return False
+
+
+@njit(cache=True, inline="always")
+def cholesky_entry(st, a, b, v):
+    """Entry (a, b), b <= a, of K's Cholesky factor in ``st[NAT_LS_CHOL]`` (lower,
+    row-major, in place) from ``K_ab = v``, the rows above a and the entries left of b
+    done."""
+    for m in range(b):
+        v -= st[NAT_LS_CHOL + 13 * a + m] * st[NAT_LS_CHOL + 13 * b + m]
+    if a == b:
+        st[NAT_LS_CHOL + 14 * a] = np.sqrt(v)
+    else:
+        st[NAT_LS_CHOL + 13 * a + b] = v / st[NAT_LS_CHOL + 14 * b]
+
+
 #: the entry (row, column) of J that theta_0 .. theta_9 each set alone (doc/design.md §8)
 _J_ROW = (3, 0, 1, 2, 0, 1, 2, 0, 0, 1)
 _J_COL = (3, 3, 3, 3, 0, 1, 2, 1, 2, 2)
@@ -383,11 +411,7 @@ def diagonal_factor(st, k, M4):
     """
     J, R, Ji = M4[0], M4[1], M4[2]
     C = NAT_LS_CHOL
-    pseudo_inertia_into(st, THETA_HAT, J)
-    if not inverse_cholesky4(J, R):     # never: theta_hat_i is a body after every step
-        for a in range(13):
-            for b in range(13):
-                st[C + 13 * a + b] = 1.0 if a == b else 0.0
+    if not factor_start(st, J, R):
         return
     for p in range(4):                  # J^-1 = R^T R (R lower)
         for q in range(p + 1):
@@ -420,13 +444,8 @@ def diagonal_factor(st, k, M4):
     for a in range(13):                 # K = I + S H S / k, then Cholesky in place
         sa = st[P_FACTOR + 14 * a] * inv_k
         for b in range(a + 1):
-            v = st[C + 13 * a + b] * sa * st[P_FACTOR + 14 * b] + (1.0 if a == b else 0.0)
-            for m in range(b):
-                v -= st[C + 13 * a + m] * st[C + 13 * b + m]
-            if a == b:
-                st[C + 14 * a] = np.sqrt(v)
-            else:
-                st[C + 13 * a + b] = v / st[C + 14 * b]
+            cholesky_entry(st, a, b, st[C + 13 * a + b] * sa * st[P_FACTOR + 14 * b]
+                           + (1.0 if a == b else 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -446,11 +465,7 @@ def natural_ls_factor(st, k, col, M4):
     13x13 product of rank 10 and one 13x13 Cholesky factorisation.
     """
     J, R, X = M4[0], M4[1], M4[2]
-    pseudo_inertia_into(st, THETA_HAT, J)
-    if not inverse_cholesky4(J, R):     # never: theta_hat_i is a body after every step
-        for a in range(13):
-            for b in range(13):
-                st[NAT_LS_CHOL + 13 * a + b] = 1.0 if a == b else 0.0
+    if not factor_start(st, J, R):
         return
     for j in range(13):
         for r in range(13):
@@ -464,13 +479,7 @@ def natural_ls_factor(st, k, col, M4):
             acc = 0.0
             for e in range(10):
                 acc += st[oa + e] * st[ob + e]
-            v = acc * inv_k + (1.0 if a == b else 0.0)
-            for m in range(b):
-                v -= st[NAT_LS_CHOL + 13 * a + m] * st[NAT_LS_CHOL + 13 * b + m]
-            if a == b:
-                st[NAT_LS_CHOL + 14 * a] = np.sqrt(v)
-            else:
-                st[NAT_LS_CHOL + 13 * a + b] = v / st[NAT_LS_CHOL + 14 * b]
+            cholesky_entry(st, a, b, acc * inv_k + (1.0 if a == b else 0.0))
 
 
 @njit(cache=True, inline="always")
