@@ -218,7 +218,7 @@ CONTROLLER = _robot("controller") + (
           "gain never above P; doc/design.md §8)", choices=("log_det", "barrier")),
     Param("barrier_c", "double", None,
           "natural_metric 'barrier': c, the quadratic's curvature over the barrier's at the "
-          "start (unset: 100, doc/design.md §8)", lo=1e-6, hi=BIG),
+          "start (unset: 1000, doc/design.md §8)", lo=1e-6, hi=BIG),
     Param("joint_friction", "bool", False,
           "also estimate each joint's armature, viscous and Coulomb friction "
           "(doc/design.md §7), published on ~/friction_estimates"),

@@ -54,7 +54,7 @@ from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update
 from .pseudo_inertia import (inverse_cholesky4, natural_gain_apply, pseudo_inertia_into, retract,
-                             whitened_into)
+                             retract_short, whitened_into)
 
 
 @njit(cache=True, inline="always")
@@ -215,12 +215,18 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
 @njit(cache=True, inline="always")
 def retract_links(state, scal):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
-    consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`
-    (doc/design.md §8); the smallest step length goes to ``scal[I_RETRACT_MIN]``."""
+    consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`, or with
+    the metric ``"barrier"`` by the shortened Euclidean step of
+    :func:`~rcac_ros.core.pseudo_inertia.retract_short` (doc/design.md §8); the smallest
+    step length goes to ``scal[I_RETRACT_MIN]``."""
     a_min = 1.0
+    short = scal[I_BARRIER_C] > 0.0
     for i in range(state.shape[0]):
         st = state[i]
-        a = retract(st, THETA_PREV, st, THETA_HAT)
+        if short:
+            a = retract_short(st, THETA_PREV, st, THETA_HAT)
+        else:
+            a = retract(st, THETA_PREV, st, THETA_HAT)
         a_min = min(a_min, a)
     scal[I_RETRACT_MIN] = a_min
 

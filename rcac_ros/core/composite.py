@@ -52,8 +52,9 @@ GEOMETRIES = ("euclidean", "natural")
 #: the natural geometry's metrics (doc/design.md §8): k_i times the log-det Hessian, or the
 #: barrier plus the Euclidean quadratic
 NATURAL_METRICS = ("log_det", "barrier")
-#: default c of the metric "barrier" (doc/design.md §8: from the prototype's 1, 100, 1e4)
-BARRIER_C = 100.0
+#: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
+#: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
+BARRIER_C = 1000.0
 #: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
 BARRIER_C_MIN = 1e-6
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
@@ -133,8 +134,10 @@ class RecursiveCompositeController:
         ``k_i H^-1`` on J and ``P_nu`` on nu, as above; ``"barrier"``: ``P_mix = (H / (c
         k_i) + P_i^-1)^-1 <= P_i``, the inverse Hessian of ``-(1/(c k_i)) log det J + 1/2
         theta^T P_i^-1 theta`` (the Euclidean gain away from the cone's boundary, the
-        barrier's near it; doc/design.md §8). Only with ``geometry="natural"`` and
-        ``adaptation="gradient"``.
+        barrier's near it; doc/design.md §8); its step is the Euclidean step with that gain,
+        halved while it would take ``J_hat`` below half of itself along some direction
+        (:func:`~rcac_ros.core.pseudo_inertia.retract_short`). Only with
+        ``geometry="natural"`` and ``adaptation="gradient"``.
     barrier_c : float, optional
         ``c > 0`` of the metric ``"barrier"`` (default :data:`BARRIER_C`).
     joint_friction : bool

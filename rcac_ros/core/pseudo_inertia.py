@@ -362,6 +362,50 @@ def retract(old, oo, new, on):
     return a
 
 
+@njit(cache=True, inline="always")
+def retract_short(old, oo, new, on):
+    """The barrier metric's retraction: the Euclidean step ``old -> new``, shortened.
+
+    ``J+ = J_hat + a Delta`` with ``a`` the largest of 1, 1/2, 1/4, ... (at most
+    :data:`HALVINGS` halvings) for which ``J+ - FLOOR tr(J+) 1 >= 1/2 J_hat`` passes a
+    Cholesky factorisation: no direction of ``J_hat`` loses more than half of itself in a
+    step, and J+ clears the floor. One 4x4 factorisation when the step is kept whole.
+    ``J_hat = J(old)`` must be positive definite; a step that is not finite, or that no
+    halving makes pass, is not taken (``a = 0``: J kept, nu moves). ``nu`` is clipped as
+    in :func:`retract`. Returns ``a``.
+    """
+    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(old, oo)
+    e00, e11, e22, e33, e01, e02, e12, e03, e13, e23 = pseudo_entries(new, on)
+    n0, n1, n2 = new[on + 4], new[on + 5], new[on + 6]
+    d00, d11, d22, d33 = e00 - j00, e11 - j11, e22 - j22, e33 - j33    # Delta
+    d01, d02, d12, d03, d13, d23 = e01 - j01, e02 - j02, e12 - j12, e03 - j03, e13 - j13, \
+        e23 - j23
+    a = 1.0
+    if not math.isfinite(d00 + d11 + d22 + d33 + d01 + d02 + d12 + d03 + d13 + d23
+                         + n0 + n1 + n2):
+        for c in range(13):                         # a step that is not finite: no step
+            new[on + c] = old[oo + c]
+        return 0.0
+    for h in range(HALVINGS):
+        f = FLOOR * (j00 + j11 + j22 + j33 + a * (d00 + d11 + d22 + d33))
+        if cholesky_entries(0.5 * j00 + a * d00 - f, 0.5 * j11 + a * d11 - f,
+                            0.5 * j22 + a * d22 - f, 0.5 * j33 + a * d33 - f,
+                            0.5 * j01 + a * d01, 0.5 * j02 + a * d02, 0.5 * j12 + a * d12,
+                            0.5 * j03 + a * d03, 0.5 * j13 + a * d13, 0.5 * j23 + a * d23)[0]:
+            break
+        a *= 0.5
+    else:
+        a = 0.0                                     # keep J_hat
+    j00, j11, j22, j33 = j00 + a * d00, j11 + a * d11, j22 + a * d22, j33 + a * d33
+    j01, j02, j12 = j01 + a * d01, j02 + a * d02, j12 + a * d12
+    j03, j13, j23 = j03 + a * d03, j13 + a * d13, j23 + a * d23
+    bound = NU_RATIO * (j00 + j11 + j22 + j33)
+    theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23,
+                       min(max(n0, -bound), bound), min(max(n1, -bound), bound),
+                       min(max(n2, -bound), bound), new, on)
+    return a
+
+
 @njit(cache=True)
 def natural_gains_into(theta, k, Pnu, out):
     """``out[i]`` (169, row-major) = ``P_eff(theta_i)`` for every link (the non-recursive

@@ -107,6 +107,8 @@ LAWS = {
     # escapes to infinity (doc/design.md §8, "Unmodelled joint effects"); this one is bounded
     "paper_natural_friction": ("rcac", dict(geometry="natural", joint_friction=True,
                                             P_friction=INERTIA_SCALED)),
+    "paper_barrier_friction": ("rcac", dict(geometry="natural", natural_metric="barrier",
+                                            joint_friction=True, P_friction=INERTIA_SCALED)),
     "ls_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
                                 geometry="natural")),
     # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the

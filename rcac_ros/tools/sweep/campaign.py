@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
+from rcac_ros.core.composite import BARRIER_C
 from rcac_ros.core.identifiability import inertia_about_com
 from rcac_ros.core.model import theta_from_inertia
 from rcac_ros.core.pseudo_inertia import lambda_min
@@ -77,10 +78,13 @@ QUANTITIES = {
     # estimates of composite_friction
     "joint_damping": ("float", 7), "joint_friction": ("float", 7), "joint_armature": ("float", 7),
     "P_friction": ("float", 1),
+    # c of the natural_barrier geometry's metric (doc/design.md §8)
+    "barrier_c": ("float", 1),
 }
 #: Quantities drawn once per sample, the same in every grid cell (paired comparisons).
 PAIRED = ("joint_damping", "joint_friction", "joint_armature")
-POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "P_friction", "start_mass_scale")
+POSITIVE = ("K_D", "Lambda", "P", "lam", "trajectory_scale", "P_friction", "start_mass_scale",
+            "barrier_c")
 GAINS = ("K_D", "Lambda", "P", "gamma", "lam", "h")
 SUFFIXES = {"payload_com": ("x", "y", "z"), "payload_inertia": ("xx", "yy", "zz"),
             "start_com_shift": ("x", "y", "z"),
@@ -284,7 +288,8 @@ def validate(doc, source="campaign"):
                  payload_com=[0.0, 0.0, 0.0], payload_inertia=[0.0, 0.0, 0.0],
                  estimate_error=0.0, trajectory_scale=1.0, joint_damping=[0.0] * 7,
                  joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=30.0,
-                 geometry="euclidean", start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0])
+                 geometry="euclidean", start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0],
+                 barrier_c=BARRIER_C)
     for q in QUANTITIES:
         if q in sc and q != "law":
             fixed[q] = check_value(q, sc[q], f"scenario.{q}")
@@ -426,7 +431,7 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
         g.pop("theta_hat0")
     g.update(theta_hat0=theta_hat0, geometry=inputs["geometry"])
     if law != "slotine_li" and g["geometry"] == "natural_barrier":
-        g.update(geometry="natural", natural_metric="barrier")
+        g.update(geometry="natural", natural_metric="barrier", barrier_c=inputs["barrier_c"])
     if law == "slotine_li":
         return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
