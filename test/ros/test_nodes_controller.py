@@ -142,17 +142,19 @@ def test_watchdog_publishes_safe_effort_and_recovers():
 
 
 def test_diagnostics_sum_the_input_threads_errors():
-    """The failed takes and callback exceptions of the inputs' side threads
+    """The failed takes, buffer allocations and callback exceptions of the inputs' side threads
     (``nodes/runtime/rawtake.py``) reach the diagnostics, summed by kind."""
     with ros_context() as (ctx, ex):
         node, probe = make(ctx, ex, trajectory="topic")
         status = {kv.key: kv.value for kv in node.diagnostics().values}
         assert status["input_errors_take"] == "0" and status["input_errors_callback"] == "0"
+        assert status["input_errors_alloc"] == "0"
         assert len(node.inputs) == 2                    # the states and the trajectories
-        node.inputs.append(types.SimpleNamespace(errors={"take": 2, "callback": 1}))
+        node.inputs.append(types.SimpleNamespace(errors={"take": 2, "alloc": 3, "callback": 1}))
         node.inputs.append(types.SimpleNamespace(errors={"callback": 4}))
         status = {kv.key: kv.value for kv in node.diagnostics().values}
         assert status["input_errors_take"] == "2" and status["input_errors_callback"] == "5"
+        assert status["input_errors_alloc"] == "3"
 
 
 def test_lockstep_watchdog_trip_restarts_the_filters_only_after_a_lost_state():

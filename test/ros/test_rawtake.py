@@ -1,7 +1,8 @@
 """The lock-free take of the side inputs (``nodes/runtime/rawtake.py``, doc/failsafe.md "Where the
 time of a flood goes"): what ``rcl`` hands over is the message as published, a sample above
-the cap never reaches the callback, the buffer does not keep a large sample's size, errors
-are counted and logged once without stopping the thread, and the thread stops cleanly."""
+the cap never reaches the callback, the buffer does not keep a large sample's size (and a
+failed re-allocation of it leaves the reader a valid buffer), errors are counted and logged
+once without stopping the thread, and the thread stops cleanly."""
 
 import contextlib
 import threading
@@ -144,7 +145,7 @@ def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
             assert got[-1].name == SMALL.name and list(got[-1].position) == [1.5, -2.0]
             # LARGE grew the buffer past the bound; it was freed back to KEEP after it
             assert reader.capacity <= max(cap, RawReader.KEEP), reader.capacity
-        assert reader.errors == {"take": 0, "callback": 0} and log.lines == []
+        assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
 
 
 def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing():
@@ -154,7 +155,7 @@ def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing
         assert inbox.wait(lambda b: b.calls == 4)
         assert reader._thread.is_alive()
         assert len(inbox.data) == 2                     # the 2nd and the 4th
-        assert reader.errors == {"take": 0, "callback": 2}
+        assert reader.errors == {"take": 0, "alloc": 0, "callback": 2}
     assert len(log.lines) == 1, log.lines               # one line for one exception type
     assert log.lines[0].startswith("test input: the callback raised")
     assert "Traceback" in log.lines[0] and "ValueError: callback failure 1" in log.lines[0]
@@ -182,6 +183,66 @@ def test_an_rcl_error_is_counted_logged_once_and_the_input_keeps_flowing(monkeyp
     with raw_reader(inbox, 0, log) as (reader, publish):
         publish(SMALL, SMALL)
         assert inbox.wait(lambda b: len(b.data) == 2)
-        assert reader.errors == {"take": 3, "callback": 0}
+        assert reader.errors == {"take": 3, "alloc": 0, "callback": 0}
     assert len(log.lines) == 1, log.lines
     assert log.lines[0].startswith("test input: rcl_take_serialized_message returned 1 (")
+
+
+class FailingAlloc:
+    """rcutils whose ``rcutils_uint8_array_init`` returns ``RCUTILS_RET_BAD_ALLOC`` on the calls
+    numbered in ``fail`` (1: the reader's first buffer); the rest is the real library's."""
+
+    def __init__(self, rcutils, fail):
+        self._rcutils, self.fail, self.calls = rcutils, set(fail), 0
+
+    def rcutils_uint8_array_init(self, *args):
+        self.calls += 1
+        if self.calls in self.fail:
+            return 10                       # RCUTILS_RET_BAD_ALLOC, nothing allocated
+        return self._rcutils.rcutils_uint8_array_init(*args)
+
+    def __getattr__(self, name):
+        return getattr(self._rcutils, name)
+
+
+def test_a_failed_reallocation_is_counted_and_the_reader_keeps_a_buffer(monkeypatch):
+    """Issue 17: the buffer of KEEP bytes that replaces one grown by a large sample cannot be
+    allocated (twice): the reader keeps the large buffer, takes the next samples into it, the
+    failures are counted and the first logged, and the third attempt restores the bound."""
+    rcl, rcutils = rawtake._libraries()
+    fake = FailingAlloc(rcutils, fail={2, 3})
+    monkeypatch.setattr(rawtake, "_libraries", lambda: (rcl, fake))
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log) as (reader, publish):
+        assert reader.capacity == RawReader.KEEP
+        publish(LARGE, SMALL, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 3 and reader.capacity <= RawReader.KEEP), \
+            (len(inbox.data), reader.capacity, reader.errors, log.lines)
+        assert reader._thread.is_alive()
+        assert reader.errors == {"take": 0, "alloc": 2, "callback": 0}
+        assert fake.calls == 4                          # the first, two failed, one done
+        got = [deserialize_message(d, JointState) for d in inbox.data]
+        assert got[0].name == LARGE.name and list(got[0].position) == [0.25] * 20_000
+        assert all(m.name == SMALL.name and list(m.position) == [1.5, -2.0] for m in got[1:])
+        publish(SMALL)                                  # and the input goes on
+        assert inbox.wait(lambda b: len(b.data) == 4)
+    assert len(log.lines) == 1, log.lines
+    assert log.lines[0].startswith(
+        f"test input: rcutils_uint8_array_init of {RawReader.KEEP} bytes returned 10 ("), \
+        log.lines
+    assert "keeps its buffer of" in log.lines[0]
+
+
+def test_a_failed_reallocation_is_tried_again_without_a_further_sample(monkeypatch):
+    """No sample follows the large one whose shrink failed: the reader tries again after its
+    next wait (not only after a take), so the bound holds again without more traffic."""
+    rcl, rcutils = rawtake._libraries()
+    fake = FailingAlloc(rcutils, fail={2})
+    monkeypatch.setattr(rawtake, "_libraries", lambda: (rcl, fake))
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log) as (reader, publish):
+        publish(LARGE)
+        assert inbox.wait(lambda b: len(b.data) == 1 and reader.capacity <= RawReader.KEEP), \
+            (len(inbox.data), reader.capacity, reader.errors, log.lines)
+        assert reader.errors == {"take": 0, "alloc": 1, "callback": 0} and fake.calls == 3
+        assert reader._thread.is_alive() and len(log.lines) == 1

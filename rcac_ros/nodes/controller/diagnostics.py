@@ -32,8 +32,9 @@ def diagnostics(node, counts, rejected, starvation, inputs):
     (``counts``, :class:`LoopCounts`), its rejected inputs (``rejected``, a
     :class:`~rcac_ros.nodes.runtime.stats.Throttle`) and timer mode's starvation guard
     (``starvation``, :class:`~rcac_ros.nodes.controller.starvation.Starvation`, or ``None``),
-    and its inputs (``inputs``, each with ``errors``, the failed takes and callback
-    exceptions of its side thread by kind: ``input_errors_<kind>``, doc/failsafe.md).
+    and its inputs (``inputs``, each with ``errors``, the failed takes, buffer allocations
+    and callback exceptions of its side thread by kind: ``input_errors_<kind>``,
+    doc/failsafe.md).
     """
     count, p50, p99, worst = counts.compute.pop()
     skipped = 0 if node.loop is None else node.loop.skipped
@@ -75,7 +76,7 @@ def diagnostics(node, counts, rejected, starvation, inputs):
                 "the delay margin)"
     for name, e in zip(cfg.channel_names, E):     # every channel's E_c
         values[f"prediction_error_{name}"] = f"{e:.6g}"
-    for kind in ("take", "callback"):
+    for kind in ("take", "alloc", "callback"):
         values[f"input_errors_{kind}"] = sum(i.errors.get(kind, 0) for i in inputs)
     for kind, c in sorted(rejected.counts.items()):
         values[f"rejected_{kind.replace(' ', '_')}"] = c

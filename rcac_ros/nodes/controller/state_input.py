@@ -129,8 +129,8 @@ class StateInput:
 
     @property
     def errors(self):
-        """Failed takes and callback exceptions of the side thread, by kind (none in
-        lockstep, where the executor takes)."""
+        """Failed takes, buffer allocations and callback exceptions of the side thread, by
+        kind (none in lockstep, where the executor takes)."""
         return {} if self._side is None else self._side.errors
 
     # the latest valid state, each read from one Sample

@@ -56,7 +56,8 @@ class TrajectoryInput:
 
     @property
     def errors(self):
-        """Failed takes and callback exceptions of the side thread, by kind."""
+        """Failed takes, buffer allocations and callback exceptions of the side thread, by
+        kind."""
         return self._side.errors
 
     def _warn(self, kind, text):

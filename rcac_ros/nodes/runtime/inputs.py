@@ -63,8 +63,9 @@ class SideInput:
     reject : callable
         ``reject(kind, text)``: a message above the cap or that does not deserialise.
 
-    A failed take or an exception of ``callback`` is counted (:attr:`errors`), the first of
-    each kind logged with ``owner``'s logger, and the thread goes on.
+    A failed take, a failed allocation of the take's buffer or an exception of ``callback``
+    is counted (:attr:`errors`), the first of each kind logged with ``owner``'s logger, and
+    the thread goes on.
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
@@ -97,7 +98,8 @@ class SideInput:
 
     @property
     def errors(self):
-        """Failed takes and callback exceptions of the thread, by kind (``RawReader.errors``)."""
+        """Failed takes, buffer allocations and callback exceptions of the thread, by kind
+        (``RawReader.errors``)."""
         return self._reader.errors
 
     def close(self):

@@ -11,13 +11,16 @@ Python object is built from it.
 
 The serialised-message buffer is reused between takes; ``rcl`` grows it to the size of the
 sample taken, so after a sample larger than ``max(cap, RawReader.KEEP)`` (a flood sample
-above the cap) it is freed and allocated again at ``KEEP`` bytes: between takes the reader
-holds at most that much, not the largest sample it ever saw.
+above the cap) it is replaced by one of ``KEEP`` bytes: between takes the reader holds at
+most that much, not the largest sample it ever saw. The small buffer is allocated before the
+large one is freed: if that allocation fails (a machine short of memory), the failure is
+counted, the reader keeps the large buffer and takes into it, and tries again after the next
+take or wait (at most 50 ms later); it is never left without a buffer.
 
 Errors do not stop the reader: a return code of ``rcl`` other than "taken" and "nothing to
-take", and an exception raised by a callback, are counted (:attr:`RawReader.errors`) and the
-first of each kind is logged (the exception with its traceback); the thread then goes on
-with the next sample.
+take", a failed allocation of the small buffer, and an exception raised by a callback, are
+counted (:attr:`RawReader.errors`) and the first of each kind is logged (the exception with
+its traceback); the thread then goes on with the next sample.
 """
 
 import ctypes
@@ -30,6 +33,8 @@ RCL_RET_OK = 0
 RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
 #: s to wait after a failed take before the next (a lasting error must not spin the thread)
 ERROR_BACKOFF = 0.001
+#: the wait for a sample, ns (also the longest a failed shrink waits for its next attempt)
+WAIT_NS = 50_000_000
 
 
 class _Allocator(ctypes.Structure):
@@ -104,11 +109,13 @@ class RawReader:
     ----------
     errors : dict
         Counts by kind: ``"take"`` (``rcl_take_serialized_message`` returned an error; the
-        sample, if any, is lost) and ``"callback"`` (``on_bytes`` or ``on_oversize`` raised;
-        the reader goes on with the next sample).
+        sample, if any, is lost), ``"alloc"`` (the buffer of :attr:`KEEP` bytes that replaces
+        one grown past the bound could not be allocated; the reader keeps the grown buffer,
+        takes into it and tries again after the next take or wait) and ``"callback"``
+        (``on_bytes`` or ``on_oversize`` raised; the reader goes on with the next sample).
     """
 
-    #: bytes the buffer is allocated with, and freed back to after a sample larger than
+    #: bytes the buffer is allocated with, and replaced by after a sample larger than
     #: ``max(cap, KEEP)`` (a bound on what the reader holds between takes)
     KEEP = 65_536
 
@@ -119,7 +126,7 @@ class RawReader:
         self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
         self._bound = max(cap, self.KEEP)
         self._name, self._log = name, log
-        self.errors = {"take": 0, "callback": 0}
+        self.errors = {"take": 0, "alloc": 0, "callback": 0}
         self._logged = set()
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
@@ -140,9 +147,24 @@ class RawReader:
         return self._msg.buffer_capacity
 
     def _shrink(self):
-        """Free a buffer grown past the bound and allocate it again at :attr:`KEEP` bytes."""
-        self._rcutils.rcutils_uint8_array_fini(ctypes.byref(self._msg))
-        self._init_buffer()
+        """Replace a buffer grown past the bound by one of :attr:`KEEP` bytes.
+
+        The new buffer is allocated before the old one is freed: if the allocation fails, it
+        is counted (``"alloc"``) and the reader keeps the old buffer (valid, only larger than
+        the bound) until the next attempt.
+        """
+        small = _Uint8Array()
+        ret = self._rcutils.rcutils_uint8_array_init(ctypes.byref(small), self.KEEP,
+                                                     ctypes.byref(self._alloc))
+        if ret != RCL_RET_OK:
+            message = self._rcutils.rcutils_get_error_string().str.decode(errors="replace")
+            self._rcutils.rcutils_reset_error()
+            self._error("alloc", f"rcutils_uint8_array_init of {self.KEEP} bytes returned "
+                        f"{ret} ({message}): the reader keeps its buffer of "
+                        f"{self._msg.buffer_capacity} bytes and tries again")
+            return
+        large, self._msg = self._msg, small
+        self._rcutils.rcutils_uint8_array_fini(ctypes.byref(large))
 
     def _error(self, kind, text, key=None):
         """Count an error of ``kind``; log the first of each ``(kind, key)``."""
@@ -195,10 +217,12 @@ class RawReader:
                 with self._sub.handle, self._context.handle:
                     wait_set.clear_entities()
                     wait_set.add_subscription(self._sub.handle)
-                    wait_set.wait(50_000_000)               # 50 ms, without the lock
+                    wait_set.wait(WAIT_NS)                  # without the lock
                 if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
                         and self._take_all():
                     self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
+                if self._msg.buffer_capacity > self._bound:     # a failed shrink: again
+                    self._shrink()
         except Exception:               # noqa: BLE001 -- the context or the handle went down
             if not self._stop.is_set() and self._context.ok():
                 raise
