@@ -72,6 +72,32 @@ def initial_estimates(model, geometry, theta_hat0):
         as_array(theta_hat0, (n, 13), "theta_hat0")
 
 
+def natural_metric_option(natural_metric, barrier_c, geometry, adaptation="gradient"):
+    """Check the natural geometry's metric options (doc/design.md §8): ``(natural_metric,
+    c)``, ``c`` None unless ``natural_metric="barrier"`` (then ``barrier_c`` or
+    :data:`BARRIER_C`); one-line :class:`GainError` otherwise."""
+    if natural_metric not in NATURAL_METRICS:
+        raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
+                        f"{natural_metric!r}")
+    if natural_metric == "barrier" and geometry != "natural":
+        raise GainError("natural_metric: 'barrier' only with geometry='natural'")
+    if natural_metric == "barrier" and adaptation != "gradient":
+        raise GainError(f"natural_metric: 'barrier' needs adaptation='gradient', got "
+                        f"{adaptation!r} (natural least squares has its own metric, "
+                        f"doc/design.md §8)")
+    if barrier_c is not None and natural_metric != "barrier":
+        raise GainError("barrier_c: only with natural_metric='barrier'")
+    if natural_metric != "barrier":
+        return natural_metric, None
+    c = scalar(BARRIER_C if barrier_c is None else barrier_c, "barrier_c", GainError,
+               minimum=0.0, strict=True)
+    if c < BARRIER_C_MIN:                           # H / (c k_i) must stay finite
+        raise GainError(f"barrier_c: must be >= {BARRIER_C_MIN:g} (the barrier's curvature "
+                        f"at the start at most {1 / BARRIER_C_MIN:g} times the quadratic's), "
+                        f"got {c:g}")
+    return natural_metric, c
+
+
 class RecursiveCompositeController:
     """The recursive composite adaptive controller of eqs 18-24, O(m n) per step.
 
@@ -250,26 +276,9 @@ class RecursiveCompositeController:
 
     def _metric(self, natural_metric, barrier_c):
         """The natural geometry's metric (doc/design.md §8): ``c`` into the scalars."""
-        if natural_metric not in NATURAL_METRICS:
-            raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
-                            f"{natural_metric!r}")
-        if natural_metric == "barrier" and self.geometry != "natural":
-            raise GainError("natural_metric: 'barrier' only with geometry='natural'")
-        if natural_metric == "barrier" and self.adaptation != "gradient":
-            raise GainError(f"natural_metric: 'barrier' needs adaptation='gradient', got "
-                            f"{self.adaptation!r} (natural least squares has its own metric, "
-                            f"doc/design.md §8)")
-        if barrier_c is not None and natural_metric != "barrier":
-            raise GainError("barrier_c: only with natural_metric='barrier'")
-        self.natural_metric = natural_metric
-        self.barrier_c = None
-        if natural_metric == "barrier":
-            self.barrier_c = scalar(BARRIER_C if barrier_c is None else barrier_c,
-                                    "barrier_c", GainError, minimum=0.0, strict=True)
-            if self.barrier_c < BARRIER_C_MIN:     # H / (c k_i) must stay finite
-                raise GainError(f"barrier_c: must be >= {BARRIER_C_MIN:g} (the barrier's "
-                                f"curvature at the start at most {1 / BARRIER_C_MIN:g} times "
-                                f"the quadratic's), got {self.barrier_c:g}")
+        self.natural_metric, self.barrier_c = natural_metric_option(
+            natural_metric, barrier_c, self.geometry, self.adaptation)
+        if self.barrier_c is not None:
             self._scal[I_BARRIER_C] = self.barrier_c
 
     def _joint_terms(self, friction_hat0, P_friction, m):

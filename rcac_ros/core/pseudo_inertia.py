@@ -431,6 +431,45 @@ def retract_rows(prev, theta):
     return a_min
 
 
+@njit(cache=True)
+def barrier_gains_into(theta, kc, P_inv, E, out):
+    """``out[i]`` (169, row-major) = ``P_mix(theta_i) = (H(theta_i) / kc_i + P_i^-1)^-1``
+    for every link: the barrier metric's explicit gains of the non-recursive law
+    (doc/design.md §8). ``theta`` (n, 13), ``kc`` (n,) the products ``c k_i``, ``P_inv``
+    (n, 13, 13), ``E`` (13, 4, 4) the pseudo-inertias of the unit parameter vectors; ``H``
+    from its trace form ``H_ab = tr(J^-1 E_a J^-1 E_b)``."""
+    J = np.empty((4, 4))
+    G = np.empty((13, 4, 4))
+    M = np.empty((13, 13))
+    for i in range(theta.shape[0]):
+        pseudo_inertia_into(theta[i], 0, J)
+        Ji = np.linalg.inv(J)
+        for a in range(13):
+            G[a] = Ji @ E[a]
+        for a in range(13):
+            for b in range(a + 1):
+                acc = 0.0
+                for p in range(4):
+                    for q in range(4):
+                        acc += G[a, p, q] * G[b, q, p]
+                M[a, b] = acc / kc[i] + P_inv[i, a, b]
+                M[b, a] = M[a, b]
+        Pm = np.linalg.inv(M)
+        for a in range(13):
+            for b in range(13):
+                out[i, 13 * a + b] = 0.5 * (Pm[a, b] + Pm[b, a])
+
+
+@njit(cache=True)
+def retract_rows_short(prev, theta):
+    """:func:`retract_short` of every link's step ``prev[i] -> theta[i]``, in place; the
+    smallest step length."""
+    a_min = 1.0
+    for i in range(theta.shape[0]):
+        a_min = min(a_min, retract_short(prev[i], 0, theta[i], 0))
+    return a_min
+
+
 # ---- Python side: conversions, checks, defaults --------------------------------------------
 
 def pseudo_inertia(theta):

@@ -37,9 +37,10 @@ from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I
 from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
-from .composite import initial_estimates
-from .pseudo_inertia import (is_body, lambda_min, matched_gain, natural_gains_into, nu_gain,
-                             retract_rows)
+from .composite import initial_estimates, natural_metric_option
+from .pseudo_inertia import (barrier_gains_into, is_body, lambda_min, matched_gain,
+                             natural_gains_into, nu_gain, pseudo_inertia, retract_rows,
+                             retract_rows_short)
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
@@ -250,7 +251,10 @@ class SlotineLiCompositeController:
 
     ``geometry="natural"`` (doc/design.md §8): before each step the gains ``P_i`` are
     replaced by ``P_eff(theta_hat_i)``, after it each link's step is retracted into the cone
-    ``J > 0``, as in the recursive law (same ``natural_gain``, same default start).
+    ``J > 0``, as in the recursive law (same ``natural_gain``, same default start). With
+    ``natural_metric="barrier"`` (and ``barrier_c``) the gains are ``P_mix(theta_hat_i) =
+    (H / (c k_i) + P_i^-1)^-1`` and the step is shortened instead of retracted, as in the
+    recursive law.
     ``joint_friction``, ``friction_hat0`` and ``P_friction`` add each joint's armature,
     viscous and Coulomb friction as three more columns of its row of ``Y``, ``Phi``, ``Psi``
     (doc/design.md §8).
@@ -258,7 +262,8 @@ class SlotineLiCompositeController:
 
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, update="implicit", joint_friction=False, friction_hat0=None,
-                 P_friction=P_FRICTION, geometry="euclidean", natural_gain=None):
+                 P_friction=P_FRICTION, geometry="euclidean", natural_gain=None,
+                 natural_metric="log_det", barrier_c=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -275,6 +280,8 @@ class SlotineLiCompositeController:
         if geometry not in ("euclidean", "natural"):
             raise GainError(f"geometry: expected 'euclidean' or 'natural', got {geometry!r}")
         self.geometry = geometry
+        self.natural_metric, self.barrier_c = natural_metric_option(natural_metric, barrier_c,
+                                                                    geometry)
         self.natural_gain = None
         if geometry == "natural":
             start = initial_estimates(model, geometry, theta_hat0)
@@ -285,6 +292,10 @@ class SlotineLiCompositeController:
             self.natural_gain = k
             self._nu_gain = np.ascontiguousarray(nu_gain(self.P).reshape(n, 9))
             self._prev = np.zeros((n, 13))
+            if self.barrier_c is not None:              # P_mix, doc/design.md §8
+                self._kc = self.barrier_c * k
+                self._P_inv = np.linalg.inv(self.P)
+                self._E = pseudo_inertia(np.eye(13))
         elif natural_gain is not None:
             raise GainError("natural_gain: only with geometry='natural'")
         self._joint = np.zeros((n if self.joint_friction else 0, 4))
@@ -329,8 +340,12 @@ class SlotineLiCompositeController:
         if self.geometry == "natural":                      # doc/design.md §8
             th = self._theta[:13 * self.n].reshape(self.n, 13)
             self._prev[:] = th
-            natural_gains_into(th, self.natural_gain, self._nu_gain,
-                               self._data[:self.n, GAIN_P:GAIN_P + 169])
+            if self.barrier_c is None:
+                natural_gains_into(th, self.natural_gain, self._nu_gain,
+                                   self._data[:self.n, GAIN_P:GAIN_P + 169])
+            else:
+                barrier_gains_into(th, self._kc, self._P_inv, self._E,
+                                   self._data[:self.n, GAIN_P:GAIN_P + 169])
             if self.joint_friction:
                 fh = self._theta[13 * self.n:].reshape(self.n, 3)
                 self._prev_f = fh.copy()
@@ -347,8 +362,9 @@ class SlotineLiCompositeController:
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         if self.geometry == "natural":
-            self.retraction_length = retract_rows(self._prev,
-                                                  self._theta[:13 * self.n].reshape(self.n, 13))
+            retract = retract_rows if self.barrier_c is None else retract_rows_short
+            self.retraction_length = retract(self._prev,
+                                             self._theta[:13 * self.n].reshape(self.n, 13))
             if self.joint_friction:
                 self.retraction_length = min(self.retraction_length, retract_terms(
                     self._prev_f, self._theta[13 * self.n:].reshape(self.n, 3)))

@@ -32,7 +32,25 @@ def install(tmp_path_factory):
     # while colcon reads the metadata nor in the build ("--- stderr" on a terminal)
     assert "--- stderr" not in proc.stdout and "Warning" not in proc.stderr, \
         proc.stdout + proc.stderr
+    seed_numba_cache(tmp / "install")
     return tmp / "install"
+
+
+def seed_numba_cache(install):
+    """Copy the source tree's numba cache (``__pycache__/*.nbi``, ``*.nbc``: the kernels the
+    earlier tests compiled) next to the installed modules. numba keys a cache on its source
+    file's modification time and size, which the install keeps (setuptools copies with
+    their times): an installed file that differs from the source is compiled again, one that
+    does not loads the kernels (the cold compile itself is covered where the core is first
+    imported; a second one here took 160 s of the CI run)."""
+    site = glob.glob(str(install / "rcac_ros" / "lib" / "python3*" / "site-packages"))
+    for cache in glob.glob(os.path.join(ROOT, "rcac_ros", "**", "__pycache__", "*.nb[ic]"),
+                           recursive=True):
+        rel = os.path.relpath(cache, ROOT)
+        target = os.path.join(site[0], rel)
+        if os.path.isdir(os.path.dirname(os.path.dirname(target))):
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            shutil.copy2(cache, target)
 
 
 def env_for(install):
@@ -56,8 +74,9 @@ def test_executables_are_installed(install):
 def test_installed_nodes_run(install):
     """Both nodes start from the install space, run 0.2 s in lockstep and exit cleanly.
 
-    The install space is a new path for numba's cache: both nodes compile their kernels
-    cold, which took over 120 s on the loaded 2-core VM (hence the long timeout)."""
+    The install space is a new path for numba's cache, seeded from the source tree's
+    (:func:`seed_numba_cache`); a kernel missing there is compiled cold, which took over
+    120 s on the loaded 2-core VM (hence the long timeout)."""
     lib = install / "rcac_ros" / "lib" / "rcac_ros"
     share = install / "rcac_ros" / "share" / "rcac_ros" / "config"
     env = env_for(install)

@@ -480,6 +480,7 @@ def test_barrier_campaign_runs_the_three_geometries_on_the_same_draws():
     assert (ctrl.geometry, ctrl.natural_metric, ctrl.barrier_c) == ("natural", "barrier", 1000.0)
     ctrl = cp.controller_for(three, dict(runs[2], barrier_c=30.0), cp.nominal_model("panda"))
     assert ctrl.barrier_c == 30.0
-    with pytest.raises(RcacError, match="^geometry: expected 'euclidean' or 'natural'"):
-        cp.controller_for(three, dict(runs[2], law="slotine_li"),
-                          cp.nominal_model("panda"))
+    ctrl = cp.controller_for(three, dict(runs[2], law="slotine_li", barrier_c=30.0),
+                             cp.nominal_model("panda"))
+    assert (type(ctrl).__name__, ctrl.natural_metric, ctrl.barrier_c) == \
+        ("SlotineLiCompositeController", "barrier", 30.0)

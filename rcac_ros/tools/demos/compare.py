@@ -92,6 +92,7 @@ LAWS = {
                                  forgetting=LS_FORGETTING)),
     "slotine_li": ("slotine_li", {}),
     "slotine_li_natural": ("slotine_li", dict(geometry="natural")),
+    "slotine_li_barrier": ("slotine_li", dict(geometry="natural", natural_metric="barrier")),
     # doc/design.md §8: estimates kept physically consistent; "paper_nat_start" and
     # "all_nat_start" are the Euclidean laws from the natural geometry's default start (the
     # same start: the paired comparison)

@@ -52,7 +52,7 @@ from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 #: the law's geometry: "natural_barrier" is the natural one with natural_metric="barrier"
-#: (doc/design.md §8), on the recursive laws
+#: (doc/design.md §8)
 GEOMETRIES = ("euclidean", "natural", "natural_barrier")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
@@ -430,7 +430,7 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
         g["gamma"] = gamma
         g.pop("theta_hat0")
     g.update(theta_hat0=theta_hat0, geometry=inputs["geometry"])
-    if law != "slotine_li" and g["geometry"] == "natural_barrier":
+    if g["geometry"] == "natural_barrier":
         g.update(geometry="natural", natural_metric="barrier", barrier_c=inputs["barrier_c"])
     if law == "slotine_li":
         return controller("slotine_li", model, g)
