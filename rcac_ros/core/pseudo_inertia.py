@@ -244,6 +244,17 @@ def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po):
 
 
 @njit(cache=True, inline="always")
+def step_entries(old, oo, new, on):
+    """The step ``old -> new`` of a retraction: J_hat's 10 entries, Delta's 10 (``J(new) -
+    J_hat``, in the order of :func:`pseudo_entries`) and new's nu."""
+    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(old, oo)
+    e00, e11, e22, e33, e01, e02, e12, e03, e13, e23 = pseudo_entries(new, on)
+    return (j00, j11, j22, j33, j01, j02, j12, j03, j13, j23,
+            e00 - j00, e11 - j11, e22 - j22, e33 - j33, e01 - j01, e02 - j02, e12 - j12,
+            e03 - j03, e13 - j13, e23 - j23, new[on + 4], new[on + 5], new[on + 6])
+
+
+@njit(cache=True, inline="always")
 def retract(old, oo, new, on):
     """Make the step ``old -> new`` (13 parameters each) consistent, in place in ``new``.
 
@@ -261,12 +272,8 @@ def retract(old, oo, new, on):
     (``a = 0``) and only nu moves; a step that is not finite is not taken at all. ``nu`` is
     clipped to ``|nu_k| <= NU_RATIO tr(J+)`` (:data:`NU_RATIO`).
     """
-    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(old, oo)
-    e00, e11, e22, e33, e01, e02, e12, e03, e13, e23 = pseudo_entries(new, on)
-    n0, n1, n2 = new[on + 4], new[on + 5], new[on + 6]
-    d00, d11, d22, d33 = e00 - j00, e11 - j11, e22 - j22, e33 - j33    # Delta
-    d01, d02, d12, d03, d13, d23 = e01 - j01, e02 - j02, e12 - j12, e03 - j03, e13 - j13, \
-        e23 - j23
+    (j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, d00, d11, d22, d33, d01, d02, d12,
+     d03, d13, d23, n0, n1, n2) = step_entries(old, oo, new, on)
     ok, l00, l10, l11, l20, l21, l22, l30, l31, l32, l33 = cholesky_entries(
         j00, j11, j22, j33, j01, j02, j12, j03, j13, j23)
     if not ok:                                     # never, from a checked start
@@ -374,12 +381,8 @@ def retract_short(old, oo, new, on):
     halving makes pass, is not taken (``a = 0``: J kept, nu moves). ``nu`` is clipped as
     in :func:`retract`. Returns ``a``.
     """
-    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(old, oo)
-    e00, e11, e22, e33, e01, e02, e12, e03, e13, e23 = pseudo_entries(new, on)
-    n0, n1, n2 = new[on + 4], new[on + 5], new[on + 6]
-    d00, d11, d22, d33 = e00 - j00, e11 - j11, e22 - j22, e33 - j33    # Delta
-    d01, d02, d12, d03, d13, d23 = e01 - j01, e02 - j02, e12 - j12, e03 - j03, e13 - j13, \
-        e23 - j23
+    (j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, d00, d11, d22, d33, d01, d02, d12,
+     d03, d13, d23, n0, n1, n2) = step_entries(old, oo, new, on)
     a = 1.0
     if not math.isfinite(d00 + d11 + d22 + d33 + d01 + d02 + d12 + d03 + d13 + d23
                          + n0 + n1 + n2):
