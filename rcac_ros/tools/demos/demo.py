@@ -213,8 +213,6 @@ def add_arguments(parser):
 
 
 def run(args):
-    from rcac_ros.tools.bags.inspect import format_metrics, format_summary, inspect
-
     out = os.path.abspath(args.out)
     try:
         bag = run_demo(args.duration, out, args.storage)
@@ -225,6 +223,9 @@ def run(args):
     except NodeFailed as err:
         print(f"rcac demo: error: {err}", file=sys.stderr)
         return 1
+    # imported here, not first: it imports the core, whose first import compiles the kernels
+    # (warm_kernels says so before)
+    from rcac_ros.tools.bags.inspect import format_metrics, format_summary, inspect
     result = inspect(bag, plots_dir=out)
     print(format_summary(bag, result["summary"]))
     start = result["metrics"].get("sim_time_start_s")
