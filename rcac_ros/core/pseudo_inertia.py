@@ -425,12 +425,17 @@ def natural_gains_into(theta, k, Pnu, out):
 
 
 @njit(cache=True)
-def retract_rows(prev, theta):
-    """:func:`retract` of every link's step ``prev[i] -> theta[i]``, in place; the smallest
+def retract_rows(prev, theta, short):
+    """Every link's step ``prev[i] -> theta[i]`` made consistent in place, by :func:`retract`
+    or, with ``short`` (the metric ``"barrier"``), by :func:`retract_short`; the smallest
     step length."""
     a_min = 1.0
     for i in range(theta.shape[0]):
-        a_min = min(a_min, retract(prev[i], 0, theta[i], 0))
+        if short:
+            a = retract_short(prev[i], 0, theta[i], 0)
+        else:
+            a = retract(prev[i], 0, theta[i], 0)
+        a_min = min(a_min, a)
     return a_min
 
 
@@ -461,16 +466,6 @@ def barrier_gains_into(theta, kc, P_inv, E, out):
         for a in range(13):
             for b in range(13):
                 out[i, 13 * a + b] = 0.5 * (Pm[a, b] + Pm[b, a])
-
-
-@njit(cache=True)
-def retract_rows_short(prev, theta):
-    """:func:`retract_short` of every link's step ``prev[i] -> theta[i]``, in place; the
-    smallest step length."""
-    a_min = 1.0
-    for i in range(theta.shape[0]):
-        a_min = min(a_min, retract_short(prev[i], 0, theta[i], 0))
-    return a_min
 
 
 # ---- Python side: conversions, checks, defaults --------------------------------------------

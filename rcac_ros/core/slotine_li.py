@@ -39,8 +39,7 @@ from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
 from .composite import initial_estimates, natural_metric_option
 from .pseudo_inertia import (barrier_gains_into, is_body, lambda_min, matched_gain,
-                             natural_gains_into, nu_gain, pseudo_inertia, retract_rows,
-                             retract_rows_short)
+                             natural_gains_into, nu_gain, pseudo_inertia, retract_rows)
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
@@ -362,9 +361,9 @@ class SlotineLiCompositeController:
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
         if self.geometry == "natural":
-            retract = retract_rows if self.barrier_c is None else retract_rows_short
-            self.retraction_length = retract(self._prev,
-                                             self._theta[:13 * self.n].reshape(self.n, 13))
+            self.retraction_length = retract_rows(self._prev,
+                                                  self._theta[:13 * self.n].reshape(self.n, 13),
+                                                  self.barrier_c is not None)
             if self.joint_friction:
                 self.retraction_length = min(self.retraction_length, retract_terms(
                     self._prev_f, self._theta[13 * self.n:].reshape(self.n, 3)))
