@@ -15,6 +15,7 @@ demo: $(VENV)/.runtime
 	$(BIN)/rcac demo --out $(OUT)/demo
 
 test: $(VENV)/.test
+	$(BIN)/python -m rcac_ros.tools.warm
 	$(BIN)/python -m pytest -q
 
 setup: $(VENV)/.runtime
@@ -48,8 +49,11 @@ $(VENV)/.runtime: requirements.txt setup.py
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $@
 
+# the kernels compile (python -m rcac_ros.tools.warm) while the test requirements install
 $(VENV)/.test: $(VENV)/.runtime requirements-test.txt
-	$(BIN)/python -m pip install --quiet -r requirements-test.txt
+	$(BIN)/python -m rcac_ros.tools.warm > $(VENV)/warm.log 2>&1 & \
+	$(BIN)/python -m pip install --quiet -r requirements-test.txt; status=$$?; \
+	wait; cat $(VENV)/warm.log; exit $$status
 	touch $@
 
 clean:

@@ -45,57 +45,13 @@ from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, natural_friction_start)
 from .least_squares import initial_factor
-from .pseudo_inertia import as_start, default_start, is_body, lambda_min, matched_gain, nu_gain
+from .pseudo_inertia import (initial_estimates, is_body, lambda_min, matched_gain,
+                             natural_metric_option, nu_gain)
 
 UPDATES = ("implicit", "explicit")
 GEOMETRIES = ("euclidean", "natural")
-#: the natural geometry's metrics (doc/design.md §8): k_i times the log-det Hessian, or the
-#: barrier plus the Euclidean quadratic
-NATURAL_METRICS = ("log_det", "barrier")
-#: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
-#: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
-BARRIER_C = 1000.0
-#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
-BARRIER_C_MIN = 1e-6
 ADAPTATIONS = {"gradient": ADAPT_GRADIENT, "least_squares": ADAPT_LS,
                "least_squares_prediction": ADAPT_LS_PREDICTION}
-
-
-def initial_estimates(model, geometry, theta_hat0):
-    """The link estimates a controller starts from (both laws): ``theta_hat0`` checked, by
-    default zero (Euclidean) or a body per link (natural: the nominal model made a body,
-    doc/design.md §8)."""
-    n = model.n
-    if geometry == "natural":
-        return default_start(model.theta()) if theta_hat0 is None else as_start(theta_hat0, n)
-    return np.zeros((n, 13)) if theta_hat0 is None else \
-        as_array(theta_hat0, (n, 13), "theta_hat0")
-
-
-def natural_metric_option(natural_metric, barrier_c, geometry, adaptation="gradient"):
-    """Check the natural geometry's metric options (doc/design.md §8): ``(natural_metric,
-    c)``, ``c`` None unless ``natural_metric="barrier"`` (then ``barrier_c`` or
-    :data:`BARRIER_C`); one-line :class:`GainError` otherwise."""
-    if natural_metric not in NATURAL_METRICS:
-        raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
-                        f"{natural_metric!r}")
-    if natural_metric == "barrier" and geometry != "natural":
-        raise GainError("natural_metric: 'barrier' only with geometry='natural'")
-    if natural_metric == "barrier" and adaptation != "gradient":
-        raise GainError(f"natural_metric: 'barrier' needs adaptation='gradient', got "
-                        f"{adaptation!r} (natural least squares has its own metric, "
-                        f"doc/design.md §8)")
-    if barrier_c is not None and natural_metric != "barrier":
-        raise GainError("barrier_c: only with natural_metric='barrier'")
-    if natural_metric != "barrier":
-        return natural_metric, None
-    c = scalar(BARRIER_C if barrier_c is None else barrier_c, "barrier_c", GainError,
-               minimum=0.0, strict=True)
-    if c < BARRIER_C_MIN:                           # H / (c k_i) must stay finite
-        raise GainError(f"barrier_c: must be >= {BARRIER_C_MIN:g} (the barrier's curvature "
-                        f"at the start at most {1 / BARRIER_C_MIN:g} times the quadratic's), "
-                        f"got {c:g}")
-    return natural_metric, c
 
 
 class RecursiveCompositeController:
@@ -165,7 +121,8 @@ class RecursiveCompositeController:
         (:func:`~rcac_ros.core.pseudo_inertia.retract_short`). Only with
         ``geometry="natural"`` and ``adaptation="gradient"``.
     barrier_c : float, optional
-        ``c > 0`` of the metric ``"barrier"`` (default :data:`BARRIER_C`).
+        ``c > 0`` of the metric ``"barrier"`` (default
+        :data:`~rcac_ros.core.pseudo_inertia.BARRIER_C`).
     joint_friction : bool
         Also estimate each joint's armature, viscous and Coulomb friction
         (:mod:`rcac_ros.core.joint_friction`, doc/design.md §7): ``friction_hat`` (n, 3).

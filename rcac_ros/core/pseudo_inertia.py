@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._validate import as_array
+from ._validate import as_array, scalar
 from rcac_ros.errors import GainError, InputError
 
 #: Pinocchio's order of the standard parameters (``Inertia.toDynamicParameters``).
@@ -65,6 +65,16 @@ SECOND_MOMENT_FLOOR = 0.01
 #: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
 #: above the rounding of a 4x4 factorisation and far below any real body's ratio.
 FLOOR = 1e-12
+
+#: the natural geometry's metrics (doc/design.md §8): k_i times the log-det Hessian, or the
+#: barrier plus the Euclidean quadratic
+NATURAL_METRICS = ("log_det", "barrier")
+#: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
+#: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
+BARRIER_C = 1000.0
+#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
+BARRIER_C_MIN = 1e-6
+
 #: Numerical guard on nu: |nu_k| <= NU_RATIO tr(J), so that the 13 stored parameters keep
 #: J's digits (a body has 0 <= nu_k = h_k^2 / m <= Sigma_kk <= tr(J)).
 NU_RATIO = 100.0
@@ -682,3 +692,40 @@ def whitened_into(R, th, o, X, out, oo):
                 acc += X[i, m] * R[j, m]
             out[oo + c] = acc if i == j else _SQRT2 * acc
             c += 1
+
+
+def initial_estimates(model, geometry, theta_hat0):
+    """The link estimates a controller starts from (both laws): ``theta_hat0`` checked, by
+    default zero (Euclidean) or a body per link (natural: the nominal model made a body,
+    doc/design.md §8)."""
+    n = model.n
+    if geometry == "natural":
+        return default_start(model.theta()) if theta_hat0 is None else as_start(theta_hat0, n)
+    return np.zeros((n, 13)) if theta_hat0 is None else \
+        as_array(theta_hat0, (n, 13), "theta_hat0")
+
+
+def natural_metric_option(natural_metric, barrier_c, geometry, adaptation="gradient"):
+    """Check the natural geometry's metric options (doc/design.md §8): ``(natural_metric,
+    c)``, ``c`` None unless ``natural_metric="barrier"`` (then ``barrier_c`` or
+    :data:`BARRIER_C`); one-line :class:`GainError` otherwise."""
+    if natural_metric not in NATURAL_METRICS:
+        raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
+                        f"{natural_metric!r}")
+    if natural_metric == "barrier" and geometry != "natural":
+        raise GainError("natural_metric: 'barrier' only with geometry='natural'")
+    if natural_metric == "barrier" and adaptation != "gradient":
+        raise GainError(f"natural_metric: 'barrier' needs adaptation='gradient', got "
+                        f"{adaptation!r} (natural least squares has its own metric, "
+                        f"doc/design.md §8)")
+    if barrier_c is not None and natural_metric != "barrier":
+        raise GainError("barrier_c: only with natural_metric='barrier'")
+    if natural_metric != "barrier":
+        return natural_metric, None
+    c = scalar(BARRIER_C if barrier_c is None else barrier_c, "barrier_c", GainError,
+               minimum=0.0, strict=True)
+    if c < BARRIER_C_MIN:                           # H / (c k_i) must stay finite
+        raise GainError(f"barrier_c: must be >= {BARRIER_C_MIN:g} (the barrier's curvature "
+                        f"at the start at most {1 / BARRIER_C_MIN:g} times the quadratic's), "
+                        f"got {c:g}")
+    return natural_metric, c

@@ -37,9 +37,9 @@ from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I
 from ._validate import as_array, joint_values
 from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
-from .composite import initial_estimates, natural_metric_option
-from .pseudo_inertia import (barrier_gains_into, is_body, lambda_min, matched_gain,
-                             natural_gains_into, nu_gain, pseudo_inertia, retract_rows)
+from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lambda_min,
+                             matched_gain, natural_gains_into, natural_metric_option, nu_gain,
+                             pseudo_inertia, retract_rows)
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor

@@ -55,20 +55,17 @@ def demo_overrides(duration, dt):
 
 
 def warm_kernels(log):
-    """Load (on the first run: compile) the numba kernels the two nodes use, once, here.
+    """Load (on the first run: compile) the numba kernels, once, before the nodes start.
 
     numba caches them next to the sources, so the nodes started next load them in seconds;
     without this both would compile them at the same time at their start (over 2 min on a
-    2-core machine), longer than the wait for their topics. Says how long it took."""
-    import numpy as np
-    from rcac_ros.core import RecursiveCompositeController, Simulator, css_arm
+    2-core machine), longer than the wait for their topics. Compiles in two processes at a
+    time (:mod:`rcac_ros.tools.warm`) and says how long it took."""
+    from rcac_ros.tools.warm import warm
     log("rcac demo: loading the kernels (the first run compiles them once: about 2 min on "
         "2 cores)")
     t0 = time.monotonic()
-    model = css_arm()
-    z = np.zeros(model.n)
-    RecursiveCompositeController(model).step(z, z, z, z, z)
-    Simulator(model, dt=0.002).step(z)
+    warm(log=lambda text: log(f"rcac demo: {text}") if " failed " in text else None)
     log(f"rcac demo: kernels ready in {time.monotonic() - t0:.0f} s")
 
 

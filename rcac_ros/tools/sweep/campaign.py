@@ -38,7 +38,7 @@ import time
 import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
-from rcac_ros.core.composite import BARRIER_C
+from rcac_ros.core.pseudo_inertia import BARRIER_C
 from rcac_ros.core.identifiability import inertia_about_com
 from rcac_ros.core.model import theta_from_inertia
 from rcac_ros.core.pseudo_inertia import lambda_min
