@@ -45,8 +45,8 @@ from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, natural_friction_start)
 from .least_squares import initial_factor
-from .pseudo_inertia import (initial_estimates, is_body, lambda_min, matched_gain,
-                             natural_metric_option, nu_gain)
+from .pseudo_inertia import (bregman_log_det, check_body, initial_estimates, is_body,
+                             lambda_min, matched_gain, natural_metric_option, nu_gain)
 
 UPDATES = ("implicit", "explicit")
 GEOMETRIES = ("euclidean", "natural")
@@ -523,20 +523,38 @@ class RecursiveCompositeController:
         return bool(self._scal[I_TRACKING]), self._chan[:, CH_ACTIVE] != 0.0
 
     def lyapunov(self, theta):
-        """Eqs 25-26: ``sum_i (s_i^T M_i s_i + theta_tilde_i^T P_i^-1 theta_tilde_i) / 2``.
+        """The Lyapunov function of the law in use, with the true parameters ``theta`` (n, 13).
 
-        Uses the link velocity errors of the last step and the true parameters ``theta`` (n, 13).
-        This is the Euclidean law's V, with the fixed ``P_i``: with ``geometry="natural"``
-        the V of doc/design.md §8 has a Bregman divergence in place of the second term,
-        which is not computed here.
+        Euclidean (eqs 25-26): ``sum_i (s_i^T M_i s_i + theta~_i^T P_i^-1 theta~_i) / 2``,
+        ``theta~ = theta_hat - theta``, with the fixed ``P_i`` or the least-squares ``P_i``.
+        Natural (doc/design.md §8): the second term becomes the Bregman divergence of the
+        law's metric: ``D(J_i || J_hat_i) / k_i + nu~_i^T P_nu,i^-1 nu~_i / 2`` (log-det),
+        ``D / (c k_i) + theta~_i^T P_i^-1 theta~_i / 2`` (barrier), ``D / k_i + theta~_i^T
+        Gamma_i theta~_i / 2`` (least squares), ``D`` of :func:`~rcac_ros.core.pseudo_inertia.
+        bregman_log_det`; then every ``theta_i`` must be a body (else :class:`InputError`).
+        Uses the link velocity errors of the last step; the joint terms are not included.
         """
         from .regressor import link_matrices
         theta = as_array(theta, (self.n, 13), "theta")
         s = self.link_velocity_error
         tt = self.theta_hat - theta
-        P = self.gain
         total = 0.0
         for i in range(self.n):
             M = link_matrices(theta[i], np.zeros(3))[0]
-            total += 0.5 * s[i] @ M @ s[i] + 0.5 * tt[i] @ np.linalg.solve(P[i], tt[i])
-        return float(total)
+            total += 0.5 * s[i] @ M @ s[i]
+        P = self.gain
+        if self.geometry == "euclidean":
+            return float(total + sum(0.5 * tt[i] @ np.linalg.solve(P[i], tt[i])
+                                     for i in range(self.n)))
+        check_body(theta, "theta")
+        D = bregman_log_det(theta, self.theta_hat)
+        k = self._const[:, NAT_K]
+        if self.adaptation == "least_squares":          # D / k + theta~^T Gamma theta~ / 2
+            quad = [tt[i] @ np.linalg.solve(P[i], tt[i]) for i in range(self.n)]
+        elif self.barrier_c is not None:                # D / (c k) + theta~^T P^-1 theta~ / 2
+            k = k * self.barrier_c
+            quad = [tt[i] @ np.linalg.solve(P[i], tt[i]) for i in range(self.n)]
+        else:                                           # D / k + nu~^T P_nu^-1 nu~ / 2
+            Pnu = self._const[:, NAT_P_NU:NAT_P_NU + 9].reshape(self.n, 3, 3)
+            quad = [tt[i, 4:7] @ np.linalg.solve(Pnu[i], tt[i, 4:7]) for i in range(self.n)]
+        return float(total + np.sum(D / k) + 0.5 * np.sum(quad))

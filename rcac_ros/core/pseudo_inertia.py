@@ -545,6 +545,17 @@ def is_body(theta):
     return ok.reshape(np.shape(theta)[:-1])
 
 
+def bregman_log_det(theta, theta_hat):
+    """``D(J || J_hat) = tr(J J_hat^-1) - log det(J J_hat^-1) - 4`` per link, the Bregman
+    divergence of ``-log det`` between the pseudo-inertias of ``theta`` and ``theta_hat``
+    (..., 13), both bodies (doc/design.md §8). >= 0, zero exactly when ``J = J_hat``."""
+    J = pseudo_inertia(theta)
+    L = np.linalg.cholesky(pseudo_inertia(theta_hat))
+    X = np.linalg.solve(L, np.swapaxes(np.linalg.solve(L, J), -1, -2))   # L^-1 J L^-T
+    sign, logdet = np.linalg.slogdet(X)
+    return np.trace(X, axis1=-2, axis2=-1) - logdet - 4.0
+
+
 def check_body(theta, name="theta_hat0", exc=InputError):
     """Raise ``exc`` with one line naming the first link whose ``theta`` is not a body."""
     ok = np.atleast_1d(is_body(theta))
