@@ -39,8 +39,9 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
                        block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
-from .composite_kernels import (friction_step_kernel, is_paper_law, paper_friction_step,
-                                paper_step, rcac_step_kernel)
+from .composite_kernels import (friction_step_kernel, is_paper_law, is_paper_natural_law,
+                                paper_friction_step, paper_natural_step, paper_step,
+                                rcac_step_kernel)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, natural_friction_start)
@@ -253,7 +254,8 @@ class RecursiveCompositeController:
 
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step`, the paper's law's fused body (faster), for
-        that law, else the general kernel :func:`rcac_step_kernel`; with the joint terms,
+        that law, :func:`paper_natural_step` for it in the natural geometry, else the general
+        kernel :func:`rcac_step_kernel`; with the joint terms,
         :func:`~rcac_ros.core.composite_kernels.paper_friction_step` or
         :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`."""
         fused = self._fused and is_paper_law(self._chan, self._scal)
@@ -261,6 +263,9 @@ class RecursiveCompositeController:
             kernel = paper_friction_step if fused else friction_step_kernel
             jdata, jfilt = self._jdata, self._jfilt
             self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
+            return
+        if self._fused and is_paper_natural_law(self._chan, self._scal):
+            self._kernel = paper_natural_step
             return
         self._kernel = paper_step if fused else rcac_step_kernel
 

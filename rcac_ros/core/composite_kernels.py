@@ -7,7 +7,8 @@ Two compiled bodies of one law, tested against each other bit for bit
   any option of the adaptation step (:mod:`rcac_ros.core.adaptation`);
 - :func:`paper_step`, the paper's law (:func:`is_paper_law`) fused in one loop body: one
   channel (joint 1), the fixed gain, the implicit update. It is the speed (doc/tools.md,
-  ``rcac bench``).
+  ``rcac bench``). :func:`paper_natural_step` is the same body in the natural geometry
+  (doc/design.md §8).
 
 With the joint terms (doc/design.md §7) the general kernel is
 :func:`friction_step_kernel`, the same body as :func:`rcac_step_kernel`
@@ -27,10 +28,12 @@ from numba import njit
 from ._blocks import VEC, check_vectors, feedback_wrench, reference_motion
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
-                       I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
-                       I_PROJECT, I_P_DIAG, I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA, PHI_F,
-                       PHI_PREV, PSI_F, PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
+                       I_BARRIER_C, I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK,
+                       I_NATURAL, I_PROJECT, I_P_DIAG, I_RETRACT_MIN, I_TRACKING, I_Y, LAMBDA,
+                       NAT_K, NAT_P_NU, PHI_F, PHI_PREV, PSI_F, PSI_PREV, Q_PREV, S_LINK, TAU,
+                       THETA_HAT, THETA_PREV, U_ROW, W_ROW)
+from .adaptation import (adapt_link, diagonal_factor, implicit_solve, natural_ls_apply,
+                         natural_ls_factor, project, retract_links, tracking_active,
                          update_least_squares)
 from .channels import (axis_terms, close_channels, filter_step, filtered_output, predict_link,
                        start_channels)
@@ -38,6 +41,7 @@ from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC,
                              FRICTION_SIGNATURE, JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW,
                              adapt_joint, implicit_solve_joint, predict_joint, retract_term,
                              term_gain)
+from .pseudo_inertia import natural_gain_apply
 from .regressor import reference_wrench, regressor_row, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
@@ -48,22 +52,38 @@ GENERAL_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1
 
 
 @njit(cache=True, inline="always")
-def is_paper_law(chan, scal):
-    """True for the paper's law exactly: one channel (joint 1), the fixed gain, implicit
-    update, no dead zone, no projection, no leakage, the Euclidean geometry, adapting.
-    The controller then runs :func:`paper_step` or :func:`paper_friction_step`."""
+def paper_options(chan, scal):
+    """The paper's law's options, whatever the geometry: one channel (joint 1), the fixed
+    gain, implicit update, no dead zone, no projection, no leakage, adapting."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
-            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0
-            and scal[I_NATURAL] == 0.0)
+            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0)
 
 
 @njit(cache=True, inline="always")
-def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
-    """The one body of :func:`paper_step` and :func:`paper_friction_step`: the paper's law
-    (:func:`is_paper_law`) fused in one loop, with joint i's terms of doc/design.md §7
-    (``jdata``, ``jfilt``) when ``joint`` is true, else without them (``jdata``, ``jfilt``
-    unread). Each caller passes ``joint`` as a constant, so the compiler keeps one branch.
+def is_paper_law(chan, scal):
+    """True for the paper's law exactly: :func:`paper_options` and the Euclidean geometry.
+    The controller then runs :func:`paper_step` or :func:`paper_friction_step`."""
+    return paper_options(chan, scal) and scal[I_NATURAL] == 0.0
+
+
+@njit(cache=True, inline="always")
+def is_paper_natural_law(chan, scal):
+    """True for the paper's law in the natural geometry (doc/design.md §8, either metric):
+    :func:`paper_options` and ``geometry="natural"``. Without the joint terms the controller
+    then runs :func:`paper_natural_step`."""
+    return paper_options(chan, scal) and scal[I_NATURAL] != 0.0
+
+
+@njit(cache=True, inline="always")
+def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d):
+    """The one body of :func:`paper_step`, :func:`paper_friction_step` and
+    :func:`paper_natural_step`: the paper's law (:func:`paper_options`) fused in one loop,
+    with joint i's terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true,
+    else without them (``jdata``, ``jfilt`` unread), and in the natural geometry of
+    doc/design.md §8 when ``natural`` is true (the gain ``P_eff(theta_hat_i)`` of either
+    metric in eq 24's step 1, then the retraction; ``joint`` is then false). Each caller
+    passes ``joint`` and ``natural`` as constants, so the compiler keeps one branch.
 
     The same equations, in the same floating-point order, as the general kernels with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
@@ -82,12 +102,14 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     if err != 0:
         scal[I_ERR] = err
         return np.empty(0, q.dtype)
-    work = np.empty(n * 41 + 6, q.dtype)
+    work = np.empty(n * 41 + 96, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
     R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
     F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
+    Pg, t = work[41 * n + 6:41 * n + 19], work[41 * n + 19:41 * n + 32]   # natural: gain
+    M4 = work[41 * n + 32:41 * n + 96].reshape((4, 4, 4))   # natural: 4x4 scratch
     tau = np.empty(n, q.dtype)
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
@@ -191,7 +213,27 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
         # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
         for k in range(13):
             G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
-        if p_diag:
+        if natural:                  # P_eff(theta_hat_i) of adapt_link, doc/design.md §8
+            st = state[i]
+            crow = const[i]
+            for k in range(13):
+                st[THETA_PREV + k] = st[THETA_HAT + k]
+            if scal[I_BARRIER_C] > 0.0:           # (H / (c k_i) + P_i^-1)^-1, factored
+                if p_diag:
+                    diagonal_factor(st, scal[I_BARRIER_C] * crow[NAT_K], M4)
+                else:
+                    natural_ls_factor(st, scal[I_BARRIER_C] * crow[NAT_K], Pg, M4)
+                natural_ls_apply(st, G[i], 0, Pg, 0, t, p_diag)
+                for k in range(13):
+                    R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+                natural_ls_apply(st, filt[0, i], W_ROW, filt[0, i], U_ROW, t, p_diag)
+            else:                                 # k_i (Hessian of -log det)^-1, P_nu
+                natural_gain_apply(st, THETA_HAT, G[i], 0, Pg, 0, crow[NAT_K], crow, NAT_P_NU)
+                for k in range(13):
+                    R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+                natural_gain_apply(st, THETA_HAT, filt[0, i], W_ROW, filt[0, i], U_ROW,
+                                   crow[NAT_K], crow, NAT_P_NU)
+        elif p_diag:
             for a in range(13):
                 R[i, a] = state[i, THETA_HAT + a] - h * const[i, GAIN_P + 14 * a] * G[i, a]
                 filt[0, i, U_ROW + a] = const[i, GAIN_P + 14 * a] * filt[0, i, W_ROW + a]
@@ -228,6 +270,8 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
             state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
+    if natural:
+        retract_links(state, scal)                    # doc/design.md §8
     scal[I_K] += 1.0
     return tau
 
@@ -236,14 +280,22 @@ def paper_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
 def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`): :func:`paper_law`
     without the joint terms, bit for bit the general kernel's results."""
-    return paper_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
+    return paper_law(data, filt, data, filt, False, False, q, qd, q_d, qd_d, qdd_d)
+
+
+@njit(RCAC_SIGNATURE, cache=True)
+def paper_natural_step(data, filt, q, qd, q_d, qd_d, qdd_d):
+    """:func:`rcac_step_kernel` for the paper's law in the natural geometry
+    (:func:`is_paper_natural_law`, doc/design.md §8): :func:`paper_law` with the natural
+    gain and the retraction, bit for bit the general kernel's results."""
+    return paper_law(data, filt, data, filt, False, True, q, qd, q_d, qd_d, qdd_d)
 
 
 @njit(FRICTION_SIGNATURE, cache=True)
 def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     """:func:`friction_step_kernel` for the paper's law
     (:func:`is_paper_law`): :func:`paper_law` with the joint terms (doc/design.md §7)."""
-    return paper_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)
+    return paper_law(data, filt, jdata, jfilt, True, False, q, qd, q_d, qd_d, qdd_d)
 
 
 @njit(GENERAL_SIGNATURE, cache=True)

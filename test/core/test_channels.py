@@ -155,6 +155,33 @@ def test_fused_paper_step_equals_the_general_kernel():
             assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("options", [{}, {"natural_metric": "barrier"},
+                                     {"natural_metric": "barrier", "P": np.diag(
+                                         np.linspace(50.0, 150.0, 13)) + 1.0}])
+def test_fused_paper_natural_step_equals_the_general_kernel(options):
+    """The paper's law in the natural geometry runs the fused body too
+    (``paper_natural_step``), with either metric and a diagonal or a full ``P``: bit for bit
+    the general kernel's run (efforts, estimates, E and the retraction's step length at
+    every step), from a 0.5 rad error."""
+    from rcac_ros.core import composite_kernels
+    model = css_arm()
+    traj = PaperTrajectory(Q0)
+    runs = []
+    for fused in (True, False):
+        ctrl = RecursiveCompositeController(model, geometry="natural", **options)
+        ctrl.use_fused_kernel(fused)
+        assert (ctrl._kernel is composite_kernels.paper_natural_step) == fused
+        sim = Simulator(model, q0=Q0 + 0.5)
+        out = []
+        for k in range(500):
+            out.append(ctrl.step(sim.q, sim.qd, *traj(k * 0.002)))
+            out += [ctrl.theta_hat, ctrl.E, np.array([ctrl.retraction_length])]
+            sim.step(out[-4])
+        runs.append(out)
+    assert all(np.array_equal(a, b) for a, b in zip(*runs))
+    assert min(float(x[0]) for x in runs[0][3::4]) > 0.0
+
+
 @pytest.mark.parametrize("joint_friction", [False, True])
 def test_use_fused_kernel_chooses_the_kernel(monkeypatch, joint_friction):
     """use_fused_kernel(False) sends the paper's law through the general kernel (counted
