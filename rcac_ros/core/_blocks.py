@@ -18,6 +18,8 @@ INPUT_NAMES = ("q", "qd", "q_d", "qd_d", "qdd_d")
 #: The only signatures the step kernels are compiled for: anything else is a TypeError at
 #: dispatch (never a silent recompilation), which the Python entry points convert once.
 VEC = "float64[::1]"
+#: the recursive law's step kernels': (data, filt, q, qd, q_d, qd_d, qdd_d) -> tau
+RCAC_SIGNATURE = f"{VEC}(float64[:, ::1], float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})"
 
 
 @njit(cache=True)

@@ -212,6 +212,40 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
                 filt[c, i, U_ROW + k] = Pg[k]
 
 
+@njit(cache=True)
+def natural_gain_rows(const, state, filt0, G, R, scal, Pg, t, M4):
+    """Eq 24, step 1 of the paper's law (one channel, joint 1) in the natural geometry, every
+    link: ``R_i = theta_hat_i - h P_eff,i G_i`` and ``U_i = P_eff,i W_i^T`` (``filt0``: the
+    channel's rows), ``G_i`` already holding ``Y_ri^T s_i - gamma W_i^T y``, and
+    ``theta_hat_i`` kept for the retraction; ``P_eff`` of either metric, as
+    :func:`adapt_link` computes it (doc/design.md §8). ``Pg``, ``t``: 13 scratch each;
+    ``M4``: 4x4 scratch. Not inlined: the fused kernel calls it once per step, so its
+    Euclidean instances do not compile it (compile time)."""
+    h = scal[I_H]
+    p_diag = scal[I_P_DIAG] != 0.0
+    c = scal[I_BARRIER_C]
+    for i in range(state.shape[0]):
+        st = state[i]
+        row = const[i]
+        for k in range(13):
+            st[THETA_PREV + k] = st[THETA_HAT + k]
+        if c > 0.0:                               # (H / (c k_i) + P_i^-1)^-1, factored
+            if p_diag:
+                diagonal_factor(st, c * row[NAT_K], M4)
+            else:
+                natural_ls_factor(st, c * row[NAT_K], Pg, M4)
+            natural_ls_apply(st, G[i], 0, Pg, 0, t, p_diag)
+            for k in range(13):
+                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+            natural_ls_apply(st, filt0[i], W_ROW, filt0[i], U_ROW, t, p_diag)
+        else:                                     # k_i (Hessian of -log det)^-1, P_nu
+            natural_gain_apply(st, THETA_HAT, G[i], 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
+            for k in range(13):
+                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+            natural_gain_apply(st, THETA_HAT, filt0[i], W_ROW, filt0[i], U_ROW, row[NAT_K],
+                               row, NAT_P_NU)
+
+
 @njit(cache=True, inline="always")
 def retract_links(state, scal):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made

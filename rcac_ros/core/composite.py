@@ -22,8 +22,9 @@ Where each part lives (doc/design.md §3-4):
   ``phi``, ``psi``);
 - :mod:`rcac_ros.core.adaptation`: eq 24, the adaptation step and its discretisation
   (implicit or explicit), least squares, dead zones, projection, leakage;
-- :mod:`rcac_ros.core.composite_kernels`: the compiled step (the general kernel and the
-  paper's fused one), on the packed arrays of :mod:`rcac_ros.core._packing`;
+- :mod:`rcac_ros.core.composite_kernels` and :mod:`rcac_ros.core.composite_fused`: the
+  compiled step (the general kernel; the paper's law's fused one), on the packed arrays of
+  :mod:`rcac_ros.core._packing`;
 - here: the controller, which validates and packs the gains and options, chooses a kernel
   and reads the state back. With the defaults the law is the paper's, to the last bit.
 """
@@ -39,9 +40,11 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS,
                        block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
-from .composite_kernels import (friction_step_kernel, is_paper_law, is_paper_natural_law,
-                                paper_friction_step, paper_natural_step, paper_step,
-                                rcac_step_kernel)
+# the general kernels first: python -m rcac_ros.tools.warm compiles the fused ones (their own
+# module) in a second process meanwhile, and this import then loads them from the cache
+from .composite_kernels import friction_step_kernel, rcac_step_kernel
+from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction_step,
+                              paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, natural_friction_start)
@@ -256,7 +259,7 @@ class RecursiveCompositeController:
         """The compiled step: :func:`paper_step`, the paper's law's fused body (faster), for
         that law, :func:`paper_natural_step` for it in the natural geometry, else the general
         kernel :func:`rcac_step_kernel`; with the joint terms,
-        :func:`~rcac_ros.core.composite_kernels.paper_friction_step` or
+        :func:`~rcac_ros.core.composite_fused.paper_friction_step` or
         :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`."""
         fused = self._fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:

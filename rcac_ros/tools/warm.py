@@ -2,21 +2,22 @@
 
 numba caches each kernel next to its source (``cache=True``), keyed on the source file's
 modification time and size, so a new checkout compiles them on its first use: about 2.5 min
-of one core on a 2-core machine, most of it the controller's general step
-(:mod:`rcac_ros.core.composite_kernels`, compiled when :mod:`rcac_ros.core` is imported).
+of one core on a 2-core machine, most of it the recursive law's step kernels
+(:mod:`rcac_ros.core.composite_kernels`, :mod:`rcac_ros.core.composite_fused`, compiled
+when :mod:`rcac_ros.core` is imported).
 ``make test`` and ``rcac demo`` run this first, so the tests and the nodes load them
 instead of compiling them (and a node does not compile for minutes at its start).
 
 The work is split in two processes that compile different kernels at the same time:
 
-- ``recursive``: ``import rcac_ros.core`` (the recursive law's step kernels, compiled
+- ``recursive``: ``import rcac_ros.core`` (the recursive law's general kernels, compiled
   eagerly at import: most of the time), then one step of its variants;
-- ``others``: the kernels that do not depend on the recursive law's (dynamics, kinematics,
-  the simulator, the Slotine-Li law and the natural geometry's helpers, the identifiability
-  accumulator, the command guards). This process imports those modules without running
-  ``rcac_ros/core/__init__.py``, which would compile the recursive law's kernels a second
-  time beside the first process; what the first process then needs of them it loads from
-  the cache.
+- ``others``: everything else (dynamics, kinematics, the simulator, the Slotine-Li law and
+  the natural geometry's helpers, the identifiability accumulator, the command guards),
+  then the recursive law's fused kernels (:mod:`rcac_ros.core.composite_fused`). This
+  process imports those modules without running ``rcac_ros/core/__init__.py``, which would
+  compile the general kernels a second time beside the first process; what the first
+  process then needs of the second's it loads from the cache.
 
 Usage: ``python -m rcac_ros.tools.warm [--jobs N] [GROUP ...]`` (each group in its own
 process, ``N`` at a time, default 2). Prints one line per group with its time. Exit code 1 if
@@ -61,9 +62,9 @@ def warm_recursive():
 
 
 def warm_others():
-    """Everything that does not depend on the recursive law's kernels, without importing
-    them: dynamics, kinematics, the simulator, the Slotine-Li law and the natural geometry's
-    helpers, the identifiability accumulator, the command guards."""
+    """Everything but the recursive law's general kernels, without importing them: dynamics,
+    kinematics, the simulator, the Slotine-Li law and the natural geometry's helpers, the
+    identifiability accumulator, the command guards, then the fused kernels."""
     _core_without_init()
     import numpy as np
 
@@ -89,6 +90,7 @@ def warm_others():
     limiter = DesiredLimiter(0.01, 0.1, 0.002, model.n)
     limiter(z, z, z)
     limiter(q, z, z)
+    core("composite_fused")             # the recursive law's fused kernels (eager)
 
 
 WARMERS = {"recursive": warm_recursive, "others": warm_others}

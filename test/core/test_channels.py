@@ -163,14 +163,14 @@ def test_fused_paper_natural_step_equals_the_general_kernel(options):
     (``paper_natural_step``), with either metric and a diagonal or a full ``P``: bit for bit
     the general kernel's run (efforts, estimates, E and the retraction's step length at
     every step), from a 0.5 rad error."""
-    from rcac_ros.core import composite_kernels
+    from rcac_ros.core import composite_fused
     model = css_arm()
     traj = PaperTrajectory(Q0)
     runs = []
     for fused in (True, False):
         ctrl = RecursiveCompositeController(model, geometry="natural", **options)
         ctrl.use_fused_kernel(fused)
-        assert (ctrl._kernel is composite_kernels.paper_natural_step) == fused
+        assert (ctrl._kernel is composite_fused.paper_natural_step) == fused
         sim = Simulator(model, q0=Q0 + 0.5)
         out = []
         for k in range(500):

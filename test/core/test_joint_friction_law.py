@@ -8,7 +8,7 @@ from chains import (exact_run as true_parameters_run, frictional, frictional_cha
 
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
-from rcac_ros.core.composite_kernels import is_paper_law
+from rcac_ros.core.composite_fused import is_paper_law
 from rcac_ros.core.model import PAPER_Q0
 
 Q0 = np.array(PAPER_Q0)

@@ -115,7 +115,7 @@ class Replay:
 def natural_baselines(model):
     """The natural law (doc/design.md §8) and two Euclidean baselines, all from the natural
     default start: the paper's law as a user runs it (its fused kernel,
-    :func:`~rcac_ros.core.composite_kernels.paper_step`) and the same law on the general
+    :func:`~rcac_ros.core.composite_fused.paper_step`) and the same law on the general
     kernel's path by a projection onto infinite bounds (the same estimates, bit for bit,
     plus 13 n clips)."""
     start = default_start(model.theta())
