@@ -538,8 +538,9 @@ class RecursiveCompositeController:
         Natural (doc/design.md §8): the second term becomes the Bregman divergence of the
         law's metric: ``D(J_i || J_hat_i) / k_i + nu~_i^T P_nu,i^-1 nu~_i / 2`` (log-det),
         ``D / (c k_i) + theta~_i^T P_i^-1 theta~_i / 2`` (barrier), ``D / k_i + theta~_i^T
-        Gamma_i theta~_i / 2`` (least squares), ``D`` of :func:`~rcac_ros.core.pseudo_inertia.
-        bregman_log_det`; then every ``theta_i`` must be a body (else :class:`InputError`).
+        Gamma_i theta~_i / 2`` (least squares), with ``D`` of
+        :func:`~rcac_ros.core.pseudo_inertia.bregman_log_det`; then every ``theta_i`` must be
+        a body (else :class:`InputError`).
         Uses the link velocity errors of the last step; the joint terms are not included.
         """
         from .regressor import link_matrices
