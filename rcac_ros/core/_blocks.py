@@ -9,7 +9,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._packing import GAIN_K_D, I_ERR, LAMBDA
+from ._packing import CONST_COLS, GAIN_K_D, I_ERR, LAMBDA
 from rcac_ros.errors import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
@@ -35,6 +35,26 @@ def check_vectors(n, a, b, c, d, e):
             if not math.isfinite(v[i]):
                 return k + 11
     return 0
+
+
+@njit(cache=True, inline="always")
+def rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
+    """True, with :func:`check_vectors`' code in ``scal[I_ERR]``, if a step's inputs are not
+    five finite vectors of length n (the kernel then returns an empty tau)."""
+    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
+    if err != 0:
+        scal[I_ERR] = err
+        return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def packed_views(data, filt):
+    """The recursive law's kernel arguments as views: ``n``, the per-link constants
+    ``data[:n, :CONST_COLS]``, the per-link state, the scalars ``data[n]`` and the channels
+    ``filt[:, n]`` (layout: :mod:`rcac_ros.core._packing`)."""
+    n = data.shape[0] - 1
+    return n, data[:n, :CONST_COLS], data[:n, CONST_COLS:], data[n], filt[:, n]
 
 
 def input_error(scal, n, values):

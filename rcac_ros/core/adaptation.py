@@ -126,6 +126,35 @@ def gain_step(row, p_diag, st, grad, h, R, i):
 
 
 @njit(cache=True, inline="always")
+def natural_gain_step(row, st, factored, k_metric, s_diag, grad, h, R, i, Pg, t, M4):
+    """Natural geometry, eq 24 step 1's explicit part for link i: ``R_i = theta_hat_i - h
+    P_eff(theta_hat_i) grad`` (doc/design.md §8). ``factored``: the gain ``S K^-1 S^T`` of
+    :func:`natural_ls_factor` with ``k_metric`` (natural least squares: ``k_i``; the barrier
+    metric: ``c k_i``; ``s_diag``: S diagonal), factored here for the step; else the log-det
+    metric's ``k_i (Hessian of -log det)^-1`` on J and ``P_nu`` on nu."""
+    if factored:
+        if s_diag:
+            diagonal_factor(st, k_metric, M4)
+        else:
+            natural_ls_factor(st, k_metric, Pg, M4)
+        natural_ls_apply(st, grad, 0, Pg, 0, t, s_diag)
+    else:
+        natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
+    for k in range(13):
+        R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+
+
+@njit(cache=True, inline="always")
+def natural_gain_row(row, st, factored, s_diag, f, t):
+    """``U_ci = P_eff(theta_hat_i) W_ci^T`` in channel c's row ``f = filt[c, i]``, with the
+    gain :func:`natural_gain_step` used (its factor already in the state when ``factored``)."""
+    if factored:
+        natural_ls_apply(st, f, W_ROW, f, U_ROW, t, s_diag)
+    else:
+        natural_gain_apply(st, THETA_HAT, f, W_ROW, f, U_ROW, row[NAT_K], row, NAT_P_NU)
+
+
+@njit(cache=True, inline="always")
 def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + leakage + prediction
     part)``, and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares).
@@ -156,22 +185,11 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
         leakage_gradient(row, st, scal, grad)
     if mode != ADAPT_LS_PREDICTION:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
-    if factored:    # (H / k_i + Gamma_i)^-1 or (H / (c k_i) + P_i^-1)^-1, doc/design.md §8
+    if natural:     # (H / k_i + Gamma_i)^-1, (H / (c k_i) + P_i^-1)^-1 or k_i H^-1, P_nu
         k_metric = row[NAT_K] if mode == ADAPT_LS else scal[I_BARRIER_C] * row[NAT_K]
-        if s_diag:
-            diagonal_factor(st, k_metric, M4)
-        else:
-            natural_ls_factor(st, k_metric, Pg, M4)
-        natural_ls_apply(st, grad, 0, Pg, 0, t, s_diag)
-        for k in range(13):
-            R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+        natural_gain_step(row, st, factored, k_metric, s_diag, grad, h, R, i, Pg, t, M4)
     elif mode == ADAPT_GRADIENT:
-        if natural:
-            natural_gain_apply(st, THETA_HAT, grad, 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
-            for k in range(13):
-                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
-        else:
-            gain_step(row, p_diag, st, grad, h, R, i)
+        gain_step(row, p_diag, st, grad, h, R, i)
     elif mode == ADAPT_LS:
         apply_factored(st, P_FACTOR, grad, Pg, t)
         for k in range(13):
@@ -189,11 +207,8 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     for c in range(chan.shape[0]):
         if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
-        if factored:                            # U_ci = S K^-1 S^T W_ci^T
-            natural_ls_apply(st, filt[c, i], W_ROW, filt[c, i], U_ROW, t, s_diag)
-        elif mode == ADAPT_GRADIENT and natural:  # U_ci = P_eff(theta_hat_i) W_ci^T
-            natural_gain_apply(st, THETA_HAT, filt[c, i], W_ROW, filt[c, i], U_ROW, row[NAT_K],
-                               row, NAT_P_NU)
+        if natural:                             # U_ci = P_eff(theta_hat_i) W_ci^T
+            natural_gain_row(row, st, factored, s_diag, filt[c, i], t)
         elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
             if p_diag:
                 for a in range(13):
@@ -229,21 +244,9 @@ def natural_gain_rows(const, state, filt0, G, R, scal, Pg, t, M4):
         row = const[i]
         for k in range(13):
             st[THETA_PREV + k] = st[THETA_HAT + k]
-        if c > 0.0:                               # (H / (c k_i) + P_i^-1)^-1, factored
-            if p_diag:
-                diagonal_factor(st, c * row[NAT_K], M4)
-            else:
-                natural_ls_factor(st, c * row[NAT_K], Pg, M4)
-            natural_ls_apply(st, G[i], 0, Pg, 0, t, p_diag)
-            for k in range(13):
-                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
-            natural_ls_apply(st, filt0[i], W_ROW, filt0[i], U_ROW, t, p_diag)
-        else:                                     # k_i (Hessian of -log det)^-1, P_nu
-            natural_gain_apply(st, THETA_HAT, G[i], 0, Pg, 0, row[NAT_K], row, NAT_P_NU)
-            for k in range(13):
-                R[i, k] = st[THETA_HAT + k] - h * Pg[k]
-            natural_gain_apply(st, THETA_HAT, filt0[i], W_ROW, filt0[i], U_ROW, row[NAT_K],
-                               row, NAT_P_NU)
+        # the barrier's (H / (c k_i) + P_i^-1)^-1, factored; else k_i H^-1 and P_nu
+        natural_gain_step(row, st, c > 0.0, c * row[NAT_K], p_diag, G[i], h, R, i, Pg, t, M4)
+        natural_gain_row(row, st, c > 0.0, p_diag, filt0[i], t)
 
 
 @njit(cache=True, inline="always")

@@ -17,9 +17,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._blocks import RCAC_SIGNATURE, check_vectors, reference_motion
+from ._blocks import RCAC_SIGNATURE, packed_views, reference_motion, rejects_input
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
-                       GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_FROZEN,
+                       GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
@@ -73,14 +73,8 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     Joint 1's channel sees joint 1's terms only, so they join the Sherman-Morrison solve
     at link 1; every other joint's terms adapt from the tracking term alone.
     """
-    n = data.shape[0] - 1
-    const = data[:n, :CONST_COLS]
-    state = data[:n, CONST_COLS:]
-    scal = data[n]
-    chan = filt[:, n]
-    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
-    if err != 0:
-        scal[I_ERR] = err
+    n, const, state, scal, chan = packed_views(data, filt)
+    if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
     work = np.empty(n * 41 + 96, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations

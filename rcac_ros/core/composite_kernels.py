@@ -16,8 +16,9 @@ import math
 import numpy as np
 from numba import njit
 
-from ._blocks import RCAC_SIGNATURE, VEC, check_vectors, feedback_wrench, reference_motion
-from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_ERR, I_FE, I_FB0, I_FB1, I_FROZEN,
+from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
+    rejects_input
+from ._packing import (ADAPT_GRADIENT, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
 from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
@@ -47,14 +48,8 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     2-core VM) for no gain per step beyond the noise (same-process A/B, new over old,
     1.01-1.09 for the general laws, 1.08 for the unchanged fused kernel).
     """
-    n = data.shape[0] - 1
-    const = data[:n, :CONST_COLS]
-    state = data[:n, CONST_COLS:]
-    scal = data[n]
-    chan = filt[:, n]
-    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
-    if err != 0:
-        scal[I_ERR] = err
+    n, const, state, scal, chan = packed_views(data, filt)
+    if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
     m = chan.shape[0]
     # the implicit solve's scratch: with the joint terms, 2 + m, else 29 + m per channel

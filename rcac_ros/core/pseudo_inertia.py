@@ -552,7 +552,7 @@ def bregman_log_det(theta, theta_hat):
     J = pseudo_inertia(theta)
     L = np.linalg.cholesky(pseudo_inertia(theta_hat))
     X = np.linalg.solve(L, np.swapaxes(np.linalg.solve(L, J), -1, -2))   # L^-1 J L^-T
-    sign, logdet = np.linalg.slogdet(X)
+    logdet = np.linalg.slogdet(X)[1]           # X is positive definite: its sign is +1
     return np.trace(X, axis1=-2, axis2=-1) - logdet - 4.0
 
 

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._blocks import INPUT_NAMES, VEC, check_vectors, cholesky_solve, input_error, \
+from ._blocks import INPUT_NAMES, VEC, cholesky_solve, input_error, rejects_input, \
     reference_motion
 from ._packing import (CONST_COLS, GAIN_K_D, GAIN_P, I_E, I_ERR, I_FB0, I_FB1, I_FE, I_G, I_GAMMA,
                        I_H, I_IMPLICIT, I_K, I_LAM, I_Y, LAMBDA, Gains, new_data)
@@ -74,9 +74,7 @@ def slotine_li_step_kernel(data, theta_hat, filt, joint, q, qd, q_d, qd_d, qdd_d
     n = data.shape[0] - 1
     const = data[:n, :CONST_COLS]
     scal = data[n]
-    err = check_vectors(n, q, qd, q_d, qd_d, qdd_d)
-    if err != 0:
-        scal[I_ERR] = err
+    if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
     nj = 13 * n                               # first column of the joint terms
     m = nj + 3 * joint.shape[0]
