@@ -287,8 +287,8 @@ CONTROLLER = _robot("controller") + (
           "the desired velocity changes at most this much per control period, rad/s",
           lo=0.0, hi=BIG, strict=True),
     Param("realtime.priority", "integer", 0,
-          "SCHED_FIFO priority of the control thread (best effort, a warning if refused); "
-          "0: off", lo=0, hi=99),
+          "SCHED_FIFO priority of the control thread, the process's other threads (DDS, "
+          "inputs) one below (best effort, a warning if refused); 0: off", lo=0, hi=99),
     Param("realtime.lock_memory", "bool", False, "mlockall the process's memory (best effort)"),
     Param("realtime.cpus", "integer_array", None,
           "CPU affinity of the control thread (best effort; unset: any CPU)"),

@@ -1,6 +1,10 @@
 """Opt-in real-time options of a node process, each best-effort (doc/failsafe.md, "real time").
 
-* ``SCHED_FIFO`` priority of the calling thread (the control loop's);
+* ``SCHED_FIFO`` priority of the calling thread (the node's loop), and one below it for the
+  process's other threads (DDS reception and events, the input threads) and those they
+  start: on a loaded machine a state that DDS received must not wait behind busy processes
+  before the loop can use it, nor the loop for the interpreter lock held by a thread that
+  such processes preempted;
 * ``mlockall`` of the current and future pages (no page fault in the loop);
 * CPU affinity of the calling thread;
 * a hold on ``/dev/cpu_dma_latency``: while the file stays open with a value written, the
@@ -15,10 +19,24 @@ import ctypes
 import ctypes.util
 import os
 import struct
+import threading
 
 MCL_CURRENT = 1
 MCL_FUTURE = 2
 DMA_LATENCY = "/dev/cpu_dma_latency"
+
+
+def process_threads():
+    """The native ids of this process's threads (``/proc/self/task``)."""
+    return [int(tid) for tid in os.listdir("/proc/self/task")]
+
+
+def options_from(values):
+    """:class:`RealtimeOptions` from a node's ``realtime.*`` parameter values."""
+    return RealtimeOptions(priority=values["realtime.priority"],
+                           lock_memory=values["realtime.lock_memory"],
+                           cpus=values["realtime.cpus"] or (),
+                           dma_latency_us=values["realtime.cpu_dma_latency"])
 
 
 class RealtimeOptions:
@@ -27,7 +45,8 @@ class RealtimeOptions:
     Parameters
     ----------
     priority : int
-        SCHED_FIFO priority 1-99 of the control thread; 0: leave the scheduler alone.
+        SCHED_FIFO priority 1-99 of the loop thread, the process's other threads one below
+        (at least 1); 0: leave the scheduler alone.
     lock_memory : bool
         ``mlockall(MCL_CURRENT | MCL_FUTURE)``.
     cpus : sequence of int
@@ -102,12 +121,20 @@ class Realtime:
         top = os.sched_get_priority_max(os.SCHED_FIFO)
         if not 1 <= prio <= top:
             raise ValueError(f"priority {prio} outside 1..{top}")
+        own = threading.get_native_id()
+        others = [tid for tid in process_threads() if tid != own]
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
         except PermissionError as err:
             raise OSError(err.errno, "SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit "
                           "(/etc/security/limits.conf)") from None
-        return f"priority {prio}"
+        below = max(prio - 1, 1)
+        for tid in others:
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(below))
+            except ProcessLookupError:      # the thread ended meanwhile
+                pass
+        return f"priority {prio}, the process's {len(others)} other threads {below}"
 
     def _dma_hold(self):
         fd = os.open(DMA_LATENCY, os.O_WRONLY)

@@ -42,8 +42,8 @@ def add_controller(p):
     """The controller's options of the benchmarks over ROS (ros, faults, soak)."""
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     p.add_argument("--rt", action="store_true",
-                   help="the controller with its real-time options (SCHED_FIFO 80, mlockall, "
-                        "cpu_dma_latency 0; best effort)")
+                   help="the controller with its real-time options (SCHED_FIFO 80, its "
+                        "process's other threads 79, mlockall, cpu_dma_latency 0; best effort)")
     p.add_argument("--K_D", type=positive_float, default=None,
                    help="the controller's K_D (default: the bench's)")
     p.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",

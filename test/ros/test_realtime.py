@@ -1,0 +1,72 @@
+"""The opt-in real-time options of a node process (rcac_ros.nodes.runtime.realtime), in a
+child process so that this one keeps its scheduler: the loop thread at the priority asked
+for, the threads that were already running one below, a thread started later inheriting the
+loop's; a refused option is a warning, not an error."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+CHILD = r"""
+import json, os, sys, threading
+from rcac_ros.nodes.runtime.realtime import Realtime, RealtimeOptions
+stop = threading.Event()
+ids = {}
+def idle(key):
+    ids[key] = threading.get_native_id()
+    stop.wait()
+before = threading.Thread(target=idle, args=("before",)); before.start()
+while "before" not in ids:
+    pass
+rt = Realtime(RealtimeOptions(priority=int(sys.argv[1])), warn=lambda t: None)
+after = threading.Thread(target=idle, args=("after",)); after.start()
+while "after" not in ids:
+    pass
+ids["loop"] = threading.get_native_id()
+out = {k: [os.sched_getscheduler(t), os.sched_getparam(t).sched_priority] for k, t in ids.items()}
+out["applied"], out["warnings"] = rt.applied, rt.warnings
+stop.set(); before.join(); after.join()
+print(json.dumps(out))
+"""
+
+
+def _child(priority):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    done = subprocess.run([sys.executable, "-c", CHILD, str(priority)], capture_output=True,
+                          text=True, timeout=60, env=env, check=True)
+    return json.loads(done.stdout)
+
+
+def test_priority_applies_to_the_loop_and_one_below_to_the_process_threads():
+    try:
+        os.sched_param(1)
+        subprocess.run(["chrt", "-f", "1", "true"], check=True, capture_output=True)
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("SCHED_FIFO refused here: needs CAP_SYS_NICE or an rtprio limit, which a "
+                    "real-time install grants")
+    out = _child(30)
+    fifo = os.SCHED_FIFO
+    assert out["loop"] == [fifo, 30]
+    assert out["before"] == [fifo, 29]           # e.g. DDS's threads, the input threads
+    assert out["after"] == [fifo, 30]            # started by the loop thread: inherited
+    assert out["warnings"] == [] and out["applied"][0].startswith("sched_fifo (priority 30")
+
+
+def test_lowest_priority_keeps_the_other_threads_at_one():
+    try:
+        subprocess.run(["chrt", "-f", "1", "true"], check=True, capture_output=True)
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("SCHED_FIFO refused here: needs CAP_SYS_NICE or an rtprio limit, which a "
+                    "real-time install grants")
+    out = _child(1)
+    assert out["loop"] == [os.SCHED_FIFO, 1] and out["before"] == [os.SCHED_FIFO, 1]
+
+
+def test_a_priority_out_of_range_is_a_warning():
+    out = _child(1000)
+    assert out["applied"] == []
+    assert len(out["warnings"]) == 1 and "priority 1000 outside 1..99" in out["warnings"][0]
+    assert out["loop"][0] == os.SCHED_OTHER
