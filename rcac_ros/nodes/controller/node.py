@@ -69,7 +69,6 @@ class ControllerNode(ManagedNode):
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
-        self.realtime_options = self.failsafe.realtime      # applied by runtime.base.run
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
         self._starvation = Starvation(      # doc/failsafe.md

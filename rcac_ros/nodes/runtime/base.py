@@ -196,9 +196,9 @@ def _raise_interrupt(signum, frame):
 
 
 def _realtime(node):
-    """Apply the node's opt-in real-time options (``node.realtime_options``) to this thread
-    (the node's loop) and, for the priority, to the process's other threads."""
-    options = getattr(node, "realtime_options", None)
+    """Apply the node's opt-in real-time options to this thread (the control loop's) and,
+    for the priority, to the process's other threads."""
+    options = getattr(getattr(node, "failsafe", None), "realtime", None)
     if options is None or not options.any:
         return None
     rt = Realtime(options, warn=node.get_logger().warning)

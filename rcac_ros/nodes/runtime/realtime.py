@@ -31,14 +31,6 @@ def process_threads():
     return [int(tid) for tid in os.listdir("/proc/self/task")]
 
 
-def options_from(values):
-    """:class:`RealtimeOptions` from a node's ``realtime.*`` parameter values."""
-    return RealtimeOptions(priority=values["realtime.priority"],
-                           lock_memory=values["realtime.lock_memory"],
-                           cpus=values["realtime.cpus"] or (),
-                           dma_latency_us=values["realtime.cpu_dma_latency"])
-
-
 class RealtimeOptions:
     """What to ask for; the defaults ask for nothing.
 

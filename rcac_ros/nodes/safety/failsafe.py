@@ -12,7 +12,7 @@ The parameters are rows of :mod:`rcac_ros.params`.
 import numpy as np
 
 from rcac_ros.nodes.safety.guards import check_goal, DesiredLimiter
-from rcac_ros.nodes.runtime import realtime
+from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 from rcac_ros.nodes.safety.state_guards import SafeStop, StampGate
 
 
@@ -41,7 +41,9 @@ class ControllerGuards:
         self.stop = SafeStop(values["watchdog.replan_after"])
         self.limiter = DesiredLimiter(values["desired.max_position_step"],
                                       values["desired.max_velocity_step"], h, model.n)
-        self.realtime = realtime.options_from(values)
+        self.realtime = RealtimeOptions(
+            priority=values["realtime.priority"], lock_memory=values["realtime.lock_memory"],
+            cpus=values["realtime.cpus"] or (), dma_latency_us=values["realtime.cpu_dma_latency"])
         free = [model.joint_names[i] for i in np.flatnonzero(~np.isfinite(effort_limit))]
         if free:
             warn(f"no effort limit for joints {free} (neither the model nor effort_limit gives "
