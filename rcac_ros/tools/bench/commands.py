@@ -42,7 +42,8 @@ SIM_RT_OPTIONS = {"realtime.priority": 70, "realtime.lock_memory": True}
 
 
 def add_controller(p):
-    """The controller's options of the benchmarks over ROS (ros, faults, soak)."""
+    """The nodes' options of the benchmarks over ROS (ros, faults, soak): the controller's,
+    and with ``--rt`` the simulator's real-time options."""
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     p.add_argument("--rt", action="store_true",
                    help="both nodes with their real-time options, best effort: the "
