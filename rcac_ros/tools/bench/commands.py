@@ -39,8 +39,6 @@ RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
 #: the simulator's (the arm's driver) real-time options of ``--rt``: below the controller's,
 #: as a driver's thread beside a controller manager's on one machine
 SIM_RT_OPTIONS = {"realtime.priority": 70, "realtime.lock_memory": True}
-#: the fault bench's own process (its relay and probe) with ``--rt``: below both nodes
-BENCH_RT_PRIORITY = 60
 
 
 def add_controller(p):
@@ -51,8 +49,7 @@ def add_controller(p):
                    help="both nodes with their real-time options, best effort: the "
                         "controller SCHED_FIFO 80 (its process's other threads 79), mlockall, "
                         "cpu_dma_latency 0; the simulator, which stands for the arm's driver, "
-                        "SCHED_FIFO 70 (69), mlockall; faults and soak: the bench's relay and "
-                        "probe SCHED_FIFO 60")
+                        "SCHED_FIFO 70 (69), mlockall")
     p.add_argument("--K_D", type=positive_float, default=None,
                    help="the controller's K_D (default: the bench's)")
     p.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
@@ -202,8 +199,7 @@ def run_faults(args, cases=None, soak_minutes=None):
     run_faults(getattr(args, "duration", 60.0), cases,
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,
-               plot_path=args.plot, soak_minutes=soak_minutes,
-               bench_priority=BENCH_RT_PRIORITY if args.rt else 0)
+               plot_path=args.plot, soak_minutes=soak_minutes)
     return 0
 
 

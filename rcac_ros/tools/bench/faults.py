@@ -52,17 +52,14 @@ import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
-from rcac_ros.nodes.runtime.realtime import Realtime, RealtimeOptions
 
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
          "memory_growth": 0.05, "settle_s": 5.0, "starved_ratio": 10.0}
 #: the hostile flood (doc/failsafe.md): 1e6 joint names, a pair of messages every 100 ms
 HOSTILE = ["--names", "1000000", "--period", "0.1"]
-#: a process that only wakes every period (``h``, ``seconds``) and prints its wake-up times;
-#: a normal process, whatever the bench's scheduler
+#: a process that only wakes every period (``h``, ``seconds``) and prints its wake-up times
 PLAIN_LOOP = """
-import os, sys, time
-os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+import sys, time
 h, secs = float(sys.argv[1]), float(sys.argv[2])
 t, nxt = [], time.monotonic()
 end = nxt + secs
@@ -322,7 +319,7 @@ class _Run:
         self.busy = []
         self.third = self.t0 = self.t_restart = self.t_resume = self.track = None
         self.children, self.ctx, self.executor = [], None, None
-        self.ctrl = self.sim_child = self.rt = None
+        self.ctrl = self.sim_child = None
 
     def spin_for(self, seconds, cond=None, what="running"):
         """Spin this process's node for ``seconds`` (or until ``cond()``); the controller
@@ -340,14 +337,8 @@ class _Run:
 
 
 def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
-             verbose=True, simulator=None, bench_priority=0):
-    """Run one case; return its figures (see the module docstring).
-
-    ``bench_priority`` > 0: this process's threads (the relay and the probe, which carry the
-    states and count the efforts) at that SCHED_FIFO priority while the case runs, so that
-    a load the case puts on the machine starves the nodes, not the bench's measurement; the
-    processes the case starts (busy, flood, plain loop) reset themselves to the default
-    scheduler, the nodes take their own parameters."""
+             verbose=True, simulator=None):
+    """Run one case; return its figures (see the module docstring)."""
     import domain_coordinator
 
     from rcac_ros.tools.launch import child_env
@@ -363,9 +354,6 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         run = _Run(h, env)
         try:
             _start_nodes(run, case, spec, controller, simulator or {}, rate, domain, log_dir)
-            if bench_priority:
-                run.rt = Realtime(RealtimeOptions(priority=bench_priority),
-                                  warn=lambda text: print(f"  bench: {text}", flush=True))
             run.spin_for(warmup)
             run.probe.recording = True
             rss = _run_windows(run, spec, duration, soak, verbose)
@@ -374,8 +362,6 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
             run.spin_for(1.2)       # one more diagnostics message
         finally:
             _stop_all(run)
-            if run.rt is not None and run.rt.applied:     # the next case starts as this one
-                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     _collect_figures(run, spec, out, rss, t1, soak)
     return out
 
@@ -604,7 +590,7 @@ def plot(results, path):
 
 
 def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plot_path=None,
-               soak_minutes=None, verbose=True, simulator=None, bench_priority=0):
+               soak_minutes=None, verbose=True, simulator=None):
     """Run the cases (or the soak), print the table, return the results."""
     if not duration > 3.0:
         raise ConfigError(f"duration: must be > 3 s, got {duration}")
@@ -619,8 +605,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
         if verbose:
             print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
-                                verbose=verbose, simulator=simulator,
-                                bench_priority=bench_priority))
+                                verbose=verbose, simulator=simulator))
         if verbose:
             r = results[-1]
             print(f"  tracking RMS {r['tracking_rms']}, longest gap {r['longest_gap_ms']:.1f} "

@@ -9,7 +9,6 @@ doc/failsafe.md: ``--names 1000000 --period 0.1``).
 """
 
 import argparse
-import os
 import time
 
 import rclpy
@@ -38,8 +37,6 @@ def main(argv=None):
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--period", type=float, default=0.01)
     args = parser.parse_args(argv)
-    # a broken publisher is a normal process, whatever the scheduler of the bench that starts it
-    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     rclpy.init()
     node = rclpy.create_node("failsafe_flood")
     qos = topics.qos()
