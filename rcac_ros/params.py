@@ -142,6 +142,23 @@ def _zero_or_more(name, text):
     return Param(name, "double", 0.0, text, lo=0.0, hi=BIG)
 
 
+def _realtime(loop):
+    """The rows of a node's opt-in real-time options (:mod:`rcac_ros.nodes.runtime.realtime`);
+    ``loop`` names the thread that paces the node."""
+    return (
+        Param("realtime.priority", "integer", 0,
+              f"SCHED_FIFO priority of the {loop}, the process's other threads (DDS, "
+              "inputs) one below (best effort, a warning if refused); 0: off", lo=0, hi=99),
+        Param("realtime.lock_memory", "bool", False,
+              "mlockall the process's memory (best effort)"),
+        Param("realtime.cpus", "integer_array", None,
+              f"CPU affinity of the {loop} (best effort; unset: any CPU)"),
+        Param("realtime.cpu_dma_latency", "integer", -1,
+              "hold /dev/cpu_dma_latency at this many us while running (0: the shallowest "
+              "idle state; best effort); -1: off", lo=-1, hi=100_000),
+    )
+
+
 def _diagnostics_period():
     return Param("diagnostics_period", "double", 1.0, "diagnostics period, s (steady clock)",
                  lo=0.0, hi=3600.0, strict=True)
@@ -286,15 +303,7 @@ CONTROLLER = _robot("controller") + (
     Param("desired.max_velocity_step", "double", 1.0,
           "the desired velocity changes at most this much per control period, rad/s",
           lo=0.0, hi=BIG, strict=True),
-    Param("realtime.priority", "integer", 0,
-          "SCHED_FIFO priority of the control thread, the process's other threads (DDS, "
-          "inputs) one below (best effort, a warning if refused); 0: off", lo=0, hi=99),
-    Param("realtime.lock_memory", "bool", False, "mlockall the process's memory (best effort)"),
-    Param("realtime.cpus", "integer_array", None,
-          "CPU affinity of the control thread (best effort; unset: any CPU)"),
-    Param("realtime.cpu_dma_latency", "integer", -1,
-          "hold /dev/cpu_dma_latency at this many us while running (0: the shallowest idle "
-          "state; best effort); -1: off", lo=-1, hi=100_000),
+    *_realtime("control thread"),
     Param("timer.lookahead", "double", None,
           "timer mode: predict the state this long beyond its age at the tick, from the "
           "model and the effort being applied (RK4), s; unset: no prediction (the effort "
@@ -370,6 +379,7 @@ SIMULATOR = _robot("simulator") + (
     Param("publish_velocity", "bool", True,
           "fill JointState.velocity (false: positions only)"),
     _effort_limit(),
+    *_realtime("stepping thread"),
     _diagnostics_period(),
     _strict_parameters(),
 )

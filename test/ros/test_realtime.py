@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -69,3 +70,46 @@ def test_a_priority_out_of_range_is_a_warning():
     assert out["applied"] == []
     assert len(out["warnings"]) == 1 and "priority 1000 outside 1..99" in out["warnings"][0]
     assert out["loop"][0] == os.SCHED_OTHER
+
+
+def _schedulers(pid):
+    """``{thread id: (policy, priority)}`` of process ``pid``'s threads."""
+    out = {}
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        try:
+            out[int(tid)] = (os.sched_getscheduler(int(tid)),
+                             os.sched_getparam(int(tid)).sched_priority)
+        except ProcessLookupError:      # the thread ended meanwhile
+            pass
+    return out
+
+
+@pytest.mark.parametrize("module, overrides", [
+    ("simulator_node", ("mode:=realtime",)),      # waits for a controller meanwhile
+    ("controller_node", ("mode:=timer",)),        # waits for states meanwhile
+])
+def test_each_node_applies_its_realtime_parameters(module, overrides):
+    """Both node processes take ``realtime.priority`` from their parameters: the thread
+    that paces them at it, every other thread of the process one below."""
+    _needs_fifo()
+    from test_nodes_support import ros_domain, start, stop
+    with ros_domain():
+        proc = start(module, "realtime.priority:=30", *overrides)
+        try:
+            deadline = time.monotonic() + 120.0
+            seen = {}
+            while time.monotonic() < deadline and proc.poll() is None:
+                seen = _schedulers(proc.pid)
+                if seen.get(proc.pid) == (os.SCHED_FIFO, 30):
+                    time.sleep(0.5)                 # threads it started since: inherited
+                    seen = _schedulers(proc.pid)
+                    break
+                time.sleep(0.2)
+        finally:
+            code, out = stop(proc)
+    assert seen.get(proc.pid) == (os.SCHED_FIFO, 30), out
+    others = {tid: s for tid, s in seen.items() if tid != proc.pid}
+    assert others and all(s[0] == os.SCHED_FIFO and s[1] in (29, 30)
+                          for s in others.values()), (others, out)
+    assert "real-time options: sched_fifo (priority 30" in out
+    assert code == 0, out

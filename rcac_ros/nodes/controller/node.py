@@ -38,6 +38,7 @@ from rcac_ros.nodes.fjt.server import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.controller.lookahead import StatePredictor
 from rcac_ros.nodes.runtime.managed import ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
+from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 
 
 class ControllerNode(ManagedNode):
@@ -60,6 +61,7 @@ class ControllerNode(ManagedNode):
         self.ctrl = None
         self.loop = None                    # the steady-clock pacing of timer mode
         self._starvation = None             # timer mode's starvation guard
+        self.realtime = None                # its real-time options, once configured
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
 
     # ------------------------------------------------------------------ lifecycle
@@ -69,6 +71,7 @@ class ControllerNode(ManagedNode):
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
+        self.realtime = RealtimeOptions.from_values(values)     # applied by run()
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
         self._starvation = Starvation(      # doc/failsafe.md

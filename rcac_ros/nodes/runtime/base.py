@@ -196,9 +196,10 @@ def _raise_interrupt(signum, frame):
 
 
 def _realtime(node):
-    """Apply the node's opt-in real-time options to this thread (the control loop's) and,
-    for the priority, to the process's other threads."""
-    options = getattr(getattr(node, "failsafe", None), "realtime", None)
+    """Apply the node's opt-in real-time options (its ``realtime`` attribute, a
+    :class:`~rcac_ros.nodes.runtime.realtime.RealtimeOptions`) to this thread (the loop's)
+    and, for the priority, to the process's other threads."""
+    options = getattr(node, "realtime", None)
     if options is None or not options.any:
         return None
     rt = Realtime(options, warn=node.get_logger().warning)

@@ -54,6 +54,14 @@ class RealtimeOptions:
         self.cpus = tuple(int(c) for c in cpus)
         self.dma_latency_us = int(dma_latency_us)
 
+    @classmethod
+    def from_values(cls, values):
+        """The options of a node's checked ``realtime.*`` parameters (:mod:`rcac_ros.params`)."""
+        return cls(priority=values["realtime.priority"],
+                   lock_memory=values["realtime.lock_memory"],
+                   cpus=values["realtime.cpus"] or (),
+                   dma_latency_us=values["realtime.cpu_dma_latency"])
+
     @property
     def any(self):
         """Whether any option is asked for."""

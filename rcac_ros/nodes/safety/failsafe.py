@@ -1,18 +1,15 @@
-"""The controller's fail-safe guards and real-time options, built from its parameters
-(doc/failsafe.md).
+"""The controller's fail-safe guards, built from its parameters (doc/failsafe.md).
 
 :class:`ControllerGuards` holds the objects the node's hooks call: the stamp gate, the size
 caps, the goal check against the model's limits, the limiter of the desired state, the
 spells of safe effort and how control resumes after them (:mod:`rcac_ros.nodes.safety.guards`,
-:mod:`rcac_ros.nodes.safety.state_guards`) and the real-time options
-(:mod:`rcac_ros.nodes.runtime.realtime`).
+:mod:`rcac_ros.nodes.safety.state_guards`).
 The parameters are rows of :mod:`rcac_ros.params`.
 """
 
 import numpy as np
 
 from rcac_ros.nodes.safety.guards import check_goal, DesiredLimiter
-from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 from rcac_ros.nodes.safety.state_guards import SafeStop, StampGate
 
 
@@ -41,9 +38,6 @@ class ControllerGuards:
         self.stop = SafeStop(values["watchdog.replan_after"])
         self.limiter = DesiredLimiter(values["desired.max_position_step"],
                                       values["desired.max_velocity_step"], h, model.n)
-        self.realtime = RealtimeOptions(
-            priority=values["realtime.priority"], lock_memory=values["realtime.lock_memory"],
-            cpus=values["realtime.cpus"] or (), dma_latency_us=values["realtime.cpu_dma_latency"])
         free = [model.joint_names[i] for i in np.flatnonzero(~np.isfinite(effort_limit))]
         if free:
             warn(f"no effort limit for joints {free} (neither the model nor effort_limit gives "

@@ -34,6 +34,7 @@ from rcac_ros.plants import make_plant
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR, RcacNode, run
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
+from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 
 NS = 1_000_000_000
 
@@ -104,6 +105,7 @@ class SimulatorNode(RcacNode):
         self.velocity_noise = v["velocity_noise"]
         self.noise_seed = v["noise_seed"]
         self.publish_velocity = v["publish_velocity"]
+        self.realtime = RealtimeOptions.from_values(v)         # applied by run()
         self.engine = v["engine"]
         limit = params.per_joint("effort_limit", v["effort_limit"], n, None)
         try:

@@ -36,14 +36,20 @@ def add_core(p):
 #: the controller's real-time options of ``--rt``
 RT_OPTIONS = {"realtime.priority": 80, "realtime.lock_memory": True,
               "realtime.cpu_dma_latency": 0}
+#: the simulator's (the arm's driver) real-time options of ``--rt``: below the controller's,
+#: as a driver's thread beside a controller manager's on one machine
+SIM_RT_OPTIONS = {"realtime.priority": 70, "realtime.lock_memory": True}
 
 
 def add_controller(p):
-    """The controller's options of the benchmarks over ROS (ros, faults, soak)."""
+    """The nodes' options of the benchmarks over ROS (ros, faults, soak): the controller's,
+    and with ``--rt`` the simulator's real-time options."""
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     p.add_argument("--rt", action="store_true",
-                   help="the controller with its real-time options (SCHED_FIFO 80, its "
-                        "process's other threads 79, mlockall, cpu_dma_latency 0; best effort)")
+                   help="both nodes with their real-time options, best effort: the "
+                        "controller SCHED_FIFO 80 (its process's other threads 79), mlockall, "
+                        "cpu_dma_latency 0; the simulator, which stands for the arm's driver, "
+                        "SCHED_FIFO 70 (69), mlockall")
     p.add_argument("--K_D", type=positive_float, default=None,
                    help="the controller's K_D (default: the bench's)")
     p.add_argument("--lookahead", type=non_negative_float, default=None, metavar="SECONDS",
@@ -63,6 +69,18 @@ def controller_overrides(args):
     if args.phase_offset is not None:
         over["timer.phase_offset"] = float(args.phase_offset)
     return over
+
+
+def simulator_overrides(args):
+    """The simulator parameters the options of :func:`add_controller` set."""
+    return dict(SIM_RT_OPTIONS) if args.rt else {}
+
+
+def warm_kernels():
+    """Load (the first time: compile) the kernels before the nodes start, as the demo does:
+    two nodes compiling at once take longer than the bench waits for them."""
+    from rcac_ros.tools.warm import warm
+    warm()
 
 
 def add_ros(p):
@@ -165,8 +183,10 @@ def run_core(args):
 
 def run_ros(args):
     from rcac_ros.tools.bench.ros import run_ros_bench
+    warm_kernels()
     result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.mode,
-                           controller_overrides=controller_overrides(args))
+                           controller_overrides=controller_overrides(args),
+                           simulator_overrides=simulator_overrides(args))
     return 0 if result else 1
 
 
@@ -175,8 +195,10 @@ def run_faults(args, cases=None, soak_minutes=None):
     from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
     if cases is None:
         cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+    warm_kernels()
     run_faults(getattr(args, "duration", 60.0), cases,
-               dict(BENCH_CONTROLLER, **controller_overrides(args)), json_path=args.json,
+               dict(BENCH_CONTROLLER, **controller_overrides(args)),
+               simulator=simulator_overrides(args), json_path=args.json,
                plot_path=args.plot, soak_minutes=soak_minutes)
     return 0
 

@@ -69,7 +69,9 @@ while nxt < end:
     t.append(time.monotonic_ns())
 print(" ".join(str(x) for x in t))
 """
-BUSY = "while True:\n    pass\n"
+#: a busy process, at the default scheduler whatever the bench's own
+BUSY = "import os\nos.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))\n" \
+    "while True:\n    pass\n"
 FLOOD = os.path.join(os.path.dirname(os.path.abspath(__file__)), "flood.py")
 BOUND = 1e6                 # |theta_hat| above this: not bounded
 #: the namespace the simulator's states and clock are remapped into, ahead of the relay
@@ -335,7 +337,7 @@ class _Run:
 
 
 def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
-             verbose=True):
+             verbose=True, simulator=None):
     """Run one case; return its figures (see the module docstring)."""
     import domain_coordinator
 
@@ -351,7 +353,7 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
         env = child_env(domain)
         run = _Run(h, env)
         try:
-            _start_nodes(run, case, spec, controller, rate, domain, log_dir)
+            _start_nodes(run, case, spec, controller, simulator or {}, rate, domain, log_dir)
             run.spin_for(warmup)
             run.probe.recording = True
             rss = _run_windows(run, spec, duration, soak, verbose)
@@ -364,7 +366,7 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     return out
 
 
-def _start_nodes(run, case, spec, controller, rate, domain, log_dir):
+def _start_nodes(run, case, spec, controller, simulator, rate, domain, log_dir):
     """This process's node (the relay and the probe), the controller and the simulator;
     returns once they are connected."""
     from rclpy.executors import SingleThreadedExecutor
@@ -376,7 +378,7 @@ def _start_nodes(run, case, spec, controller, rate, domain, log_dir):
     h, env = run.h, run.env
     ctrl_over = dict(controller, mode="timer", rate=float(rate), monitor_decimation=10)
     ctrl_over.update(spec.controller)
-    sim_over = {"mode": "realtime", "dt": h, "duration": 0.0}
+    sim_over = dict(simulator, mode="realtime", dt=h, duration=0.0)
     sim_over.update(spec.simulator)
     remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
              "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
@@ -588,7 +590,7 @@ def plot(results, path):
 
 
 def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plot_path=None,
-               soak_minutes=None, verbose=True):
+               soak_minutes=None, verbose=True, simulator=None):
     """Run the cases (or the soak), print the table, return the results."""
     if not duration > 3.0:
         raise ConfigError(f"duration: must be > 3 s, got {duration}")
@@ -603,7 +605,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
         if verbose:
             print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
-                                verbose=verbose))
+                                verbose=verbose, simulator=simulator))
         if verbose:
             r = results[-1]
             print(f"  tracking RMS {r['tracking_rms']}, longest gap {r['longest_gap_ms']:.1f} "

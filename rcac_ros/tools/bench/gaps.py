@@ -12,7 +12,7 @@ stamps, so the DDS transport is not in it), it looks at the same instant (+-2 pe
 
 It prints the counts, the controller's own diagnostics (garbage collections and their
 longest pause, compute time, late ticks) and the load average (doc/failsafe.md, "Gaps
-between efforts"). ``--rt`` gives the controller its real-time options (SCHED_FIFO 80):
+between efforts"). ``--rt`` gives both nodes their real-time options (``rcac bench ros --rt``):
 what remains then is what a busy machine does not explain.
 """
 
@@ -73,14 +73,15 @@ def attribute(effort_src, state_src, sentinel_late, h_ns=PERIOD_NS):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="gaps", description=__doc__.split("\n")[0])
     parser.add_argument("--duration", type=float, default=20.0)
-    parser.add_argument("--rt", action="store_true", help="the controller's real-time options")
+    parser.add_argument("--rt", action="store_true",
+                        help="both nodes with their real-time options (rcac bench ros --rt)")
     parser.add_argument("--sentinel", metavar="OUT", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.sentinel:
         sentinel(args.sentinel)
         return 0
     from rcac_ros.tools.bench import ros
-    from rcac_ros.tools.bench.commands import RT_OPTIONS
+    from rcac_ros.tools.bench.commands import RT_OPTIONS, SIM_RT_OPTIONS
     probes = []
 
     class Probe(ros.Probe):                 # keeps the probe: its stamps are needed here
@@ -94,7 +95,8 @@ def main(argv=None):
     load0 = os.getloadavg()[0]
     try:
         r = ros.run_ros_bench(args.duration, controller_mode="timer", verbose=False,
-                              controller_overrides=dict(RT_OPTIONS) if args.rt else {})
+                              controller_overrides=dict(RT_OPTIONS) if args.rt else {},
+                              simulator_overrides=dict(SIM_RT_OPTIONS) if args.rt else {})
     finally:
         proc.terminate()
         proc.wait()

@@ -258,7 +258,8 @@ def format_table(r):
 
 
 def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_timeout=60.0,
-                  log_dir=None, verbose=True, controller_overrides=None, controller_mode="timer"):
+                  log_dir=None, verbose=True, controller_overrides=None, controller_mode="timer",
+                  simulator_overrides=None):
     """Run the two nodes free-running and measure the loop; print a table.
 
     Parameters
@@ -277,6 +278,8 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
         Where the nodes' logs go (default: a temporary directory).
     controller_overrides : dict, optional
         Controller parameters on top of :data:`BENCH_CONTROLLER`.
+    simulator_overrides : dict, optional
+        Simulator parameters on top of the bench's (``realtime`` mode at ``rate``).
     controller_mode : {"timer", "on_state"}
         ``timer``: the controller's own ``rate`` Hz loop (doc/nodes.md, "Timing");
         ``on_state`` (alias ``lockstep``, the controller mode it uses): it answers every
@@ -314,8 +317,9 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
                         rate=float(rate))
             over.update(controller_overrides or {})
             ctrl = node_command("controller", overrides=over)
-            sim = node_command("simulator", overrides={"mode": "realtime",
-                                                       "dt": 1.0 / rate, "duration": 0.0})
+            sim = node_command("simulator", overrides=dict(
+                {"mode": "realtime", "dt": 1.0 / rate, "duration": 0.0},
+                **(simulator_overrides or {})))
             children.append(Child("controller", ctrl, env,
                                   os.path.join(log_dir, "controller.log")))
             children.append(Child("simulator", sim, env, os.path.join(log_dir, "simulator.log")))
