@@ -26,6 +26,7 @@ is missing compiles on first use, as without this tool.
 """
 
 import argparse
+import functools
 import importlib
 import os
 import subprocess
@@ -138,6 +139,13 @@ def warm(groups=GROUPS, jobs=2, log=None):
                     f"{out[-1] if out else 'exit code ' + str(proc.returncode)}")
     log(f"warm: done in {time.monotonic() - t0:.0f} s")
     return ok
+
+
+@functools.cache
+def warm_once():
+    """:func:`warm` at most once per process: what starts the nodes calls it first (the ROS
+    benches), since two nodes compiling at once take longer than they are waited for."""
+    return warm()
 
 
 def main(argv=None):

@@ -76,13 +76,6 @@ def simulator_overrides(args):
     return dict(SIM_RT_OPTIONS) if args.rt else {}
 
 
-def warm_kernels():
-    """Load (the first time: compile) the kernels before the nodes start, as the demo does:
-    two nodes compiling at once take longer than the bench waits for them."""
-    from rcac_ros.tools.warm import warm
-    warm()
-
-
 def add_ros(p):
     p.add_argument("--duration", type=positive_float, default=60.0,
                    help="seconds of the run (default 60)")
@@ -183,7 +176,6 @@ def run_core(args):
 
 def run_ros(args):
     from rcac_ros.tools.bench.ros import run_ros_bench
-    warm_kernels()
     result = run_ros_bench(args.duration, json_path=args.json, controller_mode=args.mode,
                            controller_overrides=controller_overrides(args),
                            simulator_overrides=simulator_overrides(args))
@@ -195,7 +187,6 @@ def run_faults(args, cases=None, soak_minutes=None):
     from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
     if cases is None:
         cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
-    warm_kernels()
     run_faults(getattr(args, "duration", 60.0), cases,
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,

@@ -52,6 +52,7 @@ import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
+from rcac_ros.tools.warm import warm_once
 
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
          "memory_growth": 0.05, "settle_s": 5.0, "starved_ratio": 10.0}
@@ -598,6 +599,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
     if unknown:
         raise ConfigError(f"cases: unknown {unknown} (known: {', '.join(CASES)})")
     controller = dict(controller or {})
+    warm_once()
     results = []
     if soak_minutes:
         cases, duration = ("nominal",), soak_minutes * 60.0

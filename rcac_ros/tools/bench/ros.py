@@ -37,6 +37,7 @@ from rcac_ros.errors import ConfigError
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
     shut_down, StopFlag
 from rcac_ros.tools.metrics import percentiles
+from rcac_ros.tools.warm import warm_once
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no
 #: delay); free-running, the effort lands up to one period late and that loop diverges within
@@ -298,6 +299,7 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
         raise ConfigError(f"duration: must be > 0 s, got {duration}")
     if not rate > 0.0:
         raise ConfigError(f"rate: must be > 0 Hz, got {rate}")
+    warm_once()
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_ros_bench_")
     os.makedirs(log_dir, exist_ok=True)
     stop = StopFlag()
