@@ -46,10 +46,10 @@ import numpy as np
 from numba import njit
 
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CH_ACTIVE,
-                       CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT, I_BARRIER_C, I_DZ_S, I_FORGET, I_GAMMA, I_H,
-                       I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG, I_RETRACT_MIN, LAMBDA, LEAK_M0,
-                       NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_0, THETA_HAT,
-                       THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
+                       CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT, I_BARRIER_C, I_DZ_S, I_FORGET,
+                       I_GAMMA, I_H, I_IMPLICIT, I_LEAK, I_NATURAL, I_P_DIAG, I_RETRACT_MIN,
+                       LAMBDA, LEAK_M0, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_0,
+                       THETA_HAT, THETA_MAX, THETA_MIN, THETA_PREV, TRACE_MAX, U_ROW, W_ROW)
 from ._blocks import cholesky_solve
 from .channels import channel_start
 from .least_squares import apply_factored, bounded_gain_forgetting, potter_update

@@ -33,10 +33,10 @@ import numpy as np
 
 from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CHAN_COLS,
-                       CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_BARRIER_C,
-                       I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK,
-                       I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K,
-                       NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
+                       CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT,
+                       I_BARRIER_C, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT,
+                       I_K, I_LEAK, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0,
+                       NAT_K, NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
                        block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels

@@ -15,7 +15,7 @@ import pytest
 from chains import random_chain
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR, STATE_COLS,
-                                   THETA_HAT)
+                                    THETA_HAT)
 from rcac_ros.core.adaptation import (barrier_apply, barrier_factor, natural_ls_apply,
                                       natural_ls_factor)
 from rcac_ros.core.model import PAPER_GAINS
