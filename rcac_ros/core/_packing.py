@@ -39,7 +39,11 @@ THETA_0 = 245       #: theta_0i (13), the nominal estimates the leakage pulls to
 LEAK_M0 = 258       #: M_0 of link i, the switching leakage's radius (0: fixed sigma)
 NAT_K = 259         #: k_i, the natural geometry's gain (doc/design.md §8)
 NAT_P_NU = 260      #: P_nu,i, 3x3 row-major, its gain on nu (doc/design.md §8)
-CONST_COLS = 269
+BAR_Q = 269         #: metric "barrier": (A P_i A^T)^-1, P_i's metric on J's 10 entries with nu
+#:                     eliminated (10x10 lower, packed by rows: 55), doc/design.md §8
+BAR_F = 324         #: metric "barrier": F_i = C_i E_i^-1, the coupling of J's entries and nu in
+#:                     the metric P_i^-1 (10 x 3, row-major), doc/design.md §8
+CONST_COLS = 354
 
 # ---- per-link state: data[i, CONST_COLS:] (offsets relative to the state block) ------------
 THETA_HAT = 0       #: theta_hat_i (13)
@@ -49,7 +53,8 @@ Q_PREV = 20         #: q_i at the last step (the power channel's tau^T dq)
 P_FACTOR = 21       #: S_i, 13x13 row-major, with P_i = S_i S_i^T (least squares)
 THETA_PREV = 190    #: theta_hat_i before this step's update (the natural retraction)
 NAT_LS_CHOL = 203   #: natural least squares: Cholesky factor of I + S^T H S / k (13x13 lower,
-#:                     row-major), doc/design.md §8
+#:                     row-major); metric "barrier": the factor of H_J / (c k) + (A P A^T)^-1
+#:                     (10x10 lower, row-major, its diagonal inverted), doc/design.md §8
 NAT_LS_N = 372      #: natural least squares: the whitened J(S e_j) of S's 13 columns (13 x 10)
 STATE_COLS = 502
 LINK_COLS = CONST_COLS + STATE_COLS

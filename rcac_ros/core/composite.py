@@ -32,11 +32,11 @@ Where each part lives (doc/design.md §3-4):
 import numpy as np
 
 from ._blocks import INPUT_NAMES, input_error
-from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, CHAN_COLS, CH_ACTIVE, CH_E,
-                       CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT, I_BARRIER_C,
-                       I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT, I_K, I_LEAK,
-                       I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K,
-                       NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
+from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CHAN_COLS,
+                       CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT,
+                       I_BARRIER_C, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT,
+                       I_K, I_LEAK, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0,
+                       NAT_K, NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
                        block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
@@ -49,8 +49,8 @@ from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, friction_natural_gain, natural_friction_start)
 from .least_squares import initial_factor
-from .pseudo_inertia import (bregman_log_det, check_body, initial_estimates, is_body,
-                             lambda_min, matched_gain, natural_metric_option, nu_gain)
+from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
+                             is_body, lambda_min, matched_gain, natural_metric_option, nu_gain)
 
 UPDATES = ("implicit", "explicit")
 GEOMETRIES = ("euclidean", "natural")
@@ -241,6 +241,9 @@ class RecursiveCompositeController:
             natural_metric, barrier_c, self.geometry, self.adaptation)
         if self.barrier_c is not None:
             self._scal[I_BARRIER_C] = self.barrier_c
+            Q, F = barrier_blocks(self.P)
+            self._const[:, BAR_Q:BAR_Q + 55] = Q
+            self._const[:, BAR_F:BAR_F + 30] = F.reshape(self.n, 30)
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""

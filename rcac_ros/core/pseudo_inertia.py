@@ -608,6 +608,29 @@ def nu_gain(P):
     return np.linalg.inv(NU_BASIS.T @ Pinv @ NU_BASIS)
 
 
+#: the entry (row, column) of J that theta_0 .. theta_9 each set alone: the coordinates ``j``
+#: of J in which the barrier metric's gain is factored (doc/design.md §8)
+J_SLOTS = ((3, 3), (0, 3), (1, 3), (2, 3), (0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def barrier_blocks(P):
+    """The constant blocks of the barrier metric's gain for gains ``P`` (n, 13, 13),
+    doc/design.md §8: ``(A P_i A^T)^-1`` (n, 55: its lower triangle, packed by rows) and
+    ``F_i = -(A P_i A^T)^-1 A P_i N^T`` (n, 10, 3), with ``A``: theta -> j (J's entries at
+    :data:`J_SLOTS`) and ``N``: theta -> nu = theta_4..6. In the coordinates ``(j, nu)`` the
+    metric ``P_i^-1`` is ``[[X, C], [C^T, E]]``; the first block is ``X - C E^-1 C^T`` (its
+    Schur complement), ``F_i = C E^-1``, and ``E^-1`` is :func:`nu_gain`'s ``P_nu``."""
+    A = np.array([[pseudo_inertia(e)[i, j] for e in np.eye(13)] for i, j in J_SLOTS])
+    N = np.eye(13)[4:7]
+    rows, cols = np.tril_indices(10)
+    Q, F = np.empty((len(P), 55)), np.empty((len(P), 10, 3))
+    for i, Pi in enumerate(P):
+        Qt = np.linalg.inv(A @ Pi @ A.T)
+        Q[i] = (0.5 * (Qt + Qt.T))[rows, cols]
+        F[i] = -Qt @ (A @ Pi @ N.T)
+    return Q, F
+
+
 def log_det_hessian(theta):
     """The Hessian of ``-log det J(theta)`` in the 13 parameters (13 x 13, rank 10)."""
     J = pseudo_inertia(theta)

@@ -14,10 +14,13 @@ import pytest
 
 from chains import random_chain
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
-from rcac_ros.core._packing import P_FACTOR, STATE_COLS, THETA_HAT
-from rcac_ros.core.adaptation import diagonal_factor, natural_ls_apply, natural_ls_factor
+from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR, STATE_COLS,
+                                    THETA_HAT)
+from rcac_ros.core.adaptation import (barrier_apply, barrier_factor, natural_ls_apply,
+                                      natural_ls_factor)
 from rcac_ros.core.model import PAPER_GAINS
-from rcac_ros.core.pseudo_inertia import FLOOR, HALVINGS, NU_RATIO, default_start, retract_short
+from rcac_ros.core.pseudo_inertia import (FLOOR, HALVINGS, NU_RATIO, barrier_blocks, default_start,
+                                          nu_gain, retract_short)
 
 from test_natural_geometry import euclidean_twin, run
 
@@ -54,29 +57,38 @@ def p_mix(theta, k, c, P):
     return np.linalg.inv(A.T @ H @ A / (c * k) + np.linalg.inv(P))
 
 
-def kernel_gain(theta, S, kk, diag):
-    """The kernel's gain (the functions adapt_link calls) as a function of g: the factor of
-    ``K = I + S^T H S / kk`` (closed form for a diagonal S, else by whitening), then
-    ``S K^-1 S^T g``."""
+def kernel_gain(theta, P, kk, barrier):
+    """The kernel's gain (the functions adapt_link calls) as a function of g: with
+    ``barrier``, the factor of ``H_J / kk + (A P A^T)^-1`` on J's entries, nu eliminated
+    (the barrier metric), then its block solve; else the factor of ``K = I + S^T H S / kk``
+    by whitening (the natural least-squares law's, ``S = chol(P)``), then ``S K^-1 S^T g``."""
+    row = np.zeros(CONST_COLS)
     st = np.zeros(STATE_COLS)
     st[THETA_HAT:THETA_HAT + 13] = theta
-    st[P_FACTOR:P_FACTOR + 169] = S.ravel()
-    if diag:
-        diagonal_factor(st, kk, np.empty((4, 4, 4)))
+    st[P_FACTOR:P_FACTOR + 169] = np.linalg.cholesky(P).ravel()
+    Q, F = barrier_blocks(P[None])
+    row[BAR_Q:BAR_Q + 55] = Q[0]
+    row[BAR_F:BAR_F + 30] = F[0].ravel()
+    row[NAT_P_NU:NAT_P_NU + 9] = nu_gain(P[None])[0].ravel()
+    if barrier:
+        barrier_factor(row, st, kk, np.empty((4, 4, 4)))
     else:
         natural_ls_factor(st, kk, np.empty(13), np.empty((4, 4, 4)))
 
     def apply(g):
         out = np.empty(13)
-        natural_ls_apply(st, g, 0, out, 0, np.empty(13), diag)
+        if barrier:
+            barrier_apply(row, st, g, 0, out, 0, np.empty(13))
+        else:
+            natural_ls_apply(st, g, 0, out, 0, np.empty(13))
         return out
     return apply
 
 
 def test_the_kernel_gain_is_numpys_solve_and_below_p():
     """The kernel's gain against ``np.linalg.solve(A^T H A / (c k) + P^-1, g)`` on random
-    bodies, diagonal gains over four decades (both factorisations: the closed form the
-    kernel runs for a diagonal P, the whitening otherwise) and full random gains, k and c
+    bodies, diagonal gains over four decades and full random gains (both factorisations:
+    the barrier metric's on J's entries, and the whitening of natural least squares), k and c
     over several: the residual of the system at rounding (1e-15 of ``||M|| ||out||``) and
     the two solutions within 1e-12 relative, or within ``eps cond(M)`` times a small factor
     where ``M`` is worse conditioned (then neither solver is closer: the share within 1e-12
@@ -90,17 +102,12 @@ def test_the_kernel_gain_is_numpys_solve_and_below_p():
             H = np.array([[np.trace(Ji @ entry_basis(a) @ Ji @ entry_basis(b))
                            for b in range(10)] for a in range(10)])
             X = rng.normal(size=(13, 13))
-            gains = [(np.diag(10.0 ** rng.uniform(-2.0, 2.0, 13)), True),
-                     (X @ X.T + np.eye(13), False)]
-            for P, diag in gains:
+            for P in (np.diag(10.0 ** rng.uniform(-2.0, 2.0, 13)), X @ X.T + np.eye(13)):
                 for k in (1e-3, 0.3, 50.0):
                     for c in (1.0, 100.0, 1e4):
                         M = A.T @ H @ A / (c * k) + np.linalg.inv(P)
                         tol = max(1e-12, 20.0 * np.finfo(float).eps * np.linalg.cond(M))
-                        S = np.linalg.cholesky(P)
-                        fns = [kernel_gain(theta, S, c * k, diag)]
-                        if diag:                     # the whitening agrees on diagonal S
-                            fns.append(kernel_gain(theta, S, c * k, False))
+                        fns = [kernel_gain(theta, P, c * k, b) for b in (True, False)]
                         for g in rng.normal(size=(3, 13)) * 10.0 ** rng.uniform(-3, 3, (3, 1)):
                             want = np.linalg.solve(M, g)
                             for fn in fns:
