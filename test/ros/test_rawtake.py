@@ -62,13 +62,15 @@ class Inbox:
 
 
 @contextlib.contextmanager
-def raw_reader(inbox, cap, log):
-    """A RawReader on ``/rawtake_test`` and a publisher to it; yields ``(reader, publish)``."""
+def raw_reader(inbox, cap, log, hold=0):
+    """A RawReader on ``/rawtake_test`` (``hold``: 0, a grown buffer is always freed) and a
+    publisher to it; yields ``(reader, publish)``."""
     with ros_context() as (ctx, _):
         node = Node("rawtake_reader", context=ctx)
         sub = node.create_subscription(JointState, "/rawtake_test", lambda _: None, QOS,
                                        raw=True)
-        reader = RawReader(sub, ctx, inbox.on_bytes, inbox.on_oversize, cap, "test input", log)
+        reader = RawReader(sub, ctx, inbox.on_bytes, inbox.on_oversize, cap, "test input", log,
+                           hold)
         pub = node.create_publisher(JointState, "/rawtake_test", QOS)
         try:
             end = time.monotonic() + 20.0
@@ -126,6 +128,22 @@ def test_side_input_delivers_within_the_cap_and_refuses_above_it():
         assert all(abs(int(t.split(": ")[1].split()[0]) - size) <= 8 for _, t in refused), \
             (refused, size)
         assert not side._reader._thread.is_alive()
+
+
+def test_a_buffer_grown_within_hold_is_kept_and_reused():
+    """With ``hold`` above LARGE's size the grown buffer stays (the next large sample is
+    copied into mapped pages), and the samples around it arrive whole."""
+    large = len(serialize_message(LARGE))
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log, hold=4 * large) as (reader, publish):
+        assert reader.capacity == RawReader.KEEP
+        publish(LARGE, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 2), (len(inbox.data), inbox.oversize)
+        # kept, not freed: it still holds the large sample's bytes
+        assert reader.capacity >= len(inbox.data[0]) > RawReader.KEEP, reader.capacity
+        got = [deserialize_message(d, JointState) for d in inbox.data]
+        assert got[0].name == LARGE.name and got[1].name == SMALL.name
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
 
 
 def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
