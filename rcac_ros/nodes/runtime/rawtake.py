@@ -124,7 +124,7 @@ class RawReader:
     """
 
     #: bytes the buffer is allocated with, and replaced by after a sample larger than
-    #: ``max(cap, KEEP)`` (a bound on what the reader holds between takes)
+    #: ``max(cap, KEEP, hold)`` (a bound on what the reader holds between takes)
     KEEP = 65_536
     #: bytes a grown buffer may keep between takes (the hostile flood's 24 MB state fits)
     HOLD = 33_554_432
