@@ -229,10 +229,11 @@ CONTROLLER = _robot("controller") + (
     Param("natural_gain", "double", None,
           "geometry 'natural': gain k_i of every link (unset: matched to P at the start, "
           "doc/design.md §8)", lo=0.0, hi=BIG, strict=True),
-    Param("natural_metric", "string", "log_det",
-          "geometry 'natural' with adaptation 'gradient': 'log_det' (k_i times the inverse "
-          "Hessian of -log det J) or 'barrier' (that barrier plus the Euclidean quadratic: a "
-          "gain never above P; doc/design.md §8)", choices=("log_det", "barrier")),
+    Param("natural_metric", "string", "auto",
+          "geometry 'natural': 'barrier' (the barrier -log det J plus the Euclidean quadratic: "
+          "a gain never above P), 'log_det' (k_i times the inverse Hessian of -log det J) or "
+          "'auto' ('barrier' with adaptation 'gradient', 'log_det' with 'least_squares'; "
+          "doc/design.md §8)", choices=("auto", "barrier", "log_det")),
     Param("barrier_c", "double", None,
           "natural_metric 'barrier': c, the quadratic's curvature over the barrier's at the "
           "start (unset: 1000, doc/design.md §8)", lo=1e-6, hi=BIG),

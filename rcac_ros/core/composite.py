@@ -104,26 +104,29 @@ class RecursiveCompositeController:
         joint terms >= 0 with ``joint_friction``).
     geometry : {"euclidean", "natural"}
         ``"euclidean"`` (default): eq 24 as written. ``"natural"``: every link's estimates
-        stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes
-        ``k_i`` times the inverse Hessian of ``-log det J(theta_hat_i)`` (and ``P_nu`` on
-        the three parameters beyond a body), and each step is retracted into the cone
-        ``J > 0``. With ``adaptation="least_squares"`` the gain is ``(H / k_i +
-        Gamma_i)^-1``, ``H`` that Hessian and ``Gamma_i`` the least-squares information
-        (doc/design.md §8); not with ``"least_squares_prediction"``. With
-        ``joint_friction`` each joint term ``x > 0`` adapts with the gain ``min(k_f x^2,
-        P_friction)``, ``k_f = P_friction / x_0^2``, and a 1-D retraction keeps it > 0.
+        stay a physical body at every step (doc/design.md §8): the gain ``P_i`` becomes a
+        metric with a barrier at the boundary of the cone ``J > 0`` (``natural_metric``),
+        and each step is kept inside the cone. With ``adaptation="least_squares"`` the gain
+        is ``(H / k_i + Gamma_i)^-1``, ``H`` the Hessian of ``-log det J(theta_hat_i)`` and
+        ``Gamma_i`` the least-squares information (doc/design.md §8); not with
+        ``"least_squares_prediction"``. With ``joint_friction`` each joint term ``x > 0``
+        adapts with the gain ``min(k_f x^2, P_friction)``, ``k_f = P_friction / x_0^2``, and
+        a 1-D retraction keeps it > 0.
     natural_gain : float or (n,), optional
         ``k_i`` of the natural geometry (default: matched to ``P_i`` at the start,
         :func:`~rcac_ros.core.pseudo_inertia.matched_gain`).
-    natural_metric : {"log_det", "barrier"}
-        The natural geometry's gain with ``adaptation="gradient"``: ``"log_det"`` (default)
-        ``k_i H^-1`` on J and ``P_nu`` on nu, as above; ``"barrier"``: ``P_mix = (H / (c
-        k_i) + P_i^-1)^-1 <= P_i``, the inverse Hessian of ``-(1/(c k_i)) log det J + 1/2
-        theta^T P_i^-1 theta`` (the Euclidean gain away from the cone's boundary, the
-        barrier's near it; doc/design.md §8); its step is the Euclidean step with that gain,
-        halved while it would take ``J_hat`` below half of itself along some direction
-        (:func:`~rcac_ros.core.pseudo_inertia.retract_short`). Only with
-        ``geometry="natural"`` and ``adaptation="gradient"``.
+    natural_metric : {None, "barrier", "log_det"}
+        The natural geometry's gain with ``adaptation="gradient"``: ``"barrier"`` (the
+        default, ``None``): ``P_mix = (H / (c k_i) + P_i^-1)^-1 <= P_i``, the inverse
+        Hessian of ``-(1/(c k_i)) log det J + 1/2 theta^T P_i^-1 theta`` (the Euclidean gain
+        away from the cone's boundary, the barrier's near it; doc/design.md §8); its step is
+        the Euclidean step with that gain, halved while it would take ``J_hat`` below half
+        of itself along some direction
+        (:func:`~rcac_ros.core.pseudo_inertia.retract_short`); ``"log_det"``: ``k_i H^-1``
+        on J and ``P_nu`` on nu, with the curved retraction (cheaper, but its gain grows as
+        ``|J_hat|^2`` and it tracks worse, doc/design.md §8). ``"barrier"`` only with
+        ``geometry="natural"`` and ``adaptation="gradient"``; natural least squares has its
+        own metric (``None`` or ``"log_det"``).
     barrier_c : float, optional
         ``c > 0`` of the metric ``"barrier"`` (default
         :data:`~rcac_ros.core.pseudo_inertia.BARRIER_C`).
@@ -154,7 +157,7 @@ class RecursiveCompositeController:
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
                  joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
-                 geometry="euclidean", natural_gain=None, natural_metric="log_det",
+                 geometry="euclidean", natural_gain=None, natural_metric=None,
                  barrier_c=None):
         self.model = model
         n = model.n

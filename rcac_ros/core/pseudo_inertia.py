@@ -742,7 +742,13 @@ def initial_estimates(model, geometry, theta_hat0):
 def natural_metric_option(natural_metric, barrier_c, geometry, adaptation="gradient"):
     """Check the natural geometry's metric options (doc/design.md §8): ``(natural_metric,
     c)``, ``c`` None unless ``natural_metric="barrier"`` (then ``barrier_c`` or
-    :data:`BARRIER_C`); one-line :class:`GainError` otherwise."""
+    :data:`BARRIER_C`); one-line :class:`GainError` otherwise. ``natural_metric=None`` is
+    the default: ``"barrier"`` in the natural geometry with ``adaptation="gradient"``,
+    ``"log_det"`` otherwise (natural least squares has its own metric; the Euclidean
+    geometry none)."""
+    if natural_metric is None:
+        natural_metric = "barrier" if geometry == "natural" and adaptation == "gradient" \
+            else "log_det"
     if natural_metric not in NATURAL_METRICS:
         raise GainError(f"natural_metric: expected 'log_det' or 'barrier', got "
                         f"{natural_metric!r}")

@@ -246,12 +246,12 @@ class SlotineLiCompositeController:
     gains ``K_Di``, mapped to joint space as ``sum_i J_i^T K_Di J_i``. It predicts all n
     filtered joint torques (``E`` has n entries).
 
-    ``geometry="natural"`` (doc/design.md §8): before each step the gains ``P_i`` are
-    replaced by ``P_eff(theta_hat_i)``, after it each link's step is retracted into the cone
-    ``J > 0``, as in the recursive law (same ``natural_gain``, same default start). With
-    ``natural_metric="barrier"`` (and ``barrier_c``) the gains are ``P_mix(theta_hat_i) =
-    (H / (c k_i) + P_i^-1)^-1`` and the step is shortened instead of retracted, as in the
-    recursive law.
+    ``geometry="natural"`` (doc/design.md §8): as in the recursive law (same
+    ``natural_gain``, same default start, same metrics). With ``natural_metric="barrier"``
+    (the default, ``None``; and ``barrier_c``) before each step the gains ``P_i`` are
+    replaced by ``P_mix(theta_hat_i) = (H / (c k_i) + P_i^-1)^-1`` and after it each link's
+    step is shortened while it would leave the cone ``J > 0``; with ``"log_det"`` the gains
+    are ``P_eff(theta_hat_i)`` and each step is retracted into the cone.
     ``joint_friction``, ``friction_hat0`` and ``P_friction`` add each joint's armature,
     viscous and Coulomb friction as three more columns of its row of ``Y``, ``Phi``, ``Psi``
     (doc/design.md §8).
@@ -260,7 +260,7 @@ class SlotineLiCompositeController:
     def __init__(self, model, K_D=1e4, Lambda=1.0, P=100.0, gamma=0.1, lam=10.0, h=0.002,
                  theta_hat0=None, update="implicit", joint_friction=False, friction_hat0=None,
                  P_friction=P_FRICTION, geometry="euclidean", natural_gain=None,
-                 natural_metric="log_det", barrier_c=None):
+                 natural_metric=None, barrier_c=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)

@@ -56,9 +56,12 @@ def warm_recursive():
     z = np.zeros(model.n)
     q = np.full(model.n, 0.1)
     for kwargs in ({}, {"joint_friction": True}, {"geometry": "natural"},
-                   {"geometry": "natural", "natural_metric": "barrier", "channels": "all"},
+                   {"geometry": "natural", "channels": "all"},
+                   {"geometry": "natural", "natural_metric": "log_det"},
+                   {"geometry": "natural", "natural_metric": "log_det", "channels": "all"},
                    {"geometry": "natural", "adaptation": "least_squares"},
-                   {"geometry": "natural", "joint_friction": True}):
+                   {"geometry": "natural", "joint_friction": True},
+                   {"geometry": "natural", "natural_metric": "log_det", "joint_friction": True}):
         RecursiveCompositeController(model, **kwargs).step(q, z, q, z, z)
 
 
@@ -84,7 +87,7 @@ def warm_others():
     core("identifiability").Excitation(model.n, 0.002).add(np.zeros((1, model.n, 13)))
     slotine_li = core("slotine_li")
     for kwargs in ({}, {"joint_friction": True}, {"geometry": "natural"},
-                   {"geometry": "natural", "natural_metric": "barrier"},
+                   {"geometry": "natural", "natural_metric": "log_det"},
                    {"geometry": "natural", "joint_friction": True}):
         slotine_li.SlotineLiCompositeController(model, **kwargs).step(q, z, q, z, z)
     from rcac_ros.nodes.safety.guards import DesiredLimiter

@@ -155,7 +155,7 @@ def test_fused_paper_step_equals_the_general_kernel():
             assert np.array_equal(a, b)
 
 
-@pytest.mark.parametrize("options", [{}, {"natural_metric": "barrier"},
+@pytest.mark.parametrize("options", [{"natural_metric": "log_det"}, {},
                                      {"natural_metric": "barrier", "P": np.diag(
                                          np.linspace(50.0, 150.0, 13)) + 1.0}])
 def test_fused_paper_natural_step_equals_the_general_kernel(options):

@@ -19,8 +19,8 @@ from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR
 from rcac_ros.core.adaptation import (barrier_apply, barrier_factor, natural_ls_apply,
                                       natural_ls_factor)
 from rcac_ros.core.model import PAPER_GAINS
-from rcac_ros.core.pseudo_inertia import (FLOOR, HALVINGS, NU_RATIO, barrier_blocks, default_start,
-                                          nu_gain, retract_short)
+from rcac_ros.core.pseudo_inertia import (BARRIER_C, FLOOR, HALVINGS, NU_RATIO, barrier_blocks,
+                                          default_start, nu_gain, retract_short)
 
 from test_natural_geometry import euclidean_twin, run
 
@@ -274,20 +274,28 @@ def test_consistent_at_every_step_under_huge_gains_errors_and_noise(channels):
             assert run(ctrl, model, 200, noise=1e-2, rng=rng, check=check) > 10
 
 
-def test_default_metric_is_log_det_bit_for_bit():
-    """Without ``natural_metric`` the natural law is the log-det metric's, to the last bit
-    (gradient and least squares; the option changes nothing in its scalars)."""
+def test_default_metric_is_the_barrier_with_the_gradient_and_log_det_with_least_squares():
+    """Without ``natural_metric`` the natural law is the barrier metric's with
+    ``adaptation="gradient"`` (c = BARRIER_C) and natural least squares' own (``"log_det"``)
+    with ``adaptation="least_squares"``, to the last bit (the option changes nothing else in
+    the kernel's data); the Slotine-Li law takes the same default."""
+    from rcac_ros.core import SlotineLiCompositeController
     model = css_arm()
-    for extra in (dict(channels="all"), dict(adaptation="least_squares", forgetting=1.0)):
+    for extra, metric in ((dict(channels="all"), "barrier"), (dict(), "barrier"),
+                          (dict(adaptation="least_squares", forgetting=1.0), "log_det")):
         a = RecursiveCompositeController(model, geometry="natural", **extra)
-        b = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+        b = RecursiveCompositeController(model, geometry="natural", natural_metric=metric,
                                          **extra)
         assert np.array_equal(a._data, b._data)
         ta, tb = [], []
         run(a, model, 100, check=lambda c: ta.append(c.theta_hat))
         run(b, model, 100, check=lambda c: tb.append(c.theta_hat))
         assert len(ta) == 100 and np.array_equal(np.array(ta), np.array(tb))
-        assert a.natural_metric == "log_det" and a.barrier_c is None
+        assert (a.natural_metric, a.barrier_c) == \
+            (metric, BARRIER_C if metric == "barrier" else None)
+    assert SlotineLiCompositeController(model, geometry="natural").natural_metric == "barrier"
+    euclidean = RecursiveCompositeController(model)
+    assert (euclidean.natural_metric, euclidean.barrier_c) == ("log_det", None)
 
 
 def test_bad_options_are_one_line_gain_errors():
@@ -300,7 +308,10 @@ def test_bad_options_are_one_line_gain_errors():
              (dict(BARRIER, barrier_c=-1.0), "barrier_c: must be > 0"),
              (dict(BARRIER, barrier_c=np.inf), "barrier_c: must be finite"),
              (dict(BARRIER, barrier_c="big"), "barrier_c: expected a number"),
-             (dict(geometry="natural", barrier_c=10.0), "barrier_c: only with")]
+             (dict(geometry="natural", natural_metric="log_det", barrier_c=10.0),
+              "barrier_c: only with"),
+             (dict(geometry="natural", adaptation="least_squares", barrier_c=10.0),
+              "barrier_c: only with")]
     for kw, msg in cases:
         with pytest.raises(GainError, match=msg) as e:
             RecursiveCompositeController(model, **kw)
@@ -360,4 +371,5 @@ def test_slotine_li_barrier_is_the_recursive_law_with_all_channels():
     with pytest.raises(GainError, match="natural_metric: 'barrier' only with"):
         SlotineLiCompositeController(model, natural_metric="barrier")
     with pytest.raises(GainError, match="barrier_c: only with"):
-        SlotineLiCompositeController(model, geometry="natural", barrier_c=10.0)
+        SlotineLiCompositeController(model, geometry="natural", natural_metric="log_det",
+                                     barrier_c=10.0)

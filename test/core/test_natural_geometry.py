@@ -99,11 +99,12 @@ def p_eff(theta, k, Pnu):
 
 def test_default_start_and_bad_starts():
     model = css_arm()
-    ctrl = RecursiveCompositeController(model, geometry="natural")
+    ctrl = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det")
     assert np.array_equal(ctrl.theta_hat, default_start(model.theta()))
     assert ctrl.consistent.all() and (ctrl.lambda_min > 0).all()
     with pytest.raises(InputError, match="theta_hat0: link 1 is not a physical body"):
-        RecursiveCompositeController(model, geometry="natural", theta_hat0=np.zeros((7, 13)))
+        RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                     theta_hat0=np.zeros((7, 13)))
     with pytest.raises(InputError, match="link 7 is not a physical body"):
         th = default_start(model.theta())
         th[6, 0] = -1.0
@@ -113,7 +114,8 @@ def test_default_start_and_bad_starts():
     with pytest.raises(GainError, match="natural_gain: only with"):
         RecursiveCompositeController(model, natural_gain=1.0)
     with pytest.raises(GainError, match="natural_gain: must be > 0"):
-        RecursiveCompositeController(model, geometry="natural", natural_gain=0.0)
+        RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                     natural_gain=0.0)
 
 
 @pytest.mark.parametrize("gamma", [0.0, 0.1])
@@ -122,7 +124,8 @@ def test_natural_step_is_the_euclidean_step_with_p_eff_then_the_retraction(gamma
     law gives the parameters of J + Delta + 1/2 Delta J^-1 Delta, Delta = J(theta_lin -
     theta_hat0), and nu(theta_lin) (doc/design.md §8)."""
     model = css_arm()
-    nat = RecursiveCompositeController(model, geometry="natural", gamma=gamma)
+    nat = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                       gamma=gamma)
     th0 = nat.theta_hat
     P = np.array([p_eff(th0[i], nat.natural_gain[i],
                         nat._const[i, 260:269].reshape(3, 3)) for i in range(model.n)])
@@ -146,7 +149,8 @@ def test_consistent_at_every_step_under_huge_gains_errors_and_noise():
     rng = np.random.default_rng(3)
     gains = dict(PAPER_GAINS, P=1e6, gamma=100.0)
     for channels in ([1], "all"):
-        ctrl = RecursiveCompositeController(model, geometry="natural", channels=channels,
+        ctrl = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                            channels=channels,
                                             natural_gain=1e3, **gains)
         assert_bodies_at_every_step(ctrl, model, 300, 1e-2, rng)
 
@@ -160,14 +164,15 @@ def test_every_adaptation_variant_keeps_bodies():
                 dict(channels=[2, "power"])]
     for extra in variants:
         gains = dict(PAPER_GAINS, **extra)
-        ctrl = RecursiveCompositeController(model, geometry="natural", **gains)
+        ctrl = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                            **gains)
 
         def check(c):
             assert is_body(c.theta_hat).all(), extra
         assert run(ctrl, model, 100, check=check) == 100
     with pytest.raises(GainError, match="geometry: 'natural' needs adaptation='gradient' or "
                                         "'least_squares', got 'least_squares_prediction'"):
-        RecursiveCompositeController(model, geometry="natural",
+        RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
                                      adaptation="least_squares_prediction")
 
 
@@ -177,8 +182,10 @@ def test_slotine_li_natural_keeps_bodies_and_matches_the_recursive_law_with_all_
     estimates are bodies at every step."""
     from rcac_ros.core import SlotineLiCompositeController
     model = css_arm()
-    sl = SlotineLiCompositeController(model, geometry="natural", **PAPER_GAINS)
-    rc = RecursiveCompositeController(model, geometry="natural", channels="all", **PAPER_GAINS)
+    sl = SlotineLiCompositeController(model, geometry="natural", natural_metric="log_det",
+                                      **PAPER_GAINS)
+    rc = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                      channels="all", **PAPER_GAINS)
     assert np.allclose(sl.natural_gain, rc.natural_gain)
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0)

@@ -44,7 +44,8 @@ def test_joint_terms_positive_under_huge_gains_errors_and_noise():
     gains = dict(PAPER_GAINS, P=1e6, gamma=100.0, joint_friction=True, P_friction=1e6,
                  friction_hat0=np.full((plant.n, 3), 1e-6))
     for channels in ([1], "all", [2, "power"]):
-        ctrl = RecursiveCompositeController(plant, geometry="natural", channels=channels,
+        ctrl = RecursiveCompositeController(plant, geometry="natural", natural_metric="log_det",
+                                            channels=channels,
                                             natural_gain=1e3, **gains)
         seen = []
 
@@ -60,14 +61,16 @@ def test_joint_terms_positive_under_huge_gains_errors_and_noise():
 def test_natural_start_of_the_joint_terms():
     """Default start: the model's terms floored at START_FLOOR; a term <= 0 is refused."""
     model = css_arm()                                    # no joint friction in the model
-    ctrl = RecursiveCompositeController(model, geometry="natural", joint_friction=True)
+    ctrl = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det",
+                                        joint_friction=True)
     np.testing.assert_array_equal(ctrl.friction_hat, np.full((model.n, 3), START_FLOOR))
     plant = frictional(model)
-    ctrl = RecursiveCompositeController(plant, geometry="natural", joint_friction=True)
+    ctrl = RecursiveCompositeController(plant, geometry="natural", natural_metric="log_det",
+                                        joint_friction=True)
     np.testing.assert_array_equal(ctrl.friction_hat, plant.joint_terms())
     for cls in (RecursiveCompositeController, SlotineLiCompositeController):
         with pytest.raises(InputError, match="friction_hat0: every joint term must be > 0"):
-            cls(model, geometry="natural", joint_friction=True,
+            cls(model, geometry="natural", natural_metric="log_det", joint_friction=True,
                 friction_hat0=np.zeros((model.n, 3)))
     with pytest.raises(InputError, match="must be > 0"):
         ctrl.reset(friction_hat0=-np.ones((model.n, 3)))
@@ -86,7 +89,7 @@ def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
     gains = dict(K_D=30.0, P=1.0 if update == "implicit" else 0.01, gamma=0.5, lam=20.0,
                  joint_friction=True, friction_hat0=0.5 * model.joint_terms(),
                  P_friction=(0.5, 5.0, 5.0) if update == "implicit" else 0.005, update=update,
-                 geometry="natural")
+                 geometry="natural", natural_metric="log_det")
     a = RecursiveCompositeController(model, channels="all", **gains)
     b = SlotineLiCompositeController(model, **gains)
 

@@ -44,7 +44,7 @@ def closed_loop_lyapunov(ctrl, model, steps, K_D, gamma):
     return np.array(values), np.array(dissipation)
 
 
-@pytest.mark.parametrize("options", [{}, {"natural_metric": "barrier"},
+@pytest.mark.parametrize("options", [{"natural_metric": "log_det"}, {},
                                      {"natural_metric": "barrier", "channels": "all"}])
 def test_natural_lyapunov_decreases_by_the_dissipation_on_a_body(options):
     """``V_dot = -sum s^T K_D s - gamma sum E^2`` (doc/design.md §8): summed over the run,
@@ -62,7 +62,7 @@ def test_natural_lyapunov_decreases_by_the_dissipation_on_a_body(options):
 
 def test_the_natural_lyapunov_needs_a_body():
     model = css_arm()                                  # Table 1 is not a body (§5)
-    ctrl = RecursiveCompositeController(model, geometry="natural")
+    ctrl = RecursiveCompositeController(model, geometry="natural", natural_metric="log_det")
     z = np.zeros(model.n)
     ctrl.step(z, z, z, z, z)
     with pytest.raises(InputError, match="theta: link"):

@@ -90,17 +90,24 @@ def test_controller_config_is_frozen_and_read_only():
 
 
 def test_controller_natural_metric_reaches_the_core_and_a_misuse_is_one_line():
-    """``natural_metric``/``barrier_c`` (doc/design.md §8) configure the core law; the
-    barrier without the natural geometry is refused at start-up with one line naming it."""
+    """``natural_metric``/``barrier_c`` (doc/design.md §8) configure the core law; its
+    default ``auto`` is the barrier with the gradient law and natural least squares' own
+    metric with least squares; the barrier without the natural geometry is refused at
+    start-up with one line naming it."""
     with ros_context() as (ctx, _):
-        n = ControllerNode(context=ctx, parameter_overrides=[
-            Parameter("geometry", value="natural"), Parameter("natural_metric", value="barrier"),
-            Parameter("barrier_c", value=10.0)])
-        try:
-            assert (n.ctrl.geometry, n.ctrl.natural_metric, n.ctrl.barrier_c) == \
-                ("natural", "barrier", 10.0)
-        finally:
-            n.destroy_node()
+        for extra, want in (
+                ([Parameter("natural_metric", value="barrier"),
+                  Parameter("barrier_c", value=10.0)], ("barrier", 10.0)),
+                ([], ("barrier", 1000.0)),
+                ([Parameter("natural_metric", value="log_det")], ("log_det", None)),
+                ([Parameter("adaptation", value="least_squares")], ("log_det", None))):
+            n = ControllerNode(context=ctx, parameter_overrides=[
+                Parameter("geometry", value="natural")] + extra)
+            try:
+                assert (n.ctrl.geometry, n.ctrl.natural_metric, n.ctrl.barrier_c) == \
+                    ("natural",) + want
+            finally:
+                n.destroy_node()
         with pytest.raises(ConfigError) as err:
             ControllerNode(context=ctx, parameter_overrides=[
                 Parameter("natural_metric", value="barrier")])

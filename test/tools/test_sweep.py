@@ -434,16 +434,18 @@ def test_friction_campaign_pairs_the_joint_terms_across_laws():
 
 
 def test_paired_campaign_gives_every_grid_cell_the_same_draws():
-    """``paired: true`` (doc/campaigns.md): both geometries of a sample of
+    """``paired: true`` (doc/campaigns.md): the three geometries of a sample of
     campaigns/consistency.yaml get the same start and payload, the next sample others; the
     same file unpaired draws each run anew (the runs of one sample then differ)."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     path = os.path.join(root, "campaigns", "consistency.yaml")
     paired = cp.load(path)
-    assert paired["paired"] and cp.run_count(paired) == 2 * paired["samples"]
-    a, b, c = cp.sample(paired, 0), cp.sample(paired, 1), cp.sample(paired, 2)
-    assert {a["geometry"], b["geometry"]} == {"euclidean", "natural"}
-    assert dict(a, geometry=None) == dict(b, geometry=None)
+    assert paired["paired"] and cp.run_count(paired) == 3 * paired["samples"]
+    a, b, c = cp.sample(paired, 0), cp.sample(paired, 1), cp.sample(paired, 3)
+    assert [a["geometry"], b["geometry"], cp.sample(paired, 2)["geometry"]] == \
+        ["euclidean", "natural", "natural_log_det"]
+    assert dict(a, geometry=None) == dict(b, geometry=None) == \
+        dict(cp.sample(paired, 2), geometry=None)
     assert a["payload_mass"] != c["payload_mass"] and a["start_com_shift"] != c["start_com_shift"]
     doc = yaml.safe_load(open(path, encoding="utf-8"))
     doc.pop("paired")
@@ -462,25 +464,27 @@ def test_paired_campaign_gives_every_grid_cell_the_same_draws():
     assert {ctrl_a.geometry, ctrl_b.geometry} == {"euclidean", "natural"}
 
 
-def test_barrier_campaign_runs_the_three_geometries_on_the_same_draws():
-    """campaigns/consistency_barrier.yaml: a sample's three runs share start and payload with
-    campaigns/consistency.yaml's; ``natural_barrier`` builds the natural law with the
-    barrier metric; Slotine-Li refuses it (one line)."""
+def test_the_natural_geometries_build_their_metric():
+    """campaigns/consistency.yaml: ``natural`` (the default metric) and ``natural_barrier``
+    build the natural law with the barrier metric and the campaign's ``barrier_c``,
+    ``natural_log_det`` the log-det metric; the Slotine-Li law the same."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    three = cp.load(os.path.join(root, "campaigns", "consistency_barrier.yaml"))
-    two = cp.load(os.path.join(root, "campaigns", "consistency.yaml"))
-    assert cp.run_count(three) == 3 * three["samples"]
+    three = cp.load(os.path.join(root, "campaigns", "consistency.yaml"))
     runs = [cp.sample(three, k) for k in range(3)]
-    assert [r["geometry"] for r in runs] == ["euclidean", "natural", "natural_barrier"]
-    assert dict(runs[2], geometry=None) == dict(cp.sample(two, 0), geometry=None)
     from rcac_ros.tools.scenarios import find_panda_urdf
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data's panda.urdf not installed")
-    _, ctrl, _ = cp.setup(three, 2)
+    _, ctrl, _ = cp.setup(three, 1)
     assert (ctrl.geometry, ctrl.natural_metric, ctrl.barrier_c) == ("natural", "barrier", 1000.0)
-    ctrl = cp.controller_for(three, dict(runs[2], barrier_c=30.0), cp.nominal_model("panda"))
-    assert ctrl.barrier_c == 30.0
-    ctrl = cp.controller_for(three, dict(runs[2], law="slotine_li", barrier_c=30.0),
-                             cp.nominal_model("panda"))
-    assert (type(ctrl).__name__, ctrl.natural_metric, ctrl.barrier_c) == \
-        ("SlotineLiCompositeController", "barrier", 30.0)
+    _, ctrl, _ = cp.setup(three, 2)
+    assert (ctrl.geometry, ctrl.natural_metric, ctrl.barrier_c) == ("natural", "log_det", None)
+    panda = cp.nominal_model("panda")
+    ctrl = cp.controller_for(three, dict(runs[1], geometry="natural_barrier", barrier_c=30.0),
+                             panda)
+    assert (ctrl.natural_metric, ctrl.barrier_c) == ("barrier", 30.0)
+    for geometry, metric, c in (("natural", "barrier", 30.0),
+                                ("natural_log_det", "log_det", None)):
+        ctrl = cp.controller_for(three, dict(runs[1], geometry=geometry, law="slotine_li",
+                                             barrier_c=30.0), panda)
+        assert (type(ctrl).__name__, ctrl.natural_metric, ctrl.barrier_c) == \
+            ("SlotineLiCompositeController", metric, c)

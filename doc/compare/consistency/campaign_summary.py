@@ -4,13 +4,10 @@
     rcac sweep campaigns/consistency.yaml --workers 1 --out results/consistency
     PYTHONPATH=$PWD python doc/compare/consistency/campaign_summary.py results/consistency
 
-or, for campaigns/consistency_barrier.yaml (the three geometries), with the target
-``doc/compare/consistency/campaign_barrier_summary.json`` as a second argument.
-
-Per geometry: runs, consistency and RMS figures. The campaign is paired (``paired: true``,
-doc/campaigns.md): runs ``2 s`` and ``2 s + 1`` are sample ``s`` with the two geometries on
-the same start and payload, so the natural law's RMS is also compared run by run (the ratio
-natural / Euclidean per sample).
+(a second argument: another target file). Per geometry: runs, consistency and RMS figures.
+The campaign is paired (``paired: true``, doc/campaigns.md): runs ``3 s`` to ``3 s + 2`` are
+sample ``s`` with the three geometries on the same start and payload, so each natural law's
+RMS is also compared run by run (the ratio natural / Euclidean per sample).
 """
 import json
 import os

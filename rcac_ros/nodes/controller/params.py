@@ -162,7 +162,8 @@ def adaptation_options(v, channels):
                 theta_bounds=None if v["theta_bounds"] == "none" else v["theta_bounds"],
                 leakage=v["leakage"], leakage_bound=v["leakage_bound"],
                 geometry=v["geometry"], natural_gain=v["natural_gain"],
-                natural_metric=v["natural_metric"], barrier_c=v["barrier_c"])
+                natural_metric=None if v["natural_metric"] == "auto" else v["natural_metric"],
+                barrier_c=v["barrier_c"])
 
 
 def channel_names(channels):

@@ -113,13 +113,14 @@ class Replay:
 
 
 def natural_baselines(model):
-    """The natural law (doc/design.md §8) and two Euclidean baselines, all from the natural
-    default start: the paper's law as a user runs it (its fused kernel,
-    :func:`~rcac_ros.core.composite_fused.paper_step`) and the same law on the general
-    kernel's path by a projection onto infinite bounds (the same estimates, bit for bit,
-    plus 13 n clips)."""
+    """The natural law with the log-det metric (doc/design.md §8) and two Euclidean
+    baselines, all from the natural default start: the paper's law as a user runs it (its
+    fused kernel, :func:`~rcac_ros.core.composite_fused.paper_step`) and the same law on the
+    general kernel's path by a projection onto infinite bounds (the same estimates, bit for
+    bit, plus 13 n clips)."""
     start = default_start(model.theta())
-    nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural")
+    nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural",
+                                       natural_metric="log_det")
     paper = RecursiveCompositeController(model, theta_hat0=start)
     inf = np.full((model.n, 13), np.inf)
     general = RecursiveCompositeController(model, theta_hat0=start, theta_bounds=(-inf, inf))
@@ -141,7 +142,7 @@ def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
         model = css_arm().repeated(n // 7)
         inputs = recorded_inputs(model)
         barrier = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
-                                               geometry="natural", natural_metric="barrier")
+                                               geometry="natural")     # the default metric
         loops[n] = [Replay(c, inputs) for c in natural_baselines(model) + (barrier,)]
     rng = np.random.default_rng(0)
     args = tuple(rng.normal(size=(5, 7)) * 0.1)
@@ -198,10 +199,14 @@ def goal_ratios(budget_s=1.0):
             # a recorded closed loop (the goal's figure) and at one random state repeated,
             # which drives the estimates onto the retraction's floor (its worst case)
             nat, paper_b, _ = natural_baselines(model)
+            barrier = RecursiveCompositeController(model, theta_hat0=default_start(
+                model.theta()), geometry="natural")             # the default metric
             loop = recorded_inputs(model)
-            out["natural_over_paper_closed_loop_n7"] = interleaved_ratio(
+            out["barrier_over_paper_closed_loop_n7"] = interleaved_ratio(
+                Replay(barrier, loop), Replay(paper_b, loop), budget_s)
+            out["log_det_over_paper_closed_loop_n7"] = interleaved_ratio(
                 Replay(nat, loop), Replay(paper_b, loop), budget_s)
-            out["natural_over_paper_worst_case_n7"] = interleaved_ratio(
+            out["log_det_over_paper_worst_case_n7"] = interleaved_ratio(
                 lambda: nat.step(*args), lambda: paper_b.step(*args), budget_s)
         else:
             sl = SlotineLiCompositeController(model, theta_hat0=model.theta())

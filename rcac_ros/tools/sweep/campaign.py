@@ -51,9 +51,9 @@ from rcac_ros.tools.scenarios import (AMPLITUDE, controller, FREQUENCY, gains_fo
 from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
-#: the law's geometry: "natural_barrier" is the natural one with natural_metric="barrier"
-#: (doc/design.md §8)
-GEOMETRIES = ("euclidean", "natural", "natural_barrier")
+#: the law's geometry (doc/design.md §8): "natural" is the natural geometry with its default
+#: metric (the barrier), "natural_log_det" and "natural_barrier" name the metric
+GEOMETRIES = ("euclidean", "natural", "natural_log_det", "natural_barrier")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
 MODELS = ("css_arm", "panda")
@@ -78,7 +78,7 @@ QUANTITIES = {
     # estimates of composite_friction
     "joint_damping": ("float", 7), "joint_friction": ("float", 7), "joint_armature": ("float", 7),
     "P_friction": ("float", 1),
-    # c of the natural_barrier geometry's metric (doc/design.md §8)
+    # c of the barrier metric (geometries natural and natural_barrier, doc/design.md §8)
     "barrier_c": ("float", 1),
 }
 #: Quantities drawn once per sample, the same in every grid cell (paired comparisons).
@@ -430,8 +430,10 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
         g["gamma"] = gamma
         g.pop("theta_hat0")
     g.update(theta_hat0=theta_hat0, geometry=inputs["geometry"])
-    if g["geometry"] == "natural_barrier":
+    if g["geometry"] in ("natural", "natural_barrier"):
         g.update(geometry="natural", natural_metric="barrier", barrier_c=inputs["barrier_c"])
+    elif g["geometry"] == "natural_log_det":
+        g.update(geometry="natural", natural_metric="log_det")
     if law == "slotine_li":
         return controller("slotine_li", model, g)
     if inputs["channels"] is not None:
