@@ -1,11 +1,12 @@
 """What both kinds of node (plain :class:`~rcac_ros.nodes.runtime.base.RcacNode` and managed
 :class:`~rcac_ros.nodes.runtime.managed.ManagedNode`) share: on-set checks against the parameter
-table and the periodic diagnostics."""
+table, the periodic diagnostics, and publishers without rclpy's default event handlers."""
 
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import PublisherEventCallbacks
 
 from rcac_ros import params, topics
 from rcac_ros.errors import ConfigError
@@ -16,6 +17,23 @@ from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
 class RcacNodeMixin:
     """Parameter checks and diagnostics of both nodes (plain or managed): uses ``_rows``
     (name -> :class:`rcac_ros.params.Param`), ``model``, ``_pub_diag``, ``diagnostics()``."""
+
+    def create_publisher(self, *args, **kwargs):
+        """rclpy's, without its default event handlers unless ``event_callbacks`` is given.
+
+        rclpy gives every publisher two handlers (incompatible QoS, incompatible type) that only
+        log, and its executor adds each to the wait set it rebuilds at every spin: at 500 Hz
+        they were most of the wait set (24 of the controller's 30 waitables) and cost about a
+        third of each spin (doc/failsafe.md, "Where a tick's time goes"). The subscriber of an
+        incompatible pair still reports it (its own default handlers, rclpy's and rclcpp's)."""
+        kwargs.setdefault("event_callbacks", PublisherEventCallbacks(use_default_callbacks=False))
+        return super().create_publisher(*args, **kwargs)
+
+    def create_lifecycle_publisher(self, *args, **kwargs):
+        """rclpy's (managed nodes), without its default event handlers, as
+        :meth:`create_publisher`."""
+        kwargs.setdefault("event_callbacks", PublisherEventCallbacks(use_default_callbacks=False))
+        return super().create_lifecycle_publisher(*args, **kwargs)
 
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""

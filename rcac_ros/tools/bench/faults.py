@@ -496,6 +496,12 @@ def window_figures(probe, track, window, h):
         else track
     return {"window_efforts": len(inside), "window_safe": int(sum(e[2] for e in inside)),
             "window_gap_ms": float(gaps.max()),
+            # where the longest gap ends: s after the faulty third began, and wall time (s)
+            # to set it beside the machine's own logs
+            "window_gap_at_s": float((src[int(np.argmax(gaps)) + 1] - wall0) * 1e-9)
+            if src.size > 1 else None,
+            "window_gap_end_wall_s": float(src[int(np.argmax(gaps)) + 1] * 1e-9)
+            if src.size > 1 else None,
             "window_gaps_over_2h": int(np.sum(gaps > 2e3 * h)),
             "window_tracking_rms": float(np.sqrt(np.mean(during[:, 1] ** 2)))
             if during.size else None}
