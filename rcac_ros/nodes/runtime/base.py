@@ -9,6 +9,7 @@ SIGINT/SIGTERM). Throttled warnings and compute-time statistics:
 
 import signal
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -208,6 +209,11 @@ def _realtime(node):
     return rt
 
 
+#: s a node stays after its shutdown transition, serving its executor, so that DDS delivers
+#: what it wrote last (the transition's answer)
+SHUTDOWN_LINGER = 0.5
+
+
 def run(node_factory, prog, args=None):
     """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
 
@@ -242,6 +248,13 @@ def run(node_factory, prog, args=None):
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
             spin_node_once(executor, node)
+        if node.finished:
+            # the shutdown transition's answer (and the last zero effort) are written but may
+            # not be delivered yet: keep the participant a moment before destroying it (a
+            # client once waited 60 s in vain for the answer of a process already gone)
+            end = time.monotonic() + SHUTDOWN_LINGER
+            while rclpy.ok() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
         code = node.exit_code
     except RcacError as err:
         print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
