@@ -113,18 +113,20 @@ class Replay:
 
 
 def natural_baselines(model):
-    """The natural law with the log-det metric (doc/design.md §8) and two Euclidean
-    baselines, all from the natural default start: the paper's law as a user runs it (its
-    fused kernel, :func:`~rcac_ros.core.composite_fused.paper_step`) and the same law on the
-    general kernel's path by a projection onto infinite bounds (the same estimates, bit for
-    bit, plus 13 n clips)."""
+    """The natural law with the log-det metric (doc/design.md §8), two Euclidean baselines
+    and the natural law with its default metric (the barrier), all from the natural default
+    start: ``(log_det, paper, general, barrier)``, ``paper`` the paper's law as a user runs
+    it (its fused kernel, :func:`~rcac_ros.core.composite_fused.paper_step`) and ``general``
+    the same law on the general kernel's path by a projection onto infinite bounds (the same
+    estimates, bit for bit, plus 13 n clips)."""
     start = default_start(model.theta())
     nat = RecursiveCompositeController(model, theta_hat0=start, geometry="natural",
                                        natural_metric="log_det")
     paper = RecursiveCompositeController(model, theta_hat0=start)
     inf = np.full((model.n, 13), np.inf)
     general = RecursiveCompositeController(model, theta_hat0=start, theta_bounds=(-inf, inf))
-    return nat, paper, general
+    barrier = RecursiveCompositeController(model, theta_hat0=start, geometry="natural")
+    return nat, paper, general, barrier
 
 
 def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
@@ -141,12 +143,10 @@ def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
     for n in sizes:
         model = css_arm().repeated(n // 7)
         inputs = recorded_inputs(model)
-        barrier = RecursiveCompositeController(model, theta_hat0=default_start(model.theta()),
-                                               geometry="natural")     # the default metric
-        loops[n] = [Replay(c, inputs) for c in natural_baselines(model) + (barrier,)]
+        loops[n] = [Replay(c, inputs) for c in natural_baselines(model)]
     rng = np.random.default_rng(0)
     args = tuple(rng.normal(size=(5, 7)) * 0.1)
-    nat, paper, general = natural_baselines(css_arm())
+    nat, paper, general, _ = natural_baselines(css_arm())
     figures = {}
 
     def add(key, value):
@@ -198,9 +198,7 @@ def goal_ratios(budget_s=1.0):
             # the natural geometry against the Euclidean paper law from the same start, along
             # a recorded closed loop (the goal's figure) and at one random state repeated,
             # which drives the estimates onto the retraction's floor (its worst case)
-            nat, paper_b, _ = natural_baselines(model)
-            barrier = RecursiveCompositeController(model, theta_hat0=default_start(
-                model.theta()), geometry="natural")             # the default metric
+            nat, paper_b, _, barrier = natural_baselines(model)
             loop = recorded_inputs(model)
             out["barrier_over_paper_closed_loop_n7"] = interleaved_ratio(
                 Replay(barrier, loop), Replay(paper_b, loop), budget_s)
