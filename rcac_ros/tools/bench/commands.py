@@ -227,7 +227,8 @@ BENCHMARKS = {
     "ros": ("the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)",
             add_ros, run_ros, ("ros",)),
     "faults": ("the closed loop over ROS under faults (drops, jitter, noise, simulator "
-               "restart, frozen /clock, flood, hostile flood, starved machine)",
+               "restart, frozen /clock, flood, hostile flood, starved machine, nodes "
+               "joining)",
                add_faults, run_faults, ("ros",)),
     "soak": ("the direct fault case (no relay) for MINUTES (memory growth, late ticks)",
              add_soak, run_soak, ("ros",)),
