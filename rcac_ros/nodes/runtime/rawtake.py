@@ -108,6 +108,10 @@ class RawReader:
     hold : int
         Bytes the buffer may keep between takes once a sample grew it (default
         :attr:`HOLD`); a larger one is replaced by :attr:`KEEP` bytes after its take.
+    prefault : bool
+        Allocate the buffer at its bound (``max(cap, KEEP, hold)``) at once and touch its
+        pages, so that the first large sample is copied into mapped memory as the later
+        ones are (the thread's other samples then wait less behind it).
     name : str
         The thread's name (and the prefix of its log lines).
     log : logger
@@ -130,7 +134,7 @@ class RawReader:
     HOLD = 33_554_432
 
     def __init__(self, subscription, context, on_bytes, on_oversize, cap, name, log,
-                 hold=HOLD):
+                 hold=HOLD, prefault=False):
         self._rcl, self._rcutils = _libraries()
         self._sub = subscription
         self._context = context
@@ -142,15 +146,17 @@ class RawReader:
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
         self._alloc = self._rcutils.rcutils_get_default_allocator()
-        self._init_buffer()
+        self._init_buffer(self._bound if prefault else self.KEEP, prefault)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def _init_buffer(self):
-        if self._rcutils.rcutils_uint8_array_init(ctypes.byref(self._msg), self.KEEP,
+    def _init_buffer(self, size, prefault):
+        if self._rcutils.rcutils_uint8_array_init(ctypes.byref(self._msg), size,
                                                   ctypes.byref(self._alloc)) != RCL_RET_OK:
             raise MemoryError("rcutils_uint8_array_init failed")
+        if prefault:        # its pages mapped now, not during the first large sample's copy
+            ctypes.memset(self._msg.buffer, 0, size)
 
     @property
     def capacity(self):
