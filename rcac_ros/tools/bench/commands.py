@@ -90,17 +90,22 @@ def add_faults(p):
                    help="seconds per case (default 60)")
     p.add_argument("--cases", default=None, help="comma-separated cases (default: all)")
     p.add_argument("--plot", metavar="FILE", help="tracking errors per case (PNG)")
+    _add_discovery_range(p)
+    add_controller(p)
+
+
+def _add_discovery_range(p):
     p.add_argument("--discovery-range", choices=("LOCALHOST", "SUBNET"), default="LOCALHOST",
                    help="ROS_AUTOMATIC_DISCOVERY_RANGE of every process (default LOCALHOST: "
                         "nothing leaves the machine; SUBNET is ROS's default; see the joiners "
                         "case in doc/failsafe.md)")
-    add_controller(p)
 
 
 def add_soak(p):
     p.add_argument("minutes", type=positive_float, metavar="MINUTES",
                    help="minutes of the direct case (no fault, no relay)")
     p.add_argument("--plot", metavar="FILE", help="the tracking error (PNG)")
+    _add_discovery_range(p)
     add_controller(p)
 
 
