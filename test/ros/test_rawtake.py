@@ -161,6 +161,20 @@ def test_a_prefaulted_buffer_starts_at_its_bound_and_stays_there():
     assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
 
 
+def test_a_prefaulted_buffer_grown_past_its_bound_returns_to_the_bound():
+    """After a sample above ``max(cap, KEEP, hold)`` a prefaulted reader gets a buffer of
+    that bound back (a plain one gets KEEP bytes: the next test)."""
+    large = len(serialize_message(LARGE))
+    hold = (RawReader.KEEP + large) // 2        # between KEEP and LARGE's size
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log, hold=hold, prefault=True) as (reader, publish):
+        assert reader.capacity == hold
+        publish(LARGE, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 2), (len(inbox.data), inbox.oversize)
+        assert inbox.wait(lambda b: reader.capacity == hold), reader.capacity
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+
+
 def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
     small = len(serialize_message(SMALL))
     for cap, delivered in ((small + 16, 0), (0, 1)):    # LARGE above the cap / no cap
