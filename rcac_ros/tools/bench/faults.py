@@ -646,7 +646,8 @@ def format_table(results, h):
         ratio = "-" if r["tracking_ratio"] is None else f"{r['tracking_ratio']:.2f}"
         rms = "-" if r["tracking_rms"] is None else f"{r['tracking_rms']:.3g}"
         notes = []
-        if r.get("reference") == "direct" and r["tracking_ratio"] is not None:
+        if r.get("reference") == "direct" and r["case"] != "direct" \
+                and r["tracking_ratio"] is not None:
             notes.append("ref: direct")
         if r["case"] == "restart":
             rec = r.get("restart_recovery_s")
