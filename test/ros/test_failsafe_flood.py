@@ -69,3 +69,19 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
     # a liveness bound, not the goal of doc/failsafe.md (<= 2 periods beyond the machine's
     # own stalls, not met): the DDS copy of each 8 MB sample still delays the valid states
     assert gaps.max() <= machine.max() + 500.0, (gaps.max(), machine.max())
+
+
+def test_flood_without_a_subscriber_says_so_and_exits_1():
+    """A flood that matched no controller must not pass for one (the fault bench once
+    measured a third without it: its controller did not subscribe the trajectories)."""
+    import domain_coordinator
+
+    from rcac_ros.tools.launch import child_env
+    with domain_coordinator.domain_id() as domain:
+        done = subprocess.run(FLOOD + ["1.0", "--match-timeout", "0.5"], env=child_env(domain),
+                              capture_output=True, text=True, timeout=60.0, cwd=ROOT)
+    assert done.returncode == 1
+    assert "flood: start" not in done.stdout
+    last = done.stderr.strip().splitlines()[-1]     # the middleware may log before it
+    assert last.startswith("flood: error: no subscriber") and "trajectory: topic" in last, \
+        done.stderr

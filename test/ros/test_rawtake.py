@@ -62,7 +62,7 @@ class Inbox:
 
 
 @contextlib.contextmanager
-def raw_reader(inbox, cap, log, hold=0):
+def raw_reader(inbox, cap, log, hold=0, prefault=False):
     """A RawReader on ``/rawtake_test`` (``hold``: 0, a grown buffer is always freed) and a
     publisher to it; yields ``(reader, publish)``."""
     with ros_context() as (ctx, _):
@@ -70,7 +70,7 @@ def raw_reader(inbox, cap, log, hold=0):
         sub = node.create_subscription(JointState, "/rawtake_test", lambda _: None, QOS,
                                        raw=True)
         reader = RawReader(sub, ctx, inbox.on_bytes, inbox.on_oversize, cap, "test input", log,
-                           hold)
+                           hold, prefault)
         pub = node.create_publisher(JointState, "/rawtake_test", QOS)
         try:
             end = time.monotonic() + 20.0
@@ -143,6 +143,35 @@ def test_a_buffer_grown_within_hold_is_kept_and_reused():
         assert reader.capacity >= len(inbox.data[0]) > RawReader.KEEP, reader.capacity
         got = [deserialize_message(d, JointState) for d in inbox.data]
         assert got[0].name == LARGE.name and got[1].name == SMALL.name
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+
+
+def test_a_prefaulted_buffer_starts_at_its_bound_and_stays_there():
+    """``prefault``: the buffer is allocated at ``max(cap, KEEP, hold)`` before any sample
+    (the first large one is copied into mapped pages), and a sample within it keeps it."""
+    large = len(serialize_message(LARGE))
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log, hold=4 * large, prefault=True) as (reader, publish):
+        assert reader.capacity == 4 * large
+        publish(LARGE, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 2), (len(inbox.data), inbox.oversize)
+        assert reader.capacity == 4 * large
+        got = [deserialize_message(d, JointState) for d in inbox.data]
+        assert got[0].name == LARGE.name and got[1].name == SMALL.name
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+
+
+def test_a_prefaulted_buffer_grown_past_its_bound_returns_to_the_bound():
+    """After a sample above ``max(cap, KEEP, hold)`` a prefaulted reader gets a buffer of
+    that bound back (a plain one gets KEEP bytes: the next test)."""
+    large = len(serialize_message(LARGE))
+    hold = (RawReader.KEEP + large) // 2        # between KEEP and LARGE's size
+    inbox, log = Inbox(), Log()
+    with raw_reader(inbox, 0, log, hold=hold, prefault=True) as (reader, publish):
+        assert reader.capacity == hold
+        publish(LARGE, SMALL)
+        assert inbox.wait(lambda b: len(b.data) == 2), (len(inbox.data), inbox.oversize)
+        assert inbox.wait(lambda b: reader.capacity == hold), reader.capacity
     assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
 
 

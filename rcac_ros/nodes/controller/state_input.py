@@ -108,7 +108,7 @@ class StateInput:
         self._lock = threading.Lock()       # the side thread's reading against reset()
         if not lockstep:                    # states in their own thread: the loop only ticks
             self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS, self._on_state,
-                                   max_bytes, "state", self.warn)
+                                   max_bytes, "state", self.warn, prefault=True)
             self._sub = None
         else:                               # lockstep: the answer is the state's callback
             self._side = None

@@ -62,13 +62,17 @@ class SideInput:
         Name of the input in the rejection text (``max_<what>_bytes`` is the parameter).
     reject : callable
         ``reject(kind, text)``: a message above the cap or that does not deserialise.
+    prefault : bool
+        The reader's buffer allocated and mapped at its bound from the start
+        (:class:`~rcac_ros.nodes.runtime.rawtake.RawReader`).
 
     A failed take, a failed allocation of the take's buffer or an exception of ``callback``
     is counted (:attr:`errors`), the first of each kind logged with ``owner``'s logger, and
     the thread goes on.
     """
 
-    def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject):
+    def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject,
+                 prefault=False):
         if topic.startswith("~/"):      # the owner's private topic, not this side node's
             topic = owner.resolve_topic_name(topic, only_expand=True)
         self.topic = topic
@@ -94,7 +98,7 @@ class SideInput:
 
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,
-                                 f"{what} input", owner.get_logger())
+                                 f"{what} input", owner.get_logger(), prefault=prefault)
 
     @property
     def errors(self):

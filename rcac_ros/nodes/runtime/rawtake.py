@@ -10,20 +10,21 @@ DDS runs beside the control thread, and the size is checked on the taken buffer 
 Python object is built from it.
 
 The serialised-message buffer is reused between takes; ``rcl`` grows it to the size of the
-sample taken, so after a sample larger than ``max(cap, KEEP, hold)`` it is replaced by one
-of ``KEEP`` bytes: between takes the reader holds at most that much, not the largest sample
-it ever saw. A buffer grown by a sample up to ``hold`` bytes (default :attr:`RawReader.HOLD`,
-32 MiB) is kept: the next flood sample is copied into pages already mapped, instead of
-fresh ones that the kernel must fault in and zero while the valid samples queued behind it
-wait (measured: the watchdog's safe efforts in the hostile flood's third 205 and 174 of
-about 10000 with a fresh buffer per flood sample, 19 and 10 with the buffer kept;
-doc/failsafe.md). The small buffer is allocated before the
-large one is freed: if that allocation fails (a machine short of memory), the failure is
-counted, the reader keeps the large buffer and takes into it, and tries again after the next
-take or wait (at most 50 ms later); it is never left without a buffer.
+sample taken. A buffer grown by a sample of up to ``max(cap, KEEP, hold)`` bytes (``hold``
+default :attr:`RawReader.HOLD`, 32 MiB) is kept, so the next large sample is copied into
+pages already mapped instead of fresh ones that the kernel must fault in and zero while the
+valid samples queued behind it wait; after a larger sample the buffer is replaced by one of
+its initial size, so between takes the reader holds at most that bound. The initial size is
+``KEEP`` bytes, or the bound with ``prefault`` (the controller's state input): then the
+pages are touched at once, 32 MiB resident from the start, and the first large sample is
+not slower than the later ones (doc/failsafe.md, "The fault bench's flood, corrected"). The
+new buffer is allocated before the large one is freed: if that allocation fails (a machine
+short of memory), the failure is counted, the reader keeps the large buffer and takes into
+it, and tries again after the next take or wait (at most 50 ms later); it is never left
+without a buffer.
 
 Errors do not stop the reader: a return code of ``rcl`` other than "taken" and "nothing to
-take", a failed allocation of the small buffer, and an exception raised by a callback, are
+take", a failed allocation of the initial-size buffer, and an exception raised by a callback, are
 counted (:attr:`RawReader.errors`) and the first of each kind is logged (the exception with
 its traceback); the thread then goes on with the next sample.
 """
@@ -107,7 +108,11 @@ class RawReader:
         Bytes (0: no cap).
     hold : int
         Bytes the buffer may keep between takes once a sample grew it (default
-        :attr:`HOLD`); a larger one is replaced by :attr:`KEEP` bytes after its take.
+        :attr:`HOLD`); a larger one is replaced by the initial buffer after its take.
+    prefault : bool
+        Allocate the buffer at its bound (``max(cap, KEEP, hold)``) at once and touch its
+        pages, so that the first large sample is copied into mapped memory as the later
+        ones are (the thread's other samples then wait less behind it).
     name : str
         The thread's name (and the prefix of its log lines).
     log : logger
@@ -117,7 +122,7 @@ class RawReader:
     ----------
     errors : dict
         Counts by kind: ``"take"`` (``rcl_take_serialized_message`` returned an error; the
-        sample, if any, is lost), ``"alloc"`` (the buffer of :attr:`KEEP` bytes that replaces
+        sample, if any, is lost), ``"alloc"`` (the initial-size buffer that replaces
         one grown past the bound could not be allocated; the reader keeps the grown buffer,
         takes into it and tries again after the next take or wait) and ``"callback"``
         (``on_bytes`` or ``on_oversize`` raised; the reader goes on with the next sample).
@@ -130,7 +135,7 @@ class RawReader:
     HOLD = 33_554_432
 
     def __init__(self, subscription, context, on_bytes, on_oversize, cap, name, log,
-                 hold=HOLD):
+                 hold=HOLD, prefault=False):
         self._rcl, self._rcutils = _libraries()
         self._sub = subscription
         self._context = context
@@ -142,14 +147,23 @@ class RawReader:
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
         self._alloc = self._rcutils.rcutils_get_default_allocator()
-        self._init_buffer()
+        self._size, self._prefault = (self._bound if prefault else self.KEEP), prefault
+        self._init_buffer(self._msg)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def _init_buffer(self):
-        if self._rcutils.rcutils_uint8_array_init(ctypes.byref(self._msg), self.KEEP,
-                                                  ctypes.byref(self._alloc)) != RCL_RET_OK:
+    def _new_buffer(self, msg):
+        """Allocate ``msg`` with the reader's initial size (touched if prefaulted);
+        ``rcutils``'s return code."""
+        ret = self._rcutils.rcutils_uint8_array_init(ctypes.byref(msg), self._size,
+                                                     ctypes.byref(self._alloc))
+        if ret == RCL_RET_OK and self._prefault:    # mapped now, not during a sample's copy
+            ctypes.memset(msg.buffer, 0, self._size)
+        return ret
+
+    def _init_buffer(self, msg):
+        if self._new_buffer(msg) != RCL_RET_OK:
             raise MemoryError("rcutils_uint8_array_init failed")
 
     @property
@@ -158,19 +172,19 @@ class RawReader:
         return self._msg.buffer_capacity
 
     def _shrink(self):
-        """Replace a buffer grown past the bound by one of :attr:`KEEP` bytes.
+        """Replace a buffer grown past the bound by one of the initial size (:attr:`KEEP`
+        bytes, or the bound if prefaulted).
 
         The new buffer is allocated before the old one is freed: if the allocation fails, it
         is counted (``"alloc"``) and the reader keeps the old buffer (valid, only larger than
         the bound) until the next attempt.
         """
         small = _Uint8Array()
-        ret = self._rcutils.rcutils_uint8_array_init(ctypes.byref(small), self.KEEP,
-                                                     ctypes.byref(self._alloc))
+        ret = self._new_buffer(small)
         if ret != RCL_RET_OK:
             message = self._rcutils.rcutils_get_error_string().str.decode(errors="replace")
             self._rcutils.rcutils_reset_error()
-            self._error("alloc", f"rcutils_uint8_array_init of {self.KEEP} bytes returned "
+            self._error("alloc", f"rcutils_uint8_array_init of {self._size} bytes returned "
                         f"{ret} ({message}): the reader keeps its buffer of "
                         f"{self._msg.buffer_capacity} bytes and tries again")
             return

@@ -5,7 +5,7 @@ core           the recursive controller against Pinocchio, the Slotine-Li   :mod
                baseline and itself, offline (µs per step, operation count)
 ros            the two nodes over ROS 2 at 500 Hz: rate, jitter, latency    :mod:`.ros`
 faults         the closed loop over ROS under faults, one case at a time    :mod:`.faults`
-soak           the nominal fault case for minutes: memory growth, late      :mod:`.faults`
+soak           the direct fault case for minutes: memory growth, late       :mod:`.faults`
                ticks
 delay-margin   offline, tracking RMS against K_D with the effort 0-2        :mod:`.delay_margin`
                periods late (the stable range of timer mode)
@@ -90,13 +90,22 @@ def add_faults(p):
                    help="seconds per case (default 60)")
     p.add_argument("--cases", default=None, help="comma-separated cases (default: all)")
     p.add_argument("--plot", metavar="FILE", help="tracking errors per case (PNG)")
+    _add_discovery_range(p)
     add_controller(p)
+
+
+def _add_discovery_range(p):
+    p.add_argument("--discovery-range", choices=("LOCALHOST", "SUBNET"), default="LOCALHOST",
+                   help="ROS_AUTOMATIC_DISCOVERY_RANGE of every process (default LOCALHOST: "
+                        "nothing leaves the machine; SUBNET is ROS's default; see the joiners "
+                        "case in doc/failsafe.md)")
 
 
 def add_soak(p):
     p.add_argument("minutes", type=positive_float, metavar="MINUTES",
-                   help="minutes of the nominal case")
+                   help="minutes of the direct case (no fault, no relay)")
     p.add_argument("--plot", metavar="FILE", help="the tracking error (PNG)")
+    _add_discovery_range(p)
     add_controller(p)
 
 
@@ -190,12 +199,13 @@ def run_faults(args, cases=None, soak_minutes=None):
     run_faults(getattr(args, "duration", 60.0), cases,
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,
-               plot_path=args.plot, soak_minutes=soak_minutes)
+               plot_path=args.plot, soak_minutes=soak_minutes,
+               discovery_range=getattr(args, "discovery_range", "LOCALHOST"))
     return 0
 
 
 def run_soak(args):
-    return run_faults(args, cases=("nominal",), soak_minutes=args.minutes)
+    return run_faults(args, cases=("direct",), soak_minutes=args.minutes)
 
 
 def run_delay_margin(args):
@@ -222,9 +232,10 @@ BENCHMARKS = {
     "ros": ("the two nodes over ROS 2 at 500 Hz (rate, jitter, latency)",
             add_ros, run_ros, ("ros",)),
     "faults": ("the closed loop over ROS under faults (drops, jitter, noise, simulator "
-               "restart, frozen /clock, flood, hostile flood, starved machine)",
+               "restart, frozen /clock, flood, hostile flood, starved machine, nodes "
+               "joining)",
                add_faults, run_faults, ("ros",)),
-    "soak": ("the nominal fault case for MINUTES (memory growth, late ticks)",
+    "soak": ("the direct fault case (no relay) for MINUTES (memory growth, late ticks)",
              add_soak, run_soak, ("ros",)),
     "delay-margin": ("offline, tracking RMS against K_D with the effort 0-2 periods late",
                      add_delay_margin, run_delay_margin, ()),

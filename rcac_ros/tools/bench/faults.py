@@ -6,7 +6,8 @@ through a relay in this process (``/sim/joint_states`` -> ``/joint_states``), wh
 injects the faults of the wires; the others come from outside:
 
 ============  ===================================================================
-nominal       no fault (the reference: the relay is in the loop in every case)
+nominal       no fault (the reference: the relay in the loop, as in the wire faults)
+direct        no fault, the simulator publishing to the controller (the soak's case)
 drops         10 % of the joint states dropped at random
 jitter        each state delayed by 0-2 ms (+-1 ms around the mean), order kept
 noise         the simulator's measurement noise (1e-4 rad, 1e-3 rad/s)
@@ -21,7 +22,14 @@ hostile_flood a third process (niced) publishes every 100 ms a JointState of 1e6
               run, while a plain 500 Hz loop in a fourth process measures the
               machine's own stalls in the same window
 starved       busy processes (two per core) beside the nodes for a third of the run
+joiners       every 2 s of a third of the run a new process (a node with a publisher on
+              ``/joint_states``) joins the graph and leaves after 1.5 s, while a plain
+              500 Hz loop measures the machine's own stalls
 ============  ===================================================================
+
+The flood, starved and joiners cases leave the relay out: the simulator (real time with
+``--rt``, as an arm's driver) publishes to the controller directly, so that a stall of this
+process (Python, not real time) is not counted as one of the controller's input.
 
 Each case is one entry of :data:`CASES` (a :class:`Case`: the fault, its window, its
 figures and its checks).
@@ -33,13 +41,14 @@ of the run tracks within 3x nominal; after the restart, also the first non-watch
 effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
 non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
 3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
-``rcac bench soak MINUTES`` runs the nominal case that long and reports the controller's memory
+``rcac bench soak MINUTES`` runs the direct case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
 
 import json
 import os
 import queue
+import signal
 import subprocess
 import sys
 import tempfile
@@ -212,14 +221,71 @@ def _stop_busy(run):
     run.busy = []
 
 
+#: s the flood process may take to build its messages and match the controller's inputs
+FLOOD_START_TIMEOUT = 60.0
+
+
 def _flood(run, extra=(), prefix=()):
+    """Start the flood process and serve this process's node until it publishes: the
+    faulty third begins with its first message, not with its start-up (building 1e6 names
+    in a niced process took seconds)."""
+    from rcac_ros.tools.launch import NodeFailed
     cmd = list(prefix) + [sys.executable, FLOOD, str(run.third)] + list(extra)
-    run.flood = subprocess.Popen(cmd, env=run.env, stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.DEVNULL)
+    err_path = os.path.join(run.log_dir, "flood.log")
+    with open(err_path, "w", encoding="utf-8") as err_file:    # never a pipe left unread
+        run.flood = subprocess.Popen(cmd, env=run.env, stdout=subprocess.PIPE,
+                                     stderr=err_file, text=True)
+    started = threading.Event()
+
+    def read():
+        for line in run.flood.stdout:
+            if line.startswith("flood: start"):
+                started.set()
+    threading.Thread(target=read, daemon=True).start()
+    run.spin_for(FLOOD_START_TIMEOUT, lambda: started.is_set() or run.flood.poll() is not None,
+                 "while the flood started")
+    if not started.is_set():
+        run.flood.kill()
+        run.flood.wait()
+        with open(err_path, encoding="utf-8") as f:
+            err = f.read().strip().splitlines()
+        raise NodeFailed("the flood process did not start publishing: "
+                         + (err[-1] if err else f"nothing within {FLOOD_START_TIMEOUT:g} s"))
 
 
 def _hostile_flood(run):
     _flood(run, HOSTILE, ("nice", "-n", "10"))
+
+
+#: a process that starts a short-lived node with a JointState publisher every ``period`` s,
+#: ``count`` times (each node joins the graph, stays 1.5 s and leaves)
+JOINERS = """
+import subprocess, sys, time
+period, count = float(sys.argv[1]), int(sys.argv[2])
+node = ("import sys, time, rclpy; from sensor_msgs.msg import JointState; rclpy.init(); "
+        "n = rclpy.create_node('rcac_bench_joiner'); "
+        "n.create_publisher(JointState, sys.argv[1], 10); time.sleep(1.5)")
+procs = []
+for _ in range(count):
+    procs.append(subprocess.Popen([sys.executable, "-c", node, sys.argv[3]]))
+    time.sleep(period)
+for p in procs:
+    p.wait()
+"""
+#: s between two joiners
+JOIN_PERIOD = 2.0
+
+
+#: s a joiner's participant takes to appear after its process starts (1.9-2.9 s measured):
+#: the last joiner starts this long before the third ends
+JOIN_LEAD = 3.0
+
+
+def _joiners(run):
+    count = max(1, int((run.third - JOIN_LEAD) / JOIN_PERIOD) + 1)
+    run.flood = subprocess.Popen(
+        [sys.executable, "-c", JOINERS, str(JOIN_PERIOD), str(count),
+         topics.resolve(topics.JOINT_STATES)], env=run.env, start_new_session=True)
 
 
 def _restart_figures(run, out):
@@ -290,12 +356,17 @@ class Case:
     inject: Callable = None
     clear: Callable = None
     plain_loop: bool = False        # measure the machine's own stalls in the window
+    relay: bool = True              # False: the simulator publishes to the controller directly
     figures: Callable = None
     check: Callable = None
 
 
+#: the floods' controller: its trajectory input subscribed, as an integrator's would be
+TOPIC = {"trajectory": "topic"}
+
 CASES = {
     "nominal": Case(),
+    "direct": Case(relay=False),
     "drops": Case(drop=0.1),
     "jitter": Case(jitter=0.002),
     "noise": Case(simulator={"position_noise": 1e-4, "velocity_noise": 1e-3}),
@@ -303,11 +374,14 @@ CASES = {
     "frozen_clock": Case(controller={"use_sim_time": True}, window="third",
                          inject=_freeze_clock, clear=_thaw_clock, figures=_resume_figures,
                          check=_judge_resume),
-    "flood": Case(window="third", inject=_flood),
-    "hostile_flood": Case(window="third", inject=_hostile_flood, plain_loop=True,
-                          figures=_window_and_machine_figures, check=_judge_hostile),
+    "flood": Case(controller=TOPIC, window="third", inject=_flood, relay=False),
+    "hostile_flood": Case(controller=TOPIC, window="third", inject=_hostile_flood,
+                          plain_loop=True, relay=False, figures=_window_and_machine_figures,
+                          check=_judge_hostile),
     "starved": Case(window="third", inject=_starve, clear=_stop_busy, plain_loop=True,
-                    figures=_window_and_machine_figures, check=_judge_starved),
+                    relay=False, figures=_window_and_machine_figures, check=_judge_starved),
+    "joiners": Case(window="third", inject=_joiners, plain_loop=True, relay=False,
+                    figures=_window_and_machine_figures, check=_judge_hostile),
 }
 
 
@@ -338,7 +412,7 @@ class _Run:
 
 
 def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, soak=False,
-             verbose=True, simulator=None):
+             verbose=True, simulator=None, discovery_range="LOCALHOST"):
     """Run one case; return its figures (see the module docstring)."""
     import domain_coordinator
 
@@ -348,11 +422,13 @@ def run_case(case, duration, controller, rate=500.0, warmup=3.0, log_dir=None, s
     h = 1.0 / rate
     log_dir = log_dir or tempfile.mkdtemp(prefix="rcac_faults_")
     os.makedirs(log_dir, exist_ok=True)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    out = {"case": case, "rate": float(rate)}
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
+    out = {"case": case, "rate": float(rate), "discovery_range": discovery_range}
     with domain_coordinator.domain_id() as domain:
         env = child_env(domain)
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
         run = _Run(h, env)
+        run.log_dir = log_dir
         try:
             _start_nodes(run, case, spec, controller, simulator or {}, rate, domain, log_dir)
             run.spin_for(warmup)
@@ -382,12 +458,12 @@ def _start_nodes(run, case, spec, controller, simulator, rate, domain, log_dir):
     sim_over = dict(simulator, mode="realtime", dt=h, duration=0.0)
     sim_over.update(spec.simulator)
     remap = ["-r", f"{topics.JOINT_STATES}:={SIM}{topics.resolve(topics.JOINT_STATES)}",
-             "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"]
+             "-r", f"{topics.CLOCK}:={SIM}{topics.CLOCK}"] if spec.relay else []
     run.ctx = init_context(domain)
     run.executor = SingleThreadedExecutor(context=run.ctx)
     node = Node("rcac_fault_bench", context=run.ctx)
     run.executor.add_node(node)
-    relay = run.relay = Relay(node, h)
+    relay = run.relay = Relay(node, h) if spec.relay else None
     probe = run.probe = Probe(node)
 
     def sim_child(tag=""):
@@ -398,7 +474,7 @@ def _start_nodes(run, case, spec, controller, simulator, rate, domain, log_dir):
                      os.path.join(log_dir, f"{case}_controller.log"))
     run.children += [run.ctrl, sim_child()]
     if not run.spin_for(60.0, lambda: all(s.get_publisher_count() for s in probe.subs[:2])
-                        and relay.forwarded > 0, "while starting"):
+                        and (relay is None or relay.forwarded > 0), "while starting"):
         raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
 
 
@@ -406,8 +482,9 @@ def _run_windows(run, spec, duration, soak, verbose):
     """The run with its fault (:attr:`Case.window`); the controller's RSS samples."""
     spin_for, relay, h = run.spin_for, run.relay, run.h
     t0 = run.t0 = time.monotonic_ns()
-    relay.drop = spec.drop
-    relay.jitter = spec.jitter
+    if relay is not None:
+        relay.drop = spec.drop
+        relay.jitter = spec.jitter
     third = run.third = duration / 3.0
     rss = [(0.0, rss_kb(run.ctrl.proc.pid))]
     if spec.window == "restart":
@@ -447,7 +524,14 @@ def _stop_all(run):
     """The fault's processes, the relay, the nodes and this process's context."""
     from rcac_ros.tools.launch import shut_down
     for p in run.busy + [p for p in (run.flood,) if p is not None]:
-        p.kill()
+        try:
+            leader = os.getpgid(p.pid) == p.pid     # its own session: the joiners' nodes
+        except ProcessLookupError:
+            leader = False
+        if leader:
+            os.killpg(p.pid, signal.SIGKILL)
+        else:
+            p.kill()
         p.wait()
     if run.relay is not None:
         run.relay.close()
@@ -465,7 +549,7 @@ def _collect_figures(run, spec, out, rss, t1, soak):
                longest_gap_ms=float(gaps.max()), gaps_over_2h=int(np.sum(gaps > 2e3 * h)),
                tracking_rms=float(np.sqrt(np.mean(track[:, 1] ** 2))) if track.size else None,
                theta_bounded=bool(probe.theta_finite and probe.theta_max < BOUND),
-               theta_max=probe.theta_max, dropped=relay.dropped)
+               theta_max=probe.theta_max, dropped=relay.dropped if relay else 0)
     tail = track[track[:, 0] > t1 - 0.2 * (t1 - t0)] if track.size else track
     out["tracking_rms_last_fifth"] = float(np.sqrt(np.mean(tail[:, 1] ** 2))) \
         if tail.size else None
@@ -479,6 +563,10 @@ def _collect_figures(run, spec, out, rss, t1, soak):
                 "stamp_restarts"):
         if key in diag:
             out[f"controller_{key}"] = diag[key]
+    sim = probe.diagnostics.get("rcac_simulator: simulation", {})
+    for key in ("late_ticks", "skipped_ticks"):       # the controller's input, its own loop
+        if key in sim:
+            out[f"simulator_{key}"] = sim[key]
     good = [kb for _, kb in rss if kb]
     if len(good) > 2:
         base = good[1] if soak else good[0]       # soak: after the first 10 s
@@ -508,16 +596,30 @@ def window_figures(probe, track, window, h):
 
 
 def judge(results):
-    """Add the verdicts against nominal and the goals."""
-    nominal = next((r for r in results if r["case"] == "nominal"), None)
-    ref = nominal["tracking_rms"] if nominal else None
+    """Add the verdicts against the reference and the goals.
+
+    The reference of a case is the run of ``nominal`` (the relay in the loop) or, for a
+    case without the relay, of ``direct``, each if it was run (else the other). A case whose
+    controller holds its start (``trajectory: topic`` with only the flood's trajectories,
+    all refused) has no tracking to compare: its ``tracking_ratio`` and ``recovered`` are
+    ``None``.
+    """
+    runs = {r["case"]: r["tracking_rms"] for r in results if r["case"] in ("nominal", "direct")}
     for r in results:
-        r["tracking_ratio"] = r["tracking_rms"] / ref if ref and r["tracking_rms"] else None
-        last = r["tracking_rms_last_fifth"]
-        r["recovered"] = bool(ref and last is not None and last <= GOALS["tracking_ratio"] * ref)
-        check = CASES[r["case"]].check
-        if check is not None:
-            check(r, ref)
+        spec = CASES[r["case"]]
+        order = ("nominal", "direct") if spec.relay else ("direct", "nominal")
+        r["reference"] = next((c for c in order if runs.get(c)), None)
+        ref = runs.get(r["reference"])
+        if spec.controller.get("trajectory") == "topic":
+            r["tracking_ratio"] = r["recovered"] = None
+            ref = None
+        else:
+            r["tracking_ratio"] = r["tracking_rms"] / ref if ref and r["tracking_rms"] else None
+            last = r["tracking_rms_last_fifth"]
+            r["recovered"] = bool(ref and last is not None
+                                  and last <= GOALS["tracking_ratio"] * ref)
+        if spec.check is not None:
+            spec.check(r, ref)
     return results
 
 
@@ -532,14 +634,21 @@ def settle_time(t_s, error, after_s, bound):
     return 0.0 if not above.size else float(t[above[-1] + 1] - after_s)
 
 
+def _yes_no(flag):
+    return "-" if flag is None else "yes" if flag else "NO"
+
+
 def format_table(results, h):
-    head = (f"{'case':<13} {'track RMS (rad)':>15} {'x nominal':>9} {'longest gap':>11} "
+    head = (f"{'case':<13} {'track RMS (rad)':>15} {'x ref':>9} {'longest gap':>11} "
             f"{'gaps>2h':>7} {'theta ok':>8} {'recovered':>9}  notes")
     lines = [head, "-" * len(head)]
     for r in results:
         ratio = "-" if r["tracking_ratio"] is None else f"{r['tracking_ratio']:.2f}"
         rms = "-" if r["tracking_rms"] is None else f"{r['tracking_rms']:.3g}"
         notes = []
+        if r.get("reference") == "direct" and r["case"] != "direct" \
+                and r["tracking_ratio"] is not None:
+            notes.append("ref: direct")
         if r["case"] == "restart":
             rec = r.get("restart_recovery_s")
             notes.append("control back after " + ("never" if rec is None else f"{rec:.3f} s"))
@@ -557,7 +666,7 @@ def format_table(results, h):
                          f"longest gap {r['window_gap_ms']:.1f} ms (plain loop "
                          f"{r.get('plain_loop_gap_ms') or float('nan'):.1f} ms)")
         if r.get("window_ratio") is not None:
-            notes.append(f"tracking in it {r['window_ratio']:.2f}x nominal")
+            notes.append(f"tracking in it {r['window_ratio']:.2f}x ref")
         if "window_ok" in r:
             notes.append("goal " + ("met" if r["window_ok"] else "NOT met"))
         if "controller_starved_spells" in r:
@@ -568,16 +677,19 @@ def format_table(results, h):
         if "controller_late_ticks" in r:
             notes.append(f"late/skipped ticks {r['controller_late_ticks']}/"
                          f"{r.get('controller_skipped_ticks', '-')}")
+        if "simulator_late_ticks" in r:
+            notes.append(f"simulator's {r['simulator_late_ticks']}/"
+                         f"{r.get('simulator_skipped_ticks', '-')}")
         lines.append(f"{r['case']:<13} {rms:>15} {ratio:>9} {r['longest_gap_ms']:>8.1f} ms "
                      f"{r['gaps_over_2h']:>7} {'yes' if r['theta_bounded'] else 'NO':>8} "
-                     f"{'yes' if r['recovered'] else 'NO':>9}  {'; '.join(notes)}")
+                     f"{_yes_no(r['recovered']):>9}  {'; '.join(notes)}")
     lines.append(f"goals: tracking <= {GOALS['tracking_ratio']:g}x nominal (drops, jitter, "
                  f"noise); control back within {GOALS['restart_recovery_s']:g} s of a restart "
                  f"or of /clock resuming, tracking within 3x nominal {GOALS['settle_s']:g} s "
                  "after it; "
                  f"no gap > {GOALS['gap_periods'] * h * 1e3:g} ms; hostile flood: no safe "
                  "effort and no gap beyond the plain loop's + 2 periods; starved: tracking "
-                 f"<= {GOALS['starved_ratio']:g}x nominal while loaded")
+                 f"<= {GOALS['starved_ratio']:g}x the reference while loaded")
     return "\n".join(lines)
 
 
@@ -596,11 +708,25 @@ def plot(results, path):
     plt.close(fig)
 
 
+#: the values of ``ROS_AUTOMATIC_DISCOVERY_RANGE`` the bench runs with
+DISCOVERY_RANGES = ("LOCALHOST", "SUBNET")
+
+
 def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plot_path=None,
-               soak_minutes=None, verbose=True, simulator=None):
-    """Run the cases (or the soak), print the table, return the results."""
+               soak_minutes=None, verbose=True, simulator=None, discovery_range="LOCALHOST"):
+    """Run the cases (or the soak), print the table, return the results.
+
+    ``discovery_range`` is ``ROS_AUTOMATIC_DISCOVERY_RANGE`` for every process: with
+    ``LOCALHOST`` (the default: no traffic off the machine) rmw_fastrtps gives each
+    participant its own shared-memory transport with Fast DDS's default health check, which
+    can hold every writer of a participant up to 1/3 s when another participant starts
+    (doc/failsafe.md, "A node joining the graph"); ``SUBNET`` is ROS's default.
+    """
     if not duration > 3.0:
         raise ConfigError(f"duration: must be > 3 s, got {duration}")
+    if discovery_range not in DISCOVERY_RANGES:
+        raise ConfigError(f"discovery_range: {discovery_range!r} is not one of "
+                          f"{', '.join(DISCOVERY_RANGES)}")
     unknown = [c for c in cases if c not in CASES]
     if unknown:
         raise ConfigError(f"cases: unknown {unknown} (known: {', '.join(CASES)})")
@@ -608,12 +734,13 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
     warm_once()
     results = []
     if soak_minutes:
-        cases, duration = ("nominal",), soak_minutes * 60.0
+        cases, duration = ("direct",), soak_minutes * 60.0
     for case in cases:
         if verbose:
             print(f"rcac bench faults: {case} ({duration:g} s)", flush=True)
         results.append(run_case(case, duration, controller, soak=bool(soak_minutes),
-                                verbose=verbose, simulator=simulator))
+                                verbose=verbose, simulator=simulator,
+                                discovery_range=discovery_range))
         if verbose:
             r = results[-1]
             print(f"  tracking RMS {r['tracking_rms']}, longest gap {r['longest_gap_ms']:.1f} "

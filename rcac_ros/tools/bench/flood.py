@@ -1,14 +1,18 @@
 """A separate process that floods the controller's inputs with huge messages.
 
-``python -m rcac_ros.tools.bench.flood SECONDS`` publishes, alternately, a JointState of 1e6
-positions (8 MB) and a JointTrajectory of 1e5 points (5.6 MB), every 10 ms, until SECONDS
-have passed; it prints how many it sent. ``--names N`` gives the JointState N joint names
-(and N positions) instead: 1e6 names are about 20 MB, and a names list is costly to
-build; ``--period S`` sets the pause between two pairs (the hostile flood of
-doc/failsafe.md: ``--names 1000000 --period 0.1``).
+``python -m rcac_ros.tools.bench.flood SECONDS`` builds a JointState of 1e6 positions (8 MB)
+and a JointTrajectory of 1e5 points (5.6 MB), waits for a subscriber on both topics (the
+controller with ``trajectory: topic``; none within ``--match-timeout`` s, default
+:data:`MATCH_TIMEOUT`: one line on stderr, exit code 1),
+prints ``flood: start`` and publishes them alternately, every 10 ms, for SECONDS; it prints
+how many it sent. ``--names N`` gives the JointState N joint names (and N positions)
+instead: 1e6 names are about 20 MB, and a names list is costly to build; ``--period S``
+sets the pause between two pairs (the hostile flood of doc/failsafe.md: ``--names 1000000
+--period 0.1``).
 """
 
 import argparse
+import sys
 import time
 
 import rclpy
@@ -16,6 +20,9 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from rcac_ros import topics
+
+#: s to wait for a subscriber on both topics before giving up (exit code 1)
+MATCH_TIMEOUT = 30.0
 
 
 def messages(names, points):
@@ -36,6 +43,7 @@ def main(argv=None):
     parser.add_argument("--names", type=int, default=0)
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--period", type=float, default=0.01)
+    parser.add_argument("--match-timeout", type=float, default=MATCH_TIMEOUT)
     args = parser.parse_args(argv)
     rclpy.init()
     node = rclpy.create_node("failsafe_flood")
@@ -44,9 +52,15 @@ def main(argv=None):
     pub_traj = node.create_publisher(JointTrajectory, topics.resolve(topics.JOINT_TRAJECTORY),
                                      qos)
     big_state, big_traj = messages(args.names, args.points)
-    end = time.monotonic() + 30.0
-    while time.monotonic() < end and (pub_state.get_subscription_count() == 0
-                                      or pub_traj.get_subscription_count() == 0):
+    end = time.monotonic() + args.match_timeout
+    while pub_state.get_subscription_count() == 0 or pub_traj.get_subscription_count() == 0:
+        if time.monotonic() > end:
+            print(f"flood: error: no subscriber on {pub_state.topic_name} and "
+                  f"{pub_traj.topic_name} within {args.match_timeout:g} s (the controller needs "
+                  "trajectory: topic)", file=sys.stderr, flush=True)
+            node.destroy_node()
+            rclpy.shutdown()
+            return 1
         time.sleep(0.01)
     print("flood: start", flush=True)
     sent = 0
@@ -59,7 +73,8 @@ def main(argv=None):
     print(f"flood: sent {sent}", flush=True)
     node.destroy_node()
     rclpy.shutdown()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
