@@ -148,7 +148,8 @@ class RawReader:
         self._info = _MessageInfo()
         self._alloc = self._rcutils.rcutils_get_default_allocator()
         self._size, self._prefault = (self._bound if prefault else self.KEEP), prefault
-        self._init_buffer(self._msg)
+        if self._new_buffer(self._msg) != RCL_RET_OK:
+            raise MemoryError("rcutils_uint8_array_init failed")
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -161,10 +162,6 @@ class RawReader:
         if ret == RCL_RET_OK and self._prefault:    # mapped now, not during a sample's copy
             ctypes.memset(msg.buffer, 0, self._size)
         return ret
-
-    def _init_buffer(self, msg):
-        if self._new_buffer(msg) != RCL_RET_OK:
-            raise MemoryError("rcutils_uint8_array_init failed")
 
     @property
     def capacity(self):

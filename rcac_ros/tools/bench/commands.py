@@ -200,7 +200,7 @@ def run_faults(args, cases=None, soak_minutes=None):
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,
                plot_path=args.plot, soak_minutes=soak_minutes,
-               discovery_range=getattr(args, "discovery_range", "LOCALHOST"))
+               discovery_range=args.discovery_range)
     return 0
 
 

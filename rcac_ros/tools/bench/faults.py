@@ -283,7 +283,7 @@ JOIN_LEAD = 3.0
 
 def _joiners(run):
     count = max(1, int((run.third - JOIN_LEAD) / JOIN_PERIOD) + 1)
-    run.flood = subprocess.Popen(
+    run.joiners = subprocess.Popen(
         [sys.executable, "-c", JOINERS, str(JOIN_PERIOD), str(count),
          topics.resolve(topics.JOINT_STATES)], env=run.env, start_new_session=True)
 
@@ -390,7 +390,7 @@ class _Run:
 
     def __init__(self, h, env):
         self.h, self.env = h, env
-        self.relay = self.probe = self.flood = self.plain = self.window = None
+        self.relay = self.probe = self.flood = self.joiners = self.plain = self.window = None
         self.busy = []
         self.third = self.t0 = self.t_restart = self.t_resume = self.track = None
         self.children, self.ctx, self.executor = [], None, None
@@ -524,15 +524,14 @@ def _stop_all(run):
     """The fault's processes, the relay, the nodes and this process's context."""
     from rcac_ros.tools.launch import shut_down
     for p in run.busy + [p for p in (run.flood,) if p is not None]:
-        try:
-            leader = os.getpgid(p.pid) == p.pid     # its own session: the joiners' nodes
-        except ProcessLookupError:
-            leader = False
-        if leader:
-            os.killpg(p.pid, signal.SIGKILL)
-        else:
-            p.kill()
+        p.kill()
         p.wait()
+    if run.joiners is not None:     # its own session: with the nodes it started
+        try:
+            os.killpg(run.joiners.pid, signal.SIGKILL)
+        except ProcessLookupError:  # the group is gone already
+            pass
+        run.joiners.wait()
     if run.relay is not None:
         run.relay.close()
     shut_down(run.children, run.executor, run.ctx)
