@@ -380,6 +380,18 @@ SIMULATOR = _robot("simulator") + (
     Param("publish_velocity", "bool", True,
           "fill JointState.velocity (false: positions only)"),
     _effort_limit(),
+    # a payload held by the last link (doc/nodes.md, "Payload"; rcac_ros/core/payload.py)
+    Param("payload.mass", "double", 0.0,
+          "mass of a payload held by the last link, kg, finite and >= 0; 0: none (setting it "
+          "at run time is a capture, 0 a release: the plant changes at the next step)",
+          read_only=False),
+    Param("payload.com", "double_array", (0.0, 0.0, 0.0),
+          "the payload's centre of mass in the last link's frame, m (within the arm's length "
+          "of that frame's origin)", size=3, read_only=False),
+    Param("payload.inertia", "double_array", (0.0,) * 6,
+          "the payload's inertia about its centre of mass, last link's axes, kg m^2: Ixx Iyy "
+          "Izz Ixy Ixz Iyz (a body: positive semi-definite, I1 + I2 >= I3; zeros: a point "
+          "mass)", size=6, read_only=False),
     *_realtime("stepping thread"),
     _diagnostics_period(),
     _strict_parameters(),

@@ -29,6 +29,11 @@ PREDICTION_ERRORS = "~/prediction_errors"
 TRACKING_ERROR = "~/tracking_error"
 #: sensor_msgs/JointState, the desired q_d, qd_d (effort = qdd_d) the controller used
 DESIRED_STATE = "~/desired_state"
+#: geometry_msgs/InertiaStamped, published by the simulator at start-up and at each change of
+#: its payload parameters: the payload held by the last link (mass 0: none), stamped with the
+#: sim time of the first step that carries it; reliable, transient local (a late reader gets
+#: the current one)
+PAYLOAD = "~/payload"
 #: diagnostic_msgs/DiagnosticArray
 DIAGNOSTICS = "/diagnostics"
 #: rosgraph_msgs/Clock, published by the simulator

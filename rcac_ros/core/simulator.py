@@ -9,6 +9,7 @@ from numba import njit
 
 from ._validate import as_array, joint_values, scalar
 from .aba import aba_kernel
+from .payload import Payload, with_payload
 from rcac_ros.errors import InputError
 
 
@@ -86,10 +87,20 @@ class Simulator:
 
     def __init__(self, model, dt=0.002, q0=None, qd0=None, substeps=1, effort_limit=None):
         self.model = model
+        self.base_model = model             # the arm without a payload
+        self.payload = Payload()
         self.dt, self.substeps = plant_period(dt, substeps)
         self.effort_limit = effort_limits(model, effort_limit)
         self._kin = model.packed
         self.reset(q0, qd0)
+
+    def set_payload(self, payload):
+        """Hold ``payload`` (a :class:`~rcac_ros.core.payload.Payload`) with the last link
+        from the next step on, in place of any previous one (mass 0: release it); the state
+        is kept. ``model`` becomes the loaded arm."""
+        self.model = with_payload(self.base_model, payload)
+        self.payload = payload
+        self._kin = self.model.packed
 
     def reset(self, q0=None, qd0=None, t=0.0):
         """Set the state (default zero) and the time."""

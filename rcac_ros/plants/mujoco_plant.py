@@ -21,6 +21,7 @@ MuJoCo is imported here only: :func:`require_mujoco` turns its absence into a on
 
 import numpy as np
 
+from rcac_ros.core.payload import Payload, with_payload
 from rcac_ros.core.simulator import effort_limits, held_torque, initial_state, plant_period
 from rcac_ros.errors import ConfigError, DependencyError, ModelError
 
@@ -178,6 +179,8 @@ class MujocoPlant:
                  integrator="RK4"):
         mujoco = require_mujoco()
         self.model = model
+        self.base_model = model             # the arm without a payload
+        self.payload = Payload()
         self.dt, self.substeps = plant_period(dt, substeps)
         if integrator not in INTEGRATORS:
             raise ConfigError(f"integrator: expected one of {', '.join(INTEGRATORS)}, "
@@ -195,6 +198,7 @@ class MujocoPlant:
         self._step = mujoco.mj_step
         self._forward = mujoco.mj_forward
         self._reset_data = mujoco.mj_resetData
+        self._from_urdf = False
         self.reset(q0, qd0)
 
     def _restore_inertias(self, mujoco):
@@ -205,12 +209,48 @@ class MujocoPlant:
         gives both (``Q`` made a proper rotation).
         """
         for i in range(self.model.n):
-            d, Q = np.linalg.eigh(self.model.inertia[i])
-            if np.linalg.det(Q) < 0.0:
-                Q[:, 0] = -Q[:, 0]
-            self.mj_model.body_inertia[i + 1] = d
-            self.mj_model.body_iquat[i + 1] = _quat(Q)
+            self._set_inertia(i + 1, self.model.inertia[i])
         mujoco.mj_setConst(self.mj_model, self.mj_data)
+
+    def _set_inertia(self, body, I):
+        d, Q = np.linalg.eigh(I)
+        if np.linalg.det(Q) < 0.0:
+            Q[:, 0] = -Q[:, 0]
+        self.mj_model.body_inertia[body] = d
+        self.mj_model.body_iquat[body] = _quat(Q)
+
+    def set_payload(self, payload):
+        """As :meth:`rcac_ros.core.simulator.Simulator.set_payload`: the last body's mass,
+        centre of mass (``body_ipos``) and inertia (principal moments ``body_inertia`` about
+        the axes ``body_iquat``) become the link's and the payload's together
+        (:func:`rcac_ros.core.payload.combine`), from the next step on; the state is kept.
+
+        MuJoCo's dynamics read these fields at every step; the constants derived from them
+        (``body_subtreemass``, ``dof_invweight0``, ...) are recomputed by ``mj_setConst``,
+        which works on ``mj_data`` at ``qpos0``: the state is saved and put back.
+
+        Raises
+        ------
+        ConfigError
+            On a plant MuJoCo read from a URDF (:meth:`from_urdf`): its last body's frame is
+            the file's link frame, not the model's.
+        """
+        if self._from_urdf:
+            raise ConfigError("payload: not available on a plant MuJoCo read from a URDF")
+        mujoco = require_mujoco()
+        loaded = with_payload(self.base_model, payload)
+        n = loaded.n
+        body = n                            # body 0 is the world
+        self.mj_model.body_mass[body] = loaded.mass[n - 1]
+        self.mj_model.body_ipos[body] = loaded.com[n - 1]
+        self._set_inertia(body, loaded.inertia[n - 1])
+        data = self.mj_data
+        qpos, qvel, act, time = data.qpos.copy(), data.qvel.copy(), data.act.copy(), data.time
+        mujoco.mj_setConst(self.mj_model, data)
+        data.qpos[:], data.qvel[:], data.act[:], data.time = qpos, qvel, act, time
+        self._forward(self.mj_model, data)
+        self.model = loaded
+        self.payload = payload
 
     @property
     def q(self):
@@ -323,5 +363,6 @@ def _from_urdf(cls, path, model, kwargs):
     plant.mj_model = mj_model
     plant.mj_data = mujoco.MjData(mj_model)
     plant.xml = spec.to_xml()
+    plant._from_urdf = True
     plant.reset()
     return plant

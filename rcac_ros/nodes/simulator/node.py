@@ -13,6 +13,12 @@ Two modes:
   the latest effort held; never paced on ROS time, which stops when ``use_sim_time`` is set
   (a ``/**`` parameter block may set it on this node too) and nothing publishes /clock.
 
+A payload held by the last link (``payload.mass``, ``payload.com``, ``payload.inertia``,
+settable at run time: a capture, mass 0 a release) changes the plant at the next step; each
+change is checked as a whole (:mod:`rcac_ros.core.payload`: a refusal is the one-line reason
+of the parameter result, the plant unchanged), logged, in the diagnostics and published on
+``~/payload`` (doc/nodes.md, "Payload").
+
 Parameters are documented in ``config/simulator.yaml``.
 """
 
@@ -21,15 +27,18 @@ import time
 
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import InertiaStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from rcac_ros import params, topics
 from rcac_ros.core.model import PAPER_Q0
+from rcac_ros.core.payload import arm_reach, inertia_values, Payload
 from rcac_ros.plants import make_plant
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR, RcacNode, run
@@ -37,6 +46,13 @@ from rcac_ros.nodes.runtime.pacing import DeadlineLoop
 from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 
 NS = 1_000_000_000
+
+#: the payload parameters (a change of any is checked with the others' values)
+PAYLOAD_PARAMETERS = ("payload.mass", "payload.com", "payload.inertia")
+#: ``~/payload``: reliable, transient local, the last few changes
+QOS_PAYLOAD = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 class SimulatorNode(RcacNode):
@@ -75,6 +91,10 @@ class SimulatorNode(RcacNode):
         self._pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, QOS)
         self._sub = self.create_subscription(Float64MultiArray, topics.EFFORT_COMMANDS,
                                              self._on_effort, QOS)
+        self._pub_payload = self.create_publisher(InertiaStamped, topics.PAYLOAD, QOS_PAYLOAD)
+        self._pending_payload = None       # a payload set at run time, for the next step
+        self.payload_changes = 0
+        self.add_post_set_parameters_callback(self._on_parameters_set)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._start_timer = self.create_timer(0.01, self._try_start, clock=steady)
         if self.mode == "lockstep":
@@ -114,6 +134,64 @@ class SimulatorNode(RcacNode):
                                   effort_limit=None if limit is None else limit[self._order])
         except RcacError as err:
             raise ConfigError(f"simulator: {err}") from None
+        self._reach = arm_reach(self.model)
+        self.sim.set_payload(self._payload_from(v))     # ConfigError naming the parameter
+
+    # ------------------------------------------------------------------ payload
+    def _payload_from(self, values):
+        """The :class:`Payload` of the three parameters' ``values`` (ConfigError if bad)."""
+        return Payload(values["payload.mass"], list(values["payload.com"]),
+                       list(values["payload.inertia"]), reach=self._reach)
+
+    def _check_parameters(self, changed):
+        """The table's checks, then the payload's as a whole (the other two parameters at
+        their current values): a refusal leaves the plant unchanged."""
+        result = super()._check_parameters(changed)
+        if not result.successful or not any(p.name in PAYLOAD_PARAMETERS for p in changed):
+            return result
+        try:
+            self._payload_from(self._payload_values(changed))
+        except RcacError as err:
+            result.successful, result.reason = False, str(err)
+        return result
+
+    def _payload_values(self, changed):
+        values = {name: self.get_parameter(name).value for name in PAYLOAD_PARAMETERS}
+        values.update({p.name: p.value for p in changed if p.name in PAYLOAD_PARAMETERS})
+        return values
+
+    def _on_parameters_set(self, changed):
+        if any(p.name in PAYLOAD_PARAMETERS for p in changed):
+            self._pending_payload = self._payload_from(self._payload_values(()))
+
+    def _apply_payload(self):
+        """Put the pending payload into the plant (before the step that carries it)."""
+        payload, self._pending_payload = self._pending_payload, None
+        self.sim.set_payload(payload)
+        self.payload_changes += 1
+        t = self.k * self.dt
+        if payload.attached:
+            self.get_logger().info(
+                f"payload: {payload.mass:g} kg at {payload.com.tolist()} m, inertia "
+                f"{inertia_values(payload.inertia).tolist()} kg m^2, held from step {self.k} "
+                f"(t = {t:.3f} s)")
+        else:
+            self.get_logger().info(f"payload: released at step {self.k} (t = {t:.3f} s)")
+        self._publish_payload()
+
+    def _publish_payload(self):
+        payload = self.sim.payload
+        stamp_ns = self.k * self.dt_ns
+        msg = InertiaStamped()
+        msg.header.stamp = TimeMsg(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
+        msg.header.frame_id = self.model.joint_names[-1]
+        inertia = msg.inertia
+        inertia.m = float(payload.mass)
+        inertia.com.x, inertia.com.y, inertia.com.z = (float(v) for v in payload.com)
+        I = payload.inertia
+        inertia.ixx, inertia.iyy, inertia.izz = float(I[0, 0]), float(I[1, 1]), float(I[2, 2])
+        inertia.ixy, inertia.ixz, inertia.iyz = float(I[0, 1]), float(I[0, 2]), float(I[1, 2])
+        self._pub_payload.publish(msg)
 
     # ------------------------------------------------------------------ loop
     def _try_start(self):
@@ -128,6 +206,7 @@ class SimulatorNode(RcacNode):
         self._wall_start = time.monotonic()
         self.get_logger().info("controller found: starting" if self.wait_for_controller
                                else "starting")
+        self._publish_payload()
         self._publish_state()
         if self.loop is not None:
             self.loop.start()
@@ -158,6 +237,8 @@ class SimulatorNode(RcacNode):
     def _advance(self):
         """Step once with the held effort, then publish the new state (or finish)."""
         self._applied = np.clip(self._tau, -self.sim.effort_limit, self.sim.effort_limit)
+        if self._pending_payload is not None:
+            self._apply_payload()
         self.sim.step(self._tau)
         self.k += 1
         if self.mode == "lockstep" and self.max_speed > 0.0:   # no faster than the cap
@@ -252,6 +333,10 @@ class SimulatorNode(RcacNode):
             "repeated_answers": self.repeated,
             "ignored_watchdog_efforts": self.ignored_watchdog,
             "rejected_messages": self._throttle.total, **pacing,
+            "payload_mass": f"{self.sim.payload.mass:g}",
+            "payload_com": str(self.sim.payload.com.tolist()),
+            "payload_inertia": str(inertia_values(self.sim.payload.inertia).tolist()),
+            "payload_changes": self.payload_changes,
         }
         return self.status(level, "simulation",
                            "waiting for a controller" if not self.started else "running", values)

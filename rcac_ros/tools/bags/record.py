@@ -45,6 +45,7 @@ TOPIC_TYPES = (
     (topics.TRACKING_ERROR, "std_msgs/msg/Float64MultiArray"),
     (topics.DESIRED_STATE, "sensor_msgs/msg/JointState"),
     (topics.DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
+    (topics.resolve(topics.PAYLOAD, topics.SIMULATOR_NODE), "geometry_msgs/msg/InertiaStamped"),
 )
 
 STORAGE_CHOICES = STORAGES
