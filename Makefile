@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros readme-timings \
+.PHONY: demo test setup setup-test experiment payload-demo capture-demo bench bench-ros readme-timings \
 	readme-bench clean
 
 demo: $(VENV)/.runtime
@@ -26,6 +26,9 @@ experiment: $(VENV)/.runtime
 
 payload-demo: $(VENV)/.test
 	$(BIN)/rcac payload-demo --out $(OUT)/payload_demo
+
+capture-demo: $(VENV)/.runtime
+	$(BIN)/rcac capture-demo --out $(OUT)/capture_demo
 
 bench: $(VENV)/.test
 	$(BIN)/rcac bench core --json $(OUT)/bench.json

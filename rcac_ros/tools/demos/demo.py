@@ -54,7 +54,7 @@ def demo_overrides(duration, dt):
     return controller, simulator
 
 
-def warm_kernels(log):
+def warm_kernels(log, prog="rcac demo"):
     """Load (on the first run: compile) the numba kernels, once, before the nodes start.
 
     numba caches them next to the sources, so the nodes started next load them in seconds;
@@ -62,16 +62,22 @@ def warm_kernels(log):
     2-core machine), longer than the wait for their topics. Compiles in two processes at a
     time (:mod:`rcac_ros.tools.warm`) and says how long it took."""
     from rcac_ros.tools.warm import warm
-    log("rcac demo: loading the kernels (the first run compiles them once: about 2 min on "
+    log(f"{prog}: loading the kernels (the first run compiles them once: about 2 min on "
         "2 cores)")
     t0 = time.monotonic()
-    warm(log=lambda text: log(f"rcac demo: {text}") if " failed " in text else None)
-    log(f"rcac demo: kernels ready in {time.monotonic() - t0:.0f} s")
+    warm(log=lambda text: log(f"{prog}: {text}") if " failed " in text else None)
+    log(f"{prog}: kernels ready in {time.monotonic() - t0:.0f} s")
 
 
 def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=2.0,
-             start_timeout=120.0, stall_timeout=30.0, log=None):
+             start_timeout=120.0, stall_timeout=30.0, log=None, overrides=({}, {}), hook=None,
+             prog="rcac demo"):
     """Run the two nodes in lockstep, record, stop everything; return the bag path.
+
+    ``overrides``: extra parameters of the controller and of the simulator; ``hook``:
+    ``hook(context, executor)`` once the recorder runs, returning a callable called with
+    the simulated time (s, None before the first /clock) while the run goes (what
+    ``rcac capture-demo`` changes at run time); ``prog`` prefixes the log lines.
 
     Raises
     ------
@@ -86,9 +92,11 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     if not duration > 0.0:
         raise ConfigError(f"duration: must be > 0 s, got {duration}")
     bag = _prepare_out(out)
-    warm_kernels(log)
+    warm_kernels(log, prog)
     logs = os.path.join(out, "logs")
     ctrl_over, sim_over = demo_overrides(duration, dt)
+    ctrl_over, sim_over = dict(ctrl_over, **overrides[0]), dict(sim_over, **overrides[1])
+    tick = None
     stop = StopFlag()
     children = []
     recorder = None
@@ -103,7 +111,9 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             executor = SingleThreadedExecutor(context=ctx)
             recorder = BagRecorder(bag, ctx, storage=storage, log=log)
             executor.add_node(recorder.node)
-            log(f"rcac demo: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
+            if hook is not None:
+                tick = hook(ctx, executor)
+            log(f"{prog}: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
                 f"lockstep (dt {dt * 1e3:g} ms); bag {bag}")
 
             def all_alive():
@@ -140,6 +150,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             sim_child = children[1]
             while sim_child.alive():   # the simulator exits 0 after `duration` of sim time
                 executor.spin_once(timeout_sec=0.02)
+                if tick is not None:
+                    tick(recorder.sim_time)
                 now = time.monotonic()
                 if stop:
                     raise KeyboardInterrupt
@@ -167,7 +179,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                          or recorder.counts[answers] < recorder.counts[states]):
                 executor.spin_once(timeout_sec=0.02)
             sim = recorder.sim_time or 0.0
-            log(f"rcac demo: {sim:.3f} s simulated in {wall:.1f} s wall "
+            log(f"{prog}: {sim:.3f} s simulated in {wall:.1f} s wall "
                 f"({sim / max(wall, 1e-9):.2f}x real time)")
         finally:
             codes = {}
@@ -187,14 +199,14 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     misses = re.search(r"lockstep misses (\d+)", children[1].tail(5)) if len(children) > 1 \
         else None
     if misses and int(misses.group(1)):
-        log(f"rcac demo: warning: the simulator held an effort {misses.group(1)} times (no "
+        log(f"{prog}: warning: the simulator held an effort {misses.group(1)} times (no "
             "answer within lockstep_timeout: the machine is overloaded); the run is no longer "
             "the exact discrete loop of rcac experiment")
-    log(f"rcac demo: recorded {recorder.total} messages")
+    log(f"{prog}: recorded {recorder.total} messages")
     log(format_counts(recorder))
     for name, code in codes.items():
         if code not in (0, -signal.SIGINT, 130):
-            log(f"rcac demo: warning: the {name} exited with code {code} when stopped "
+            log(f"{prog}: warning: the {name} exited with code {code} when stopped "
                 f"(log {os.path.join(logs, name + '.log')})")
     return bag
 
