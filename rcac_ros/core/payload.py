@@ -156,8 +156,8 @@ def combine(mass, com, inertia, payload):
         return m_l, c_l.copy(), I_l.copy()
     m = m_l + payload.mass
     c = (m_l * c_l + payload.mass * payload.com) / m
-    origin = _about_origin(m_l, c_l, I_l) + _about_origin(payload.mass, payload.com,
-                                                           payload.inertia)
+    origin = _about_origin(m_l, c_l, I_l) \
+        + _about_origin(payload.mass, payload.com, payload.inertia)
     return m, c, origin - _shift(m, c)
 
 

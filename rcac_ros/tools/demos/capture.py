@@ -279,14 +279,25 @@ def read_run(bag, arm):
             msg = store.deserialize_cdr(raw, conn.msgtype)
             changes.append({"t": msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
                             "mass": msg.inertia.m})
-    diag = data.get(topics.DIAGNOSTICS)
-    statuses = getattr(diag, "last_status", {}) if diag is not None else {}
-    trips = [int(v["watchdog_trips"]) for k, v in statuses.items()
-             if k.startswith(topics.CONTROLLER_NODE) and "watchdog_trips" in v]
     t_est, est = series["parameter_estimates"]
     return {"track": series["tracking_error"], "effort": series["effort"],
             "estimates": (t_est, est[:, -1]), "payload_changes": changes,
-            "watchdog_trips": max(trips) if trips else None}
+            "watchdog_trips": watchdog_during_run(data)}
+
+
+def watchdog_during_run(data):
+    """The controller's safe efforts (tagged ``watchdog``) received between the first and the
+    last joint state of the run (before the first state the controller has none: its
+    start-up safe efforts are not trips of the run)."""
+    from rcac_ros import topics
+    from rcac_ros.tools.bags.inspect import effort_tags
+    eff = data.get("/" + topics.EFFORT_COMMANDS)
+    js = data.get("/" + topics.JOINT_STATES)
+    if eff is None or js is None or not eff.count or not js.count:
+        return None
+    watchdog, _ = effort_tags(eff)
+    during = (eff.recv > js.recv[0]) & (eff.recv <= js.recv[-1])
+    return int(np.count_nonzero(watchdog & during))
 
 
 def capture_hook(at, release, payload, log):
@@ -434,6 +445,9 @@ def add_arguments(parser):
                         help="rosbag2 storage plugin (default: mcap)")
     parser.add_argument("--no-ros", action="store_true",
                         help="the offline runs only (no nodes, no bag)")
+    parser.add_argument("--bag", default=None,
+                        help="read the ROS run from this bag of an earlier capture-demo (the "
+                             "same options) instead of running the nodes")
     parser.add_argument("--mass-table", action="store_true",
                         help="also the offline table over 0.1 t to 20 t, motion slowed per mass")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -448,6 +462,10 @@ def check_arguments(args):
     if args.release is not None and not args.at < args.release < args.duration:
         raise ConfigError(f"--release: must be after --at ({args.at:g} s) and before the end "
                           f"({args.duration:g} s), got {args.release:g} s")
+    if args.bag is not None and not os.path.isdir(args.bag):
+        raise ConfigError(f"--bag: no such directory {args.bag!r}")
+    if args.bag is not None and args.no_ros:
+        raise ConfigError("--bag: reads a ROS run; --no-ros asks for none")
     inertia = args.inertia if args.inertia is not None else cube_inertia(args.mass)
     from rcac_ros.core.payload import check_payload   # numpy only, no kernels
     check_payload(args.mass, args.com, inertia, reach=None)
@@ -475,8 +493,8 @@ def run(args):
         from rcac_ros.tools.launch import NodeFailed
         hook = capture_hook(at, release, payload, log)
         try:
-            bag = run_demo(args.duration, out, args.storage, log=log, hook=hook,
-                           prog="rcac capture-demo")
+            bag = args.bag or run_demo(args.duration, out, args.storage, log=log, hook=hook,
+                                       prog="rcac capture-demo")
         except KeyboardInterrupt:
             print("rcac capture-demo: interrupted; both nodes stopped", file=sys.stderr)
             return 130
@@ -503,7 +521,7 @@ def run(args):
         report["ros"] = all_figures(ros["track"], ros["effort"], ros["estimates"], at, release,
                                     args.duration, arm, loaded, ros["watchdog_trips"])
         report["ros"]["payload_changes"] = changes
-        report["ros"]["watchdog_trips"] = ros["watchdog_trips"]
+        report["ros"]["watchdog_efforts_during_run"] = ros["watchdog_trips"]
         report["ros"]["bag"] = bag
         plots.append(plot(os.path.join(out, "capture_ros.png"), {"ROS 2 (composite)": ros},
                           events, arm, loaded,
