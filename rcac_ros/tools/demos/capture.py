@@ -228,12 +228,13 @@ def offline_run(law, arm, events, duration, scale=1.0, progress=None):
             "estimates": (t, theta), "status": run["status"]}
 
 
-def offline_laws(arm, loaded, at, release, duration, progress=True):
-    """Every law of :data:`LAWS` on the run: ``({law: figures}, {law: series})``."""
+def offline_laws(arm, loaded, at, release, duration, scale=1.0, progress=True):
+    """Every law of :data:`LAWS` on the run (the motion ``scale`` times slower):
+    ``({law: figures}, {law: series})``."""
     events = [(at, loaded)] + ([(release, arm)] if release is not None else [])
     report, series = {}, {}
     for law in LAWS:
-        run = offline_run(law, arm, events, duration,
+        run = offline_run(law, arm, events, duration, scale=scale,
                           progress=f"{law:>10s}" if progress else None)
         report[law] = all_figures(run["track"], run["effort"], run["estimates"], at, release,
                                   duration, arm, loaded)
@@ -302,10 +303,17 @@ def watchdog_during_run(data):
 
 def capture_hook(at, release, payload, log):
     """The :func:`~rcac_ros.tools.demos.demo.run_demo` hook that sets the payload at ``at`` s
-    and releases it at ``release`` s; its ``results`` list gets each request's answers."""
+    and releases it at ``release`` s of sim time; ``hook.futures`` gets each request.
+
+    Its node reads ``/clock`` (keep-last 1) and sends the requests from a thread of its own:
+    the recorder's executor may run behind the simulator (it takes every message of every
+    topic), so the sim time it has seen would send them late."""
+    import threading
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
+    from rosgraph_msgs.msg import Clock as ClockMsg
     from rcac_ros import topics
     from rcac_ros.core.payload import inertia_values
     capture = [Parameter("payload.com", value=[float(v) for v in payload.com]),
@@ -315,19 +323,35 @@ def capture_hook(at, release, payload, log):
     plan = [(at, capture)] + ([(release, [Parameter("payload.mass", value=0.0)])]
                               if release is not None else [])
     futures = []
+    done = threading.Event()
 
     def hook(ctx, executor):
         node = Node("rcac_capture_demo", context=ctx)
-        executor.add_node(node)
+        own = SingleThreadedExecutor(context=ctx)
+        own.add_node(node)
         client = AsyncParameterClient(node, topics.SIMULATOR_NODE)
 
-        def tick(sim_time):
-            if plan and sim_time is not None and sim_time >= plan[0][0]:
-                t, request = plan.pop(0)
+        def on_clock(msg):
+            sim_time = msg.clock.sec + 1e-9 * msg.clock.nanosec
+            if plan and sim_time >= plan[0][0]:
+                _, request = plan.pop(0)
                 log(f"rcac capture-demo: sim {sim_time:.3f} s: setting "
                     + ", ".join(f"{p.name}={p.value}" for p in request))
                 futures.append(client.set_parameters(request))
-        return tick
+
+        node.create_subscription(ClockMsg, topics.CLOCK, on_clock, topics.qos(depth=1))
+
+        def spin():
+            try:
+                while not done.is_set():
+                    own.spin_once(timeout_sec=0.05)
+                    if not plan and all(f.done() for f in futures):
+                        done.set()
+            except Exception:  # noqa: BLE001 - the run ended and shut the context down
+                pass
+
+        threading.Thread(target=spin, name="capture-requests", daemon=True).start()
+        return None
 
     hook.futures = futures
     return hook
@@ -448,6 +472,9 @@ def add_arguments(parser):
     parser.add_argument("--bag", default=None,
                         help="read the ROS run from this bag of an earlier capture-demo (the "
                              "same options) instead of running the nodes")
+    parser.add_argument("--slow", action="store_true",
+                        help="run the paper's motion slower, as for the mass table: the desired "
+                             "motion's torques with the payload within half the limits")
     parser.add_argument("--mass-table", action="store_true",
                         help="also the offline table over 0.1 t to 20 t, motion slowed per mass")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -486,6 +513,15 @@ def run(args):
                            "recovery_window_s": WINDOW, "recovery_factor": FACTOR,
                            "goal_recovery_s": GOAL_RECOVERY, "goal_mass_relative": GOAL_MASS,
                            "effort_share_of_slowdown": EFFORT_SHARE}}
+    scale, need = slowdown(loaded) if args.slow else (1.0, None)
+    report["settings"].update(slowdown=scale, desired_effort_over_limit_unslowed=need)
+    slowed = {}
+    if args.slow:
+        from rcac_ros.core import PAPER_Q0, PaperTrajectory
+        base = PaperTrajectory(np.array(PAPER_Q0))
+        slowed = {"paper.amplitude": base.amplitude / scale, "paper.period": 20.0 * scale}
+        log(f"rcac capture-demo: the paper's motion {scale:.3f} times slower (amplitude "
+            f"{slowed['paper.amplitude']:.6g} rad/s, period {slowed['paper.period']:.6g} s)")
     events = [("capture", at)] + ([("release", release)] if release is not None else [])
     plots, tables = [], []
     if not args.no_ros:
@@ -494,7 +530,7 @@ def run(args):
         hook = capture_hook(at, release, payload, log)
         try:
             bag = args.bag or run_demo(args.duration, out, args.storage, log=log, hook=hook,
-                                       prog="rcac capture-demo")
+                                       prog="rcac capture-demo", overrides=(slowed, {}))
         except KeyboardInterrupt:
             print("rcac capture-demo: interrupted; both nodes stopped", file=sys.stderr)
             return 130
@@ -529,7 +565,8 @@ def run(args):
                           f"t = {at:.3f} s"))
         log(f"rcac capture-demo: payload held from t = {at:.3f} s (the bag's "
             "/rcac_simulator/payload)" + (f", released at {release:.3f} s" if release else ""))
-    offline, series = offline_laws(arm, loaded, at, release, args.duration, not args.quiet)
+    offline, series = offline_laws(arm, loaded, at, release, args.duration, scale,
+                                   not args.quiet)
     report["offline"] = offline
     plots.append(plot(os.path.join(out, "capture_laws.png"), series, events, arm, loaded,
                       f"the same capture offline: {args.mass:g} kg at t = {at:.3f} s"))
