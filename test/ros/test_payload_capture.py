@@ -9,9 +9,11 @@ up to the float rounding of the messages. Refused values come back with a one-li
 naming the parameter, and the states go on matching the reference (the plant unchanged).
 """
 
+import importlib.util
 import math
 
 import numpy as np
+import pytest
 
 from test_nodes_support import JOINTS, NS, PAPER_Q0, ros_context, spin_until, start, stop
 
@@ -87,15 +89,22 @@ def reference(capture_at, release_at):
     return np.array(qs)
 
 
-def test_a_capture_a_refused_value_and_a_release_over_dds():
+ENGINES = ["builtin", pytest.param("mujoco", marks=pytest.mark.skipif(
+    importlib.util.find_spec("mujoco") is None, reason="mujoco not installed"))]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_capture_a_refused_value_and_a_release_over_dds(engine):
+    """On either engine (MuJoCo's plant agrees with the built-in one to rounding,
+    test/core/test_payload.py), the reference is the built-in simulator."""
     capture = [Parameter("payload.com", value=COM), Parameter("payload.inertia", value=INERTIA),
                Parameter("payload.mass", value=MASS)]
     bad = [Parameter(name, value=value) for name, value, _ in BAD]
     with ros_context() as (ctx, executor):
         arm = Arm(ctx, {100: capture, 250: bad, 350: [Parameter("payload.mass", value=0.0)]})
         executor.add_node(arm)
-        sim = start("simulator_node", "mode:=lockstep", f"duration:={STEPS * H}",
-                    "lockstep_timeout:=5.0", "diagnostics_period:=0.05",
+        sim = start("simulator_node", "mode:=lockstep", f"engine:={engine}",
+                    f"duration:={STEPS * H}", "lockstep_timeout:=5.0", "diagnostics_period:=0.05",
                     # at most half real time: the payload is held for 0.5 s of wall time at
                     # least, ten diagnostics periods
                     "lockstep_max_speed:=0.5")

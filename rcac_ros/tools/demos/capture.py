@@ -287,18 +287,19 @@ def read_run(bag, arm):
 
 
 def watchdog_during_run(data):
-    """The controller's safe efforts (tagged ``watchdog``) received between the first and the
-    last joint state of the run (before the first state the controller has none: its
-    start-up safe efforts are not trips of the run)."""
+    """The controller's safe efforts (tagged ``watchdog``) between its first and its last
+    answer to a state: its start-up safe efforts (no state yet) and those after the
+    simulator's end are not trips of the run."""
     from rcac_ros import topics
     from rcac_ros.tools.bags.inspect import effort_tags
     eff = data.get("/" + topics.EFFORT_COMMANDS)
-    js = data.get("/" + topics.JOINT_STATES)
-    if eff is None or js is None or not eff.count or not js.count:
+    if eff is None or not eff.count:
         return None
     watchdog, _ = effort_tags(eff)
-    during = (eff.recv > js.recv[0]) & (eff.recv <= js.recv[-1])
-    return int(np.count_nonzero(watchdog & during))
+    answers = np.nonzero(~watchdog)[0]
+    if answers.size == 0:
+        return None
+    return int(np.count_nonzero(watchdog[answers[0]:answers[-1]]))
 
 
 def capture_hook(at, release, payload, log):
@@ -575,7 +576,7 @@ def run(args):
         tables.append(table(columns, name))
     if args.mass_table:
         rows = mass_table(args.com, (cube_inertia if args.inertia is None
-                                     else (lambda m: args.inertia)), at, args.duration,
+                                     else (lambda m: args.inertia)), args.at, args.duration,
                           progress=not args.quiet)
         report["mass_table"] = rows
         tables.append(mass_markdown(rows))
