@@ -280,8 +280,20 @@ def read_run(bag, arm):
             msg = store.deserialize_cdr(raw, conn.msgtype)
             changes.append({"t": msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
                             "mass": msg.inertia.m})
+    track = series["tracking_error"]
     t_est, est = series["parameter_estimates"]
-    return {"track": series["tracking_error"], "effort": series["effort"],
+    # the controller publishes its desired state (stamped with the state it answers), its
+    # tracking error and its estimates once per step, in that order: with none lost, the
+    # k-th of each belongs to the k-th stamp (the bag's receive times may bunch up when the
+    # recorder runs behind, which a nearest-receive-time match gets wrong)
+    desired = data.get(topics.resolve(topics.DESIRED_STATE))
+    if desired is not None and desired.count:
+        stamps = desired.stamp
+        if len(track[0]) == desired.count:
+            track = (stamps, track[1])
+        if len(t_est) == desired.count:
+            t_est = stamps
+    return {"track": track, "effort": series["effort"],
             "estimates": (t_est, est[:, -1]), "payload_changes": changes,
             "watchdog_trips": watchdog_during_run(data)}
 
