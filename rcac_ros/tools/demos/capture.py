@@ -410,12 +410,12 @@ def plot(path, runs, events, arm, loaded, title):
 
 # ------------------------------------------------------------------ text
 ROWS = (("rms_error_before_rad", "RMS before (rad)", "{:.3g}"),
-        ("peak_error_norm_after_rad", "peak |e| after (rad)", "{:.3g}"),
+        ("peak_error_norm_after_rad", "peak \\|e\\| after (rad)", "{:.3g}"),
         ("recovery_time_s", "recovery (s)", "{:.2f}"),
         ("mass_estimate_end_kg", "m7 estimate end (kg)", "{:.1f}"),
         ("mass_relative_error_end", "m7 rel. error end", "{:.2%}"),
         ("first_moment_relative_error_end", "m7 c7 rel. error end", "{:.2%}"),
-        ("max_effort_over_limit", "max |tau|/limit", "{:.2f}"),
+        ("max_effort_over_limit", "max \\|tau\\|/limit", "{:.2f}"),
         ("limit_first_reached_s", "limit first reached (s)", "{:.3f}"))
 
 
@@ -444,17 +444,19 @@ def table(columns, phase):
 
 
 def mass_markdown(rows):
-    lines = ["| payload (t) | slowdown s | desired |tau|/limit at s = 1 | RMS before (rad) | "
-             "peak |e| after (rad) | recovery (s) | m7 rel. error | m7 c7 rel. error | "
-             "max |tau|/limit | goals met |", "|" + "---:|" * 10]
+    lines = ["| payload (t) | slowdown s | desired \\|tau\\|/limit at s = 1 | RMS before (rad) | "
+             "peak \\|e\\| after (rad) | recovery (s) | m7 rel. error | m7 c7 rel. error | "
+             "max \\|tau\\|/limit | goals met (of recovery, mass, limits) |", "|" + "---:|" * 10]
+    short = {"recovery_within_5s": "recovery", "mass_estimate_within_5pct": "mass",
+             "effort_within_limits": "limits"}
     for r in rows:
-        met = all(v for v in r["goals"].values() if v is not None)
+        met = ", ".join(short[k] for k, v in r["goals"].items() if v and k in short) or "none"
         lines.append(
             f"| {r['payload_mass_kg'] / 1000:g} | {r['slowdown']:.2f} | "
             f"{r['desired_effort_over_limit_unslowed']:.2f} | {r['rms_error_before_rad']:.3g} | "
             f"{r['peak_error_norm_after_rad']:.3g} | {_cell(r['recovery_time_s'], '{:.2f}')} | "
             f"{r['mass_relative_error_end']:.2%} | {r['first_moment_relative_error_end']:.2%} | "
-            f"{r['max_effort_over_limit']:.2f} | {'yes' if met else 'no'} |")
+            f"{r['max_effort_over_limit']:.2f} | {met} |")
     return "\n".join(lines) + "\n"
 
 
