@@ -43,7 +43,7 @@ step, which needs ``h sigma_0 lambda_max(P_i) < 1`` (checked).
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CH_ACTIVE,
                        CH_E, CH_JOINT, CH_Y, GAIN_P, I_ADAPT, I_BARRIER_C, I_DZ_S, I_FORGET,

@@ -38,7 +38,7 @@ Discretisation and its error (with the true parameters, E_c measures only this):
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._packing import (CH_ACTIVE, CH_AXIS, CH_AXIS_DOT, CH_E, CH_JOINT, CH_Y, I_DZ_E, I_E, I_FB0,
                        I_FE, I_H, I_Y, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, TAU,

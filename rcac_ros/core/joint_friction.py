@@ -33,7 +33,7 @@ term, implicit or explicit on the prediction term, one joint solve over all para
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import numeric
 from rcac_ros.errors import GainError

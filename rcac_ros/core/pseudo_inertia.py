@@ -38,7 +38,7 @@ Everything here is O(1) per link: 4x4 products and one 4x4 Cholesky factorisatio
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import as_array, scalar
 from rcac_ros.errors import GainError, InputError

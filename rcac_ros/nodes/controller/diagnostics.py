@@ -42,6 +42,11 @@ def diagnostics(node, counts, rejected, starvation, inputs):
     cfg = node.config
     level = DiagnosticStatus.OK
     message = "running" if node.running else "inactive: no effort published"
+    if node.kernels.status == "compiling":
+        message = "inactive: compiling the law's kernels (no effort until they are ready)"
+    elif node.kernels.status == "failed":
+        level, message = DiagnosticStatus.ERROR, f"the kernels did not compile: " \
+            f"{node.kernels.error}"
     tripped = node.watchdog.tripped or node.failsafe.stop.active
     if node.running and tripped:
         level, message = DiagnosticStatus.WARN, \
@@ -67,6 +72,9 @@ def diagnostics(node, counts, rejected, starvation, inputs):
         "prediction_error": f"{E[0]:.6g}",        # the first channel's (joint 1 by default)
         "channels": ",".join(cfg.channel_names),
         "adaptation": "on" if node.ctrl.adapting else "frozen",
+        "kernels": node.kernels.status,
+        "kernels_ready_s": "" if node.kernels.seconds is None else f"{node.kernels.seconds:.2f}",
+        "compiles_after_activate": node.compile_watch.count,
     }
     if starvation is not None:          # timer mode's starvation guard (doc/failsafe.md)
         values.update(starvation.diagnostics())

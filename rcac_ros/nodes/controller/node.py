@@ -19,10 +19,12 @@ import time
 
 import numpy as np
 from rclpy.clock import Clock, ClockType
+from rclpy.lifecycle import TransitionCallbackReturn
 
 from rcac_ros import params, topics
 from rcac_ros.errors import RcacError
 from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.controller.compiling import CompileWatch, KernelWarmup
 from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.controller.diagnostics import diagnostics, LoopCounts
 from rcac_ros.nodes.controller.starvation import Starvation
@@ -67,10 +69,13 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ lifecycle
     def _configure(self, values):
         """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
-        self.config, self.ctrl = read_parameters(self, values)     # its kernels warmed
+        self.config, self.ctrl = read_parameters(self, values)     # checked; nothing compiled
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
+        self.kernels = KernelWarmup(self.ctrl, self.failsafe.limiter, log)  # beside the spin
+        self.compile_watch = self.keep(CompileWatch.close, CompileWatch(lambda: self.running,
+                                                                        log))
         self.realtime = RealtimeOptions.from_values(values)     # applied by run()
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
@@ -128,7 +133,21 @@ class ControllerNode(ManagedNode):
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
         log.info(f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
                  f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
-                 f"{list(self.joints)}")
+                 f"{list(self.joints)}; compiling the law's kernels (seconds from the cache, "
+                 f"up to a minute without)")
+
+    def _ready_to_activate(self):
+        return self.kernels.done.is_set()
+
+    def on_activate(self, state):
+        """Activate once the kernels are ready (waits for them); FAILURE if they failed."""
+        if not self.kernels.done.is_set():
+            self.get_logger().info("activate: waiting for the kernels to compile")
+        if not self.kernels.wait():
+            self.get_logger().error(f"activate refused: the kernels did not compile "
+                                    f"({self.kernels.error})")
+            return TransitionCallbackReturn.FAILURE
+        return super().on_activate(state)
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
