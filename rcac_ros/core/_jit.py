@@ -105,7 +105,7 @@ def njit(*args, **kwargs):
 
     def decorate(func):
         dispatcher = numba.njit(**kwargs)(func)
-        if cache:
+        if cache and _compilable(dispatcher):      # (not under NUMBA_DISABLE_JIT)
             dispatcher._cache = _KeyedCache(dispatcher.py_func)
         return dispatcher
     if args and callable(args[0]):
@@ -135,7 +135,7 @@ def ready(dispatcher):
     """Compile ``dispatcher`` for its signature (or load it from the cache), once, and refuse
     any other signature from then on; returns it. The first call in a process with an empty
     cache takes seconds to a minute, later ones nothing."""
-    if dispatcher._can_compile:
+    if _compilable(dispatcher):
         signature, calls = _SIGNATURES[dispatcher]
         for callee in calls:
             ready(callee)
@@ -145,5 +145,10 @@ def ready(dispatcher):
 
 
 def is_ready(dispatcher):
-    """True once :func:`ready` ran for ``dispatcher`` in this process."""
-    return not dispatcher._can_compile
+    """True once :func:`ready` ran for ``dispatcher`` in this process (always, for a plain
+    Python function: numba's ``NUMBA_DISABLE_JIT``, or a wrapper)."""
+    return not _compilable(dispatcher)
+
+
+def _compilable(dispatcher):
+    return getattr(dispatcher, "_can_compile", False)

@@ -130,7 +130,7 @@ def gain_step(row, p_diag, st, grad, h, R, i):
 LOG_DET, NATURAL_LS, BARRIER = 0, 1, 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def natural_gain_step(row, st, metric, k_metric, grad, h, R, i, Pg, t, M4):
     """Natural geometry, eq 24 step 1's explicit part for link i: ``R_i = theta_hat_i - h
     P_eff(theta_hat_i) grad`` (doc/design.md §8). ``metric``: :data:`NATURAL_LS`, the gain
@@ -149,7 +149,7 @@ def natural_gain_step(row, st, metric, k_metric, grad, h, R, i, Pg, t, M4):
         R[i, k] = st[THETA_HAT + k] - h * Pg[k]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def natural_gain_row(row, st, metric, f, t):
     """``U_ci = P_eff(theta_hat_i) W_ci^T`` in channel c's row ``f = filt[c, i]``, with the
     gain :func:`natural_gain_step` used (its factor already in the state)."""
@@ -254,7 +254,7 @@ def natural_gain_rows(const, state, filt0, G, R, scal, Pg, t, M4):
         natural_gain_row(row, st, metric, filt0[i], t)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def retract_links(state, scal):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
     consistent by the retraction of :func:`~rcac_ros.core.pseudo_inertia.retract`, or with
