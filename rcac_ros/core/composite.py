@@ -121,7 +121,7 @@ class RecursiveCompositeController:
         away from the cone's boundary, the barrier's near it; doc/design.md §8); its step is
         the Euclidean step with that gain, halved while it would take ``J_hat`` below half
         of itself along some direction
-        (:func:`~rcac_ros.core.pseudo_inertia.retract_short`); ``"log_det"``: ``k_i H^-1``
+        (:func:`~rcac_ros.core.retraction.retract_short`); ``"log_det"``: ``k_i H^-1``
         on J and ``P_nu`` on nu, with the curved retraction (cheaper, but its gain grows as
         ``|J_hat|^2`` and it tracks worse, doc/design.md §8). ``"barrier"`` only with
         ``geometry="natural"`` and ``adaptation="gradient"``; natural least squares has its

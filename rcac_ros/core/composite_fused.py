@@ -23,7 +23,7 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import natural_gain_rows, retract_links
+from .natural_step import natural_gain_rows, retract_links
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
                              JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)

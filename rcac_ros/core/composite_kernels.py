@@ -21,8 +21,8 @@ from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, referen
 from ._packing import (ADAPT_GRADIENT, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
-from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
-                         update_least_squares)
+from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
+from .natural_step import retract_links
 from .channels import close_channels, predict_link, start_channels
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
                              FRICTION_SIGNATURE, adapt_joint, implicit_solve_joint, predict_joint,

@@ -40,7 +40,8 @@ from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
 from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lambda_min,
                              matched_gain, natural_gains_into, natural_metric_option, nu_gain,
-                             pseudo_inertia, retract_rows)
+                             pseudo_inertia)
+from .retraction import retract_rows
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor

@@ -16,8 +16,6 @@ allocate from another dtype than their inputs, so running them with
 
 import math
 
-import numpy as np
-
 from ._jit import njit
 #: the packed model row's columns (:func:`rcac_ros.core.model.pack_kinematics`)
 from .model import JA, JD, JF, JV, KIN_COLS, P0, RF0, TH0  # noqa: F401  (re-exported)

@@ -21,7 +21,7 @@ SUBCOMMANDS = {
     "experiment": ("rcac_ros.tools.demos.experiment",
                    "run the paper's Section 4 experiment (both laws)", ()),
     "bench": ("rcac_ros.tools.bench.commands",
-              "benchmarks: core, ros, faults, soak, delay-margin, noise", ()),
+              "benchmarks: core, ros, faults, soak, delay-margin, startup, noise", ()),
     "record": ("rcac_ros.tools.bags.record", "record the package's topics into a rosbag2 bag",
                ("bags", "ros")),
     "inspect": ("rcac_ros.tools.bags.inspect", "summarise a bag and plot what it holds",

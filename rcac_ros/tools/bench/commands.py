@@ -9,6 +9,9 @@ soak           the direct fault case for minutes: memory growth, late       :mod
                ticks
 delay-margin   offline, tracking RMS against K_D with the effort 0-2        :mod:`.delay_margin`
                periods late (the stable range of timer mode)
+startup        how long the package takes to start, cold (empty cache)  :mod:`.startup`
+               and warm: import, a bad argument, the controller's first
+               answer and first effort, the warm-up
 noise          10-minute closed loops with sensor noise: are the estimates  :mod:`.noise`
                bounded? (``--sources``: where the paper law's drift comes
                from)
@@ -178,6 +181,24 @@ def add_noise(p):
     p.add_argument("--out", default="results/noise", help="output directory")
 
 
+def add_startup(p):
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--laws", type=startup_laws, default=("default",),
+                   help="the controller's laws, comma-separated, among default, all, "
+                        "joint_friction (default: default)")
+
+
+def startup_laws(text):
+    """``--laws``: comma-separated names of :data:`rcac_ros.tools.bench.startup.LAWS`."""
+    return tuple(_choices(text, ",", ("default", "all", "joint_friction")))
+
+
+def run_startup(args):
+    from rcac_ros.tools.bench.startup import run_startup_bench
+    run_startup_bench(laws=args.laws, json_path=args.json)
+    return 0
+
+
 def run_core(args):
     from rcac_ros.tools.bench.core import main
     return main(budget=args.budget, json_path=args.json, natural=args.natural)
@@ -239,6 +260,9 @@ BENCHMARKS = {
              add_soak, run_soak, ("ros",)),
     "delay-margin": ("offline, tracking RMS against K_D with the effort 0-2 periods late",
                      add_delay_margin, run_delay_margin, ()),
+    "startup": ("how long the package takes to start, cold and warm (import, bad argument, "
+                "the controller's first effort, the warm-up)", add_startup, run_startup,
+                ("ros",)),
     "noise": ("10-minute closed loops with sensor noise (are the estimates bounded?)",
               add_noise, run_noise, ()),
 }
