@@ -16,6 +16,7 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 
 import sys
 import time
+import traceback
 
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -94,7 +95,7 @@ class ControllerNode(ManagedNode):
             max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
             outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
-            restarted=self._stream_restarted, control=self._control))
+            restarted=self._stream_restarted, control=self._step))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
         self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
             paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
@@ -208,6 +209,22 @@ class ControllerNode(ManagedNode):
         return self._now_ns()
 
     # ------------------------------------------------------------------ control
+    def _step(self, t_ns, stamp=None):
+        """One control step; if it raises (a fault of this code or of a library, not of the
+        law's inputs), the safe effort goes out, the filters restart at the next step, and
+        the fault is counted (``control_errors``) and logged with its traceback, once per
+        type (doc/failsafe.md, "Thread failures")."""
+        try:
+            self._control(t_ns, stamp)
+        except Exception as err:        # noqa: BLE001 -- the arm must not keep a stale effort
+            if self.counts.control_failed(err):
+                self.get_logger().error(
+                    "the control step raised; the safe effort goes out (counted in "
+                    "control_errors; further ones of this type are not logged):\n"
+                    + traceback.format_exc().rstrip())
+            self.filters_stale = True
+            self._outputs.effort(self.config.safe_effort, stamp)
+
     def _control(self, t_ns, stamp=None):
         state = self.states.take()          # one snapshot (timer mode: set by another thread)
         q, qd = state.q, state.qd
@@ -260,7 +277,7 @@ class ControllerNode(ManagedNode):
         self.watchdog.ticked()
         if self.watchdog.state_is_stale():
             return self.watchdog.send_safe(no_state=True)
-        self._control(now)
+        self._step(now)
         if self.config.phase_offset_ns is not None and self.loop is not None:
             self.phase_error_ns = self.loop.lock_phase(self.states.received,
                                                        self.config.phase_offset_ns)

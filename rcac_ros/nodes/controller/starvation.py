@@ -94,9 +94,18 @@ class Starvation:
         self.state_received, self.log = state_received, log
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position
-            margin = feedback_margin(ctrl, np.zeros(ctrl.model.n) if q0 is None else q0)
+            where = "the zero position" if q0 is None else "paper.q0"
+            omega = feedback_bandwidth(ctrl, np.zeros(ctrl.model.n) if q0 is None else q0)
+            margin = (math.pi / 2.0) / omega
+            source = (f"(pi/2) / {omega:.4g} 1/s, the bandwidth lambda_max(M^-1 D) of the "
+                      f"velocity feedback of model {ctrl.model.name} at {where}")
+        else:
+            source = "starvation.delay_margin"
         self.guard = DelayGuard(margin, h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
+        log.info(f"starvation guard: delay margin {margin * 1e3:.3g} ms = {source}; K_D is "
+                 f"scaled down past a smoothed delay of {self.guard.limit * 1e3:.3g} ms "
+                 "(diagnostics delay_margin_ms)")
 
     def reset(self):
         """A fresh start (activation): nominal gains."""
