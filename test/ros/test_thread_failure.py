@@ -88,10 +88,11 @@ class FailingStep:
 
 
 def answer(probe, executor, k):
-    """Publish the state at period ``k`` until answered; the answer's data."""
+    """Publish the state at period ``k`` (moving at 0.5 rad/s off the motion, which starts at
+    rest: the law's effort is not zero) until answered; the answer's data."""
     label = f"stamp={k * H_NS // 1_000_000_000}.{k * H_NS % 1_000_000_000:09d}"
     for _ in range(40):
-        probe.state(k * H_NS, PAPER_Q0, np.zeros(7))
+        probe.state(k * H_NS, PAPER_Q0, np.full(7, 0.5))
         if spin_until(executor, lambda: any(label in lab for lab, _ in probe.efforts),
                       timeout=0.5):
             return next(d for lab, d in probe.efforts if label in lab)
