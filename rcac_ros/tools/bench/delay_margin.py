@@ -195,13 +195,16 @@ def check_margins(checks=CHECKS, json_path=None, verbose=True):
     posture), then :func:`holding_error` with the effort ``d`` periods late, ``d`` = 0,
     ``floor(WITHIN margin / h)`` and ``ceil(BEYOND margin / h)``. The derivation holds on a
     row if the loop settles at the first two delays (the final error below a tenth of the
-    start's) and not at the third (above half the start's, or diverged).
+    start's) and not at the third (above half the start's, or diverged). The delays between
+    the second and the third are run too, for the measured edge: the first at which the loop
+    does not settle.
 
     Returns
     -------
     list of dict
-        One per row: ``arm``, ``gain_name``, ``gain``, ``margin_ms``, ``delays`` (periods),
-        ``start`` and ``final`` (rad; ``None``: diverged), ``holds``.
+        One per row: ``arm``, ``gain_name``, ``gain``, ``margin_ms``, ``margin_periods``,
+        ``delays`` (periods), ``start`` and ``final`` (rad; ``None``: diverged),
+        ``edge_periods`` (``None``: settles up to the third delay), ``holds``.
     """
     rows = []
     for arm, gain in checks:
@@ -214,15 +217,19 @@ def check_margins(checks=CHECKS, json_path=None, verbose=True):
         final = [f for _, f in runs]
         holds = bool(final[0] < 0.1 * start and final[1] < 0.1 * start
                      and not final[2] <= 0.5 * start)
+        # the measured edge: the first delay, in periods, at which the loop does not settle
+        edge = next((d for d in range(delays[1] + 1, delays[2] + 1)
+                     if not holding_error(arm, gain, d)[1] < 0.1 * start), None)
         rows.append({"arm": arm, "gain_name": "kappa" if arm == "panda" else "K_D",
                      "gain": gain, "margin_ms": margin * 1e3, "delays": list(delays),
                      "start": start, "final": [f if np.isfinite(f) else None for f in final],
-                     "holds": holds})
+                     "edge_periods": edge, "margin_periods": periods, "holds": holds})
         if verbose:
             cells = "  ".join(f"d={d}: {f:.3g}" for d, f in zip(delays, final))
             print(f"{arm:8s} {rows[-1]['gain_name']:5s} {gain:<7g} margin {margin * 1e3:6.3g} ms "
                   f"({periods:4.1f} periods)  final error (from {start:.3g} rad) {cells}  "
-                  f"{'holds' if holds else 'FAILS'}", flush=True)
+                  f"does not settle from {edge} periods  {'holds' if holds else 'FAILS'}",
+                  flush=True)
     if json_path:
         import json
         with open(json_path, "w") as f:
