@@ -179,3 +179,25 @@ def test_an_unguarded_fault_stops_the_node_with_its_traceback_and_a_zero_effort(
         _, _, label, data = efforts[-1]
         assert label.endswith("watchdog") and not np.any(data), (label, data)
         assert len(JOINTS) == data.shape[0]
+
+
+def test_a_fault_after_the_effort_went_out_sends_no_second_answer():
+    """The monitors raise after the step's effort was published: that effort stands (one
+    answer per state in lockstep), the fault is counted."""
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=1.0), Parameter("monitor_decimation", value=1)])
+        probe = Probe(ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+
+        def failing_monitors(*args, **kwargs):
+            raise ZeroDivisionError("injected monitor failure")
+        node._outputs.monitors = failing_monitors
+        answers = [answer(probe, executor, k) for k in range(1, 4)]
+        spin_until(executor, lambda: False, timeout=0.2)     # a second answer would be in
+        assert all(np.any(d != 0.0) for d in answers)       # the law's efforts
+        labels = [lab for lab, _ in probe.efforts if "stamp=" in lab]
+        assert len(labels) == len(set(labels)) == 3, labels
+        assert node.counts.control_errors == 3

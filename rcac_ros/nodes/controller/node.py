@@ -211,9 +211,10 @@ class ControllerNode(ManagedNode):
     # ------------------------------------------------------------------ control
     def _step(self, t_ns, stamp=None):
         """One control step; if it raises (a fault of this code or of a library, not of the
-        law's inputs), the safe effort goes out, the filters restart at the next step, and
-        the fault is counted (``control_errors``) and logged with its traceback, once per
-        type (doc/failsafe.md, "Thread failures")."""
+        law's inputs), the safe effort goes out unless the step's effort did, the filters
+        restart at the next step, and the fault is counted (``control_errors``) and logged
+        with its traceback, once per type (doc/failsafe.md, "Thread failures")."""
+        self._effort_sent = False
         try:
             self._control(t_ns, stamp)
         except Exception as err:        # noqa: BLE001 -- the arm must not keep a stale effort
@@ -223,7 +224,8 @@ class ControllerNode(ManagedNode):
                     "control_errors; further ones of this type are not logged):\n"
                     + traceback.format_exc().rstrip())
             self.filters_stale = True
-            self._outputs.effort(self.config.safe_effort, stamp)
+            if not self._effort_sent:   # (one answer per state in lockstep)
+                self._outputs.effort(self.config.safe_effort, stamp)
 
     def _control(self, t_ns, stamp=None):
         state = self.states.take()          # one snapshot (timer mode: set by another thread)
@@ -253,12 +255,14 @@ class ControllerNode(ManagedNode):
                                 "publishing the safe effort, estimates restored")
             self.ctrl.reset(theta_before, friction_before)  # the last finite ones
             self._outputs.effort(self.config.safe_effort, stamp)
+            self._effort_sent = True
             return
         tau = np.clip(tau, -self.config.effort_limit, self.config.effort_limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         if self._lookahead is not None:
             self._lookahead.applied = tau
         self._outputs.effort(tau[self.config.out], stamp)
+        self._effort_sent = True
         if self.counts.steps % self.config.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
