@@ -192,7 +192,8 @@ def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
             assert got[-1].name == SMALL.name and list(got[-1].position) == [1.5, -2.0]
             # LARGE grew the buffer past the bound; it was freed back to KEEP after it
             assert reader.capacity <= max(cap, RawReader.KEEP), reader.capacity
-        assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0} and log.lines == []
+        assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0}
+        assert log.lines == []
 
 
 def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing():
@@ -291,5 +292,6 @@ def test_a_failed_reallocation_is_tried_again_without_a_further_sample(monkeypat
         publish(LARGE)
         assert inbox.wait(lambda b: len(b.data) == 1 and reader.capacity <= RawReader.KEEP), \
             (len(inbox.data), reader.capacity, reader.errors, log.lines)
-        assert reader.errors == {"take": 0, "alloc": 1, "callback": 0, "thread": 0} and fake.calls == 3
+        assert reader.errors == {"take": 0, "alloc": 1, "callback": 0, "thread": 0}
+        assert fake.calls == 3
         assert reader._thread.is_alive() and len(log.lines) == 1
