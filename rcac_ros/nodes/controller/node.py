@@ -16,6 +16,7 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 
 import sys
 import time
+import traceback
 
 import numpy as np
 from rclpy.clock import Clock, ClockType
@@ -99,7 +100,7 @@ class ControllerNode(ManagedNode):
             max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
             outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
-            restarted=self._stream_restarted, control=self._control))
+            restarted=self._stream_restarted, control=self._step))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
         self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
             paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
@@ -227,6 +228,24 @@ class ControllerNode(ManagedNode):
         return self._now_ns()
 
     # ------------------------------------------------------------------ control
+    def _step(self, t_ns, stamp=None):
+        """One control step; if it raises (a fault of this code or of a library, not of the
+        law's inputs), the safe effort goes out unless the step's effort did, the filters
+        restart at the next step, and the fault is counted (``control_errors``) and logged
+        with its traceback, once per type (doc/failsafe.md, "Thread failures")."""
+        self._effort_sent = False
+        try:
+            self._control(t_ns, stamp)
+        except Exception as err:        # noqa: BLE001 -- the arm must not keep a stale effort
+            if self.counts.control_failed(err):
+                self.get_logger().error(
+                    "the control step raised; the safe effort goes out (counted in "
+                    "control_errors; further ones of this type are not logged):\n"
+                    + traceback.format_exc().rstrip())
+            self.filters_stale = True
+            if not self._effort_sent:   # (one answer per state in lockstep)
+                self._outputs.effort(self.config.safe_effort, stamp)
+
     def _control(self, t_ns, stamp=None):
         state = self.states.take()          # one snapshot (timer mode: set by another thread)
         q, qd = state.q, state.qd
@@ -255,12 +274,14 @@ class ControllerNode(ManagedNode):
                                 "publishing the safe effort, estimates restored")
             self.ctrl.reset(theta_before, friction_before)  # the last finite ones
             self._outputs.effort(self.config.safe_effort, stamp)
+            self._effort_sent = True
             return
         tau = np.clip(tau, -self.config.effort_limit, self.config.effort_limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         if self._lookahead is not None:
             self._lookahead.applied = tau
         self._outputs.effort(tau[self.config.out], stamp)
+        self._effort_sent = True
         if self.counts.steps % self.config.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
@@ -279,7 +300,7 @@ class ControllerNode(ManagedNode):
         self.watchdog.ticked()
         if self.watchdog.state_is_stale():
             return self.watchdog.send_safe(no_state=True)
-        self._control(now)
+        self._step(now)
         if self.config.phase_offset_ns is not None and self.loop is not None:
             self.phase_error_ns = self.loop.lock_phase(self.states.received,
                                                        self.config.phase_offset_ns)
