@@ -12,8 +12,7 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, css_arm
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, positive_float,
                                  positive_int)
 from rcac_ros.tools.closed_loop import closed_loop
@@ -34,6 +33,7 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
     ``channels``: the composite law's prediction channels (default the paper's, joint 1);
     ``engine``: the plant (``builtin`` or ``mujoco``, doc/plants.md).
     """
+    from rcac_ros.core import RecursiveCompositeController
     model = css_arm()
     g = dict(PAPER_GAINS, **(gains or {}))
     q0 = np.array(PAPER_Q0)
