@@ -335,6 +335,8 @@ def compare(scenarios=("paper", "payload"), laws=None, duration=20.0, progress=T
     report, series = {}, {}
     for name in scenario_names(scenarios):
         scenario = SCENARIOS[name]()
+        if extra_channels is not None:               # refused before a run, with one line
+            parse_channels(extra_channels, scenario.model.n)
         table = {law: LAWS[law] for law in (scenario.laws if laws is None else laws)}
         if extra_channels is not None:
             key = "channels=" + ",".join(str(c) for c in extra_channels)
