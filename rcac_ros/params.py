@@ -96,7 +96,7 @@ class Param:
 
 def _channels_syntax(name, value):
     """The syntax of ``channels`` (the joint numbers are checked against n at configure)."""
-    from rcac_ros.core.channels import parse_channels
+    from rcac_ros.core.law_options import parse_channels
     from rcac_ros.errors import GainError
     try:
         parse_channels(list(value), None)

@@ -35,6 +35,7 @@ import numpy as np
 from ._jit import njit
 
 from ._validate import as_array, scalar
+from .law_options import BARRIER_C, BARRIER_C_MIN
 from rcac_ros.errors import GainError, InputError
 
 #: Pinocchio's order of the standard parameters (``Inertia.toDynamicParameters``).
@@ -59,11 +60,6 @@ SECOND_MOMENT_FLOOR = 0.01
 #: the natural geometry's metrics (doc/design.md §8): k_i times the log-det Hessian, or the
 #: barrier plus the Euclidean quadratic
 NATURAL_METRICS = ("log_det", "barrier")
-#: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
-#: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
-BARRIER_C = 1000.0
-#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
-BARRIER_C_MIN = 1e-6
 
 
 # ---- the linear maps (numba, one link: 13 entries at th[o:o+13]) ---------------------------

@@ -8,7 +8,9 @@ options depend on its first argument (the forms of ``rcac sweep``, the benchmark
 subcommand. The command line is read, never rewritten.
 Numbers are checked as they are parsed (the ``type=`` helpers of ``tools/args.py``); a bad
 argument gives one line naming it and exit code 2, and so does a missing optional
-dependency (``tools/extras.py``).
+dependency (``tools/extras.py``). A subcommand's module imports at its top only what its
+parser needs, never numba, Dask, matplotlib, MuJoCo or rclpy: its arguments, and the files
+they name (a campaign, a URDF, a model), are refused before any kernel is imported.
 """
 
 import argparse
