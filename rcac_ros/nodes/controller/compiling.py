@@ -64,23 +64,28 @@ class KernelWarmup:
             return "compiling"
         return "failed" if self.error else "ready"
 
-    def wait(self, timeout=None):
-        """Block until the warm-up ended; True if its kernels are ready."""
-        self.done.wait(timeout)
-        return self.done.is_set() and self.error is None
+    def wait(self):
+        """Block until the warm-up ended (saying so when it must wait); True if its kernels
+        are ready, else False with an ERROR line (activation is then refused)."""
+        if not self.done.is_set():
+            self._log.info("activate: waiting for the kernels to compile")
+        self.done.wait()
+        if self.error is not None:
+            self._log.error(f"activate refused: the kernels did not compile ({self.error})")
+        return self.error is None
 
 
 class CompileWatch(event.Listener):
-    """Count numba's compilations while ``active()`` is true (registered until :meth:`close`)."""
+    """Count numba's compilations while ``node.running`` (registered until :meth:`close`)."""
 
-    def __init__(self, active, log):
+    def __init__(self, node, log):
         self.count = 0
-        self._active = active
+        self._node = node
         self._log = log
         event.register("numba:compile", self)
 
     def on_start(self, ev):
-        if self._active():
+        if self._node.running:
             self.count += 1
             if self.count == 1:
                 name = getattr(ev.data.get("dispatcher"), "__name__", "?")
