@@ -96,7 +96,7 @@ class Param:
 
 def _channels_syntax(name, value):
     """The syntax of ``channels`` (the joint numbers are checked against n at configure)."""
-    from rcac_ros.core.channels import parse_channels
+    from rcac_ros.core.law_options import parse_channels
     from rcac_ros.errors import GainError
     try:
         parse_channels(list(value), None)
@@ -318,8 +318,9 @@ CONTROLLER = _robot("controller") + (
           "timer mode: past this smoothed delay (state age plus the previous effort held "
           "beyond a period) K_D is scaled down by margin/delay and adaptation frozen until "
           "the delay has stayed within it for starvation.recover_after, s; unset: "
-          "(pi/2) / lambda_max(M^-1 D) of the law's velocity feedback D at paper.q0 (or "
-          "the zero position), the measured margin (doc/failsafe.md); 0: no guard",
+          "derived at configure from the model and the gains, at paper.q0 (or the zero "
+          "position): phase margin / crossover of the feedback's most delay-sensitive "
+          "mode, less h/2 (doc/failsafe.md, section Delay margin per arm); 0: no guard",
           lo=0.0, hi=1.0),
     Param("starvation.recover_after", "double", 1.0,
           "the smoothed delay stays within the margin this long before the nominal gains "

@@ -2,30 +2,42 @@
 
 Model (constant) and state (per step) are kept apart, as in Pinocchio:
 :class:`RobotModel` is immutable; controllers and the simulator own their state.
+
+Importing this package, or any of its modules, compiles nothing: each name below is
+imported when first used, and a controller compiles (or loads from its cache) the kernels
+of its own law when it is first stepped or :meth:`compile` d (:mod:`rcac_ros.core._jit`).
 """
 
-from rcac_ros.errors import ConfigError, GainError, InputError, ModelError, RcacError
-from .model import (PAPER_GAINS, PAPER_Q0, PARAMETER_NAMES, PRESETS, RobotModel, css_arm,
-                    theta_from_inertia)
-from .urdf import model_from_urdf
-from .load import load_model
-from .aba import forward_dynamics
-from .crba import mass_matrix
-from .kinematics import energy, forward_kinematics
-from .composite import RecursiveCompositeController
-from .slotine_li import SlotineLiCompositeController
-from .regressor import (coriolis_gravity_regressor, link_matrices, link_regressor,
-                        mass_regressor)
-from .rnea import inverse_dynamics
-from .simulator import Simulator
-from .trajectory import PaperTrajectory, PolynomialTrajectory, SinusoidTrajectory
+import importlib
 
-__all__ = [
-    "RcacError", "ModelError", "ConfigError", "GainError", "InputError",
-    "RobotModel", "css_arm", "theta_from_inertia", "PARAMETER_NAMES", "PAPER_GAINS", "PAPER_Q0",
-    "PRESETS", "model_from_urdf", "load_model",
-    "link_regressor", "mass_regressor", "coriolis_gravity_regressor", "link_matrices",
-    "inverse_dynamics", "mass_matrix", "forward_dynamics", "forward_kinematics", "energy",
-    "RecursiveCompositeController", "SlotineLiCompositeController", "Simulator",
-    "PaperTrajectory", "SinusoidTrajectory", "PolynomialTrajectory",
-]
+from rcac_ros.errors import ConfigError, GainError, InputError, ModelError, RcacError
+
+#: public name -> the module that defines it
+_EXPORTS = {
+    "RobotModel": "model", "css_arm": "model", "theta_from_inertia": "model",
+    "PARAMETER_NAMES": "model", "PAPER_GAINS": "model", "PAPER_Q0": "model", "PRESETS": "model",
+    "model_from_urdf": "urdf", "load_model": "load",
+    "link_regressor": "regressor", "mass_regressor": "regressor",
+    "coriolis_gravity_regressor": "regressor", "link_matrices": "regressor",
+    "inverse_dynamics": "rnea", "mass_matrix": "crba", "forward_dynamics": "aba",
+    "forward_kinematics": "kinematics", "energy": "kinematics",
+    "RecursiveCompositeController": "composite", "SlotineLiCompositeController": "slotine_li",
+    "Simulator": "simulator",
+    "PaperTrajectory": "trajectory", "SinusoidTrajectory": "trajectory",
+    "PolynomialTrajectory": "trajectory",
+}
+
+__all__ = ["RcacError", "ModelError", "ConfigError", "GainError", "InputError", *_EXPORTS]
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

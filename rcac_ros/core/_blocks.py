@@ -7,7 +7,7 @@ Each block is one equation of doc/design.md §3-4 over one link, reading the pac
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._packing import CONST_COLS, GAIN_K_D, I_ERR, LAMBDA
 from rcac_ros.errors import InputError

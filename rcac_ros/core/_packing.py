@@ -25,10 +25,10 @@ import numpy as np
 
 from ._validate import per_link_matrix, positive_vector, scalar
 from rcac_ros.errors import GainError
-from .spatial import P0, RF0
+from .model import P0, RF0
 
 # ---- per-link constants: data[i, :CONST_COLS] ----------------------------------------------
-#: p_i (3) and R_fix_i (9) at the columns of :mod:`rcac_ros.core.spatial` (P0, RF0)
+#: p_i (3) and R_fix_i (9) at the columns of :func:`rcac_ros.core.model.pack_kinematics` (P0, RF0)
 LAMBDA = 12         #: Lambda_i (eq 18)
 GAIN_K_D = 13       #: K_Di, 6x6 row-major (eq 19b)
 GAIN_P = 49         #: P_i, 13x13 row-major (eq 24): the fixed adaptation gain

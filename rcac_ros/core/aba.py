@@ -10,7 +10,7 @@ Per link (``[v; w]`` order, eq 14's ``M_i``):
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import joint_vectors
 from .crba import congruence_to_parent, spatial_inertia

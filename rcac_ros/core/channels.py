@@ -38,74 +38,17 @@ Discretisation and its error (with the true parameters, E_c measures only this):
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._packing import (CH_ACTIVE, CH_AXIS, CH_AXIS_DOT, CH_E, CH_JOINT, CH_Y, I_DZ_E, I_E, I_FB0,
                        I_FE, I_H, I_Y, PHI_F, PHI_PREV, POWER, PSI_F, PSI_PREV, Q_PREV, TAU,
                        THETA_HAT, W_ROW)
-from rcac_ros.errors import GainError
+from .law_options import ALL, parse_channels  # noqa: F401  (re-exported)
 from .regressor import bias_terms, momentum_terms
 from .spatial import P0, propagate
 
-#: The value of ``channels`` that gives every joint.
-ALL = "all"
 AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
 AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-
-def parse_channels(value, n):
-    """Validate ``channels``: ``[1]``, ``"all"``, ``"power"``, ``"1,power"`` or a list of those.
-
-    Parameters
-    ----------
-    value : int, str or sequence of int/str
-        Joint numbers are 1-based; ``"power"`` is the energy channel; ``"all"`` is 1..n.
-    n : int or None
-        Number of joints; None checks the syntax only (``"all"`` stays ``"all"``).
-
-    Returns
-    -------
-    tuple
-        The channels in order, each an ``int`` in 1..n or ``"power"``.
-
-    Raises
-    ------
-    GainError
-        One line naming ``channels`` and the bad entry.
-    """
-    items = value.split(",") if isinstance(value, str) else value
-    if isinstance(items, (int, np.integer)):
-        items = [items]
-    try:
-        items = list(items)
-    except TypeError:
-        raise GainError(f"channels: expected joint numbers, 'power' or 'all', got {value!r}") \
-            from None
-    joints = "joint number" if n is None else f"joint number (1..{n})"
-    out = []
-    for item in items:
-        if isinstance(item, str):
-            word = item.strip().lower()
-            if word == ALL:
-                out.extend([ALL] if n is None else range(1, n + 1))
-                continue
-            if word == "power":
-                out.append("power")
-                continue
-            if not word.lstrip("+").isdigit():
-                raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
-            item = int(word)
-        if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, np.integer)):
-            raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
-        if item < 1 or (n is not None and item > n):
-            raise GainError(f"channels: joint {item} is out of range 1..{n or 'n'}")
-        out.append(int(item))
-    if not out:
-        raise GainError("channels: empty (give at least one joint number, 'power' or 'all')")
-    dup = sorted({str(c) for c in out if out.count(c) > 1})
-    if dup:
-        raise GainError(f"channels: listed twice: {', '.join(dup)}")
-    return tuple(out)
 
 
 def channel_codes(channels):

@@ -40,8 +40,7 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR
                        block, new_data)
 from ._validate import as_array, joint_values, scalar
 from .channels import channel_codes, parse_channels
-# the general kernels first: python -m rcac_ros.tools.warm compiles the fused ones (their own
-# module) in a second process meanwhile, and this import then loads them from the cache
+from ._jit import is_ready, ready
 from .composite_kernels import friction_step_kernel, rcac_step_kernel
 from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction_step,
                               paper_natural_step, paper_step)
@@ -122,7 +121,7 @@ class RecursiveCompositeController:
         away from the cone's boundary, the barrier's near it; doc/design.md §8); its step is
         the Euclidean step with that gain, halved while it would take ``J_hat`` below half
         of itself along some direction
-        (:func:`~rcac_ros.core.pseudo_inertia.retract_short`); ``"log_det"``: ``k_i H^-1``
+        (:func:`~rcac_ros.core.retraction.retract_short`); ``"log_det"``: ``k_i H^-1``
         on J and ``P_nu`` on nu, with the curved retraction (cheaper, but its gain grows as
         ``|J_hat|^2`` and it tracks worse, doc/design.md §8). ``"barrier"`` only with
         ``geometry="natural"`` and ``adaptation="gradient"``; natural least squares has its
@@ -263,20 +262,42 @@ class RecursiveCompositeController:
 
     def _choose_kernel(self):
         """The compiled step: :func:`paper_step`, the paper's law's fused body (faster), for
-        that law, :func:`paper_natural_step` for it in the natural geometry, else the general
-        kernel :func:`rcac_step_kernel`; with the joint terms,
+        that law, adapting or frozen, :func:`paper_natural_step` for it in the natural
+        geometry, else the general kernel :func:`rcac_step_kernel`; with the joint terms,
         :func:`~rcac_ros.core.composite_fused.paper_friction_step` or
-        :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`."""
+        :func:`~rcac_ros.core.composite_kernels.friction_step_kernel`. Compiled by
+        :meth:`compile` (or the first step)."""
         fused = self._fused and is_paper_law(self._chan, self._scal)
         if self.joint_friction:
-            kernel = paper_friction_step if fused else friction_step_kernel
-            jdata, jfilt = self._jdata, self._jfilt
-            self._kernel = lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
-            return
-        if self._fused and is_paper_natural_law(self._chan, self._scal):
-            self._kernel = paper_natural_step
-            return
-        self._kernel = paper_step if fused else rcac_step_kernel
+            self._entry = paper_friction_step if fused else friction_step_kernel
+        elif self._fused and is_paper_natural_law(self._chan, self._scal):
+            self._entry = paper_natural_step
+        else:
+            self._entry = paper_step if fused else rcac_step_kernel
+        self._kernel = self._bind(self._entry) if is_ready(self._entry) else self._compile_step
+
+    def _bind(self, kernel):
+        if not self.joint_friction:
+            return kernel
+        jdata, jfilt = self._jdata, self._jfilt
+        return lambda data, buf, *x: kernel(data, buf, jdata, jfilt, *x)
+
+    def _compile_step(self, *args):
+        self.compile()
+        return self._kernel(*args)
+
+    def compile(self):
+        """Compile this law's kernel (or load it from the cache), once per process; returns
+        ``self``.
+
+        Building the controller compiles nothing; the first :meth:`step` calls this. Every
+        path the law can then take runs the same kernel: freezing and resuming the
+        adaptation (:meth:`set_adaptation`), scaling ``K_D``, resetting the estimates. With
+        an empty cache the first call takes seconds (the paper's law) to a minute (the
+        general kernel) on 2 cores (doc/results.md).
+        """
+        self._kernel = self._bind(ready(self._entry))
+        return self
 
     def use_fused_kernel(self, fused):
         """Let the paper's law run its fused kernel (``True``, the default) or the general

@@ -15,15 +15,15 @@ All read and write the packed arrays of :mod:`rcac_ros.core._packing`; the contr
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import kernel, njit
 
-from ._blocks import RCAC_SIGNATURE, packed_views, reference_motion, rejects_input
+from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .adaptation import natural_gain_rows, retract_links
+from .natural_step import natural_gain_rows, retract_links
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
                              JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)
@@ -34,10 +34,11 @@ from .spatial import P0, propagate, transform_force_T
 @njit(cache=True, inline="always")
 def paper_options(chan, scal):
     """The paper's law's options, whatever the geometry: one channel (joint 1), the fixed
-    gain, implicit update, no dead zone, no projection, no leakage, adapting."""
+    gain, implicit update, no dead zone, no projection, no leakage; adapting or frozen
+    (``set_adaptation``: the same kernel, so that a freeze never needs another one)."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
-            and scal[I_PROJECT] == 0.0 and scal[I_FROZEN] == 0.0 and scal[I_LEAK] <= 0.0)
+            and scal[I_PROJECT] == 0.0 and scal[I_LEAK] <= 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -55,15 +56,22 @@ def is_paper_natural_law(chan, scal):
     return paper_options(chan, scal) and scal[I_NATURAL] != 0.0
 
 
-@njit(cache=True, inline="always")
+#: paper_law's: the entries pass data, filt as jdata, jfilt without the joint terms
+PAPER_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
+                   f"float64[:, :, ::1], boolean, boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+
+
+@kernel(PAPER_SIGNATURE)
 def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`paper_step`, :func:`paper_friction_step` and
     :func:`paper_natural_step`: the paper's law (:func:`paper_options`) fused in one loop,
     with joint i's terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true,
     else without them (``jdata``, ``jfilt`` unread), and in the natural geometry of
     doc/design.md §8 when ``natural`` is true (the gain ``P_eff(theta_hat_i)`` of either
-    metric in eq 24's step 1, then the retraction; ``joint`` is then false). Each caller
-    passes ``joint`` and ``natural`` as constants, so the compiler keeps one branch.
+    metric in eq 24's step 1, then the retraction; ``joint`` is then false). Compiled once,
+    with ``joint`` and ``natural`` run-time flags, and called, not inlined, by the three
+    entries (one compile of the body instead of three; the flags' branches cost nothing
+    measurable per step).
 
     The same equations, in the same floating-point order, as the general kernels with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
@@ -88,6 +96,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
     first = scal[I_K] == 0.0
+    frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False): tau and filters only
     kd_diag = scal[I_KD_DIAG] != 0.0
     p_diag = scal[I_P_DIAG] != 0.0
     y = filtered_output(chan, 0, state, scal, q, first)       # y = tau_1^f (eq 22)
@@ -155,7 +164,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
             E += w * state[i, THETA_HAT + k]
     E -= y
     chan[0, CH_Y], chan[0, CH_E], chan[0, CH_ACTIVE] = y, E, 1.0
-    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 1.0
+    scal[I_E], scal[I_Y], scal[I_TRACKING] = E, y, 0.0 if frozen else 1.0
     for k in range(6):
         F[k] = 0.0
     for i in range(n - 1, -1, -1):
@@ -176,14 +185,17 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
             jrow = jdata[i]
             tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
                              + jrow[F_Y + 2] * jrow[F_HAT + 2])             # eq 20
+        else:
+            tau[i] = F[5]                                                    # eq 20
+        if frozen:
+            continue
+        if joint:
             for k in range(3):       # eq 24, step 1, joint i's terms
                 gk = jrow[F_Y + k] * jrow[F_SQ]
                 if i == 0:
                     gk -= gamma * jfilt[0, 0, JW + k] * y
                     jfilt[0, 0, JU + k] = jrow[F_GAIN + k] * jfilt[0, 0, JW + k]
                 jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * gk
-        else:
-            tau[i] = F[5]                                                    # eq 20
         # eq 24, step 1: R_i = theta_hat_i - h P_i (Y_ri^T s_i - gamma W_i^T y), U_i = P_i W_i^T
         for k in range(13):
             G[i, k] -= gamma * filt[0, i, W_ROW + k] * y
@@ -202,6 +214,12 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
                     acc_u += const[i, GAIN_P + 13 * a + c] * filt[0, i, W_ROW + c]
                 R[i, a] = state[i, THETA_HAT + a] - h * acc_r
                 filt[0, i, U_ROW + a] = acc_u
+    if frozen:
+        for i in range(n):
+            state[i, TAU] = tau[i]
+            state[i, Q_PREV] = q[i]
+        scal[I_K] += 1.0
+        return tau
     if natural:      # eq 24, step 1 with P_eff(theta_hat_i) (doc/design.md §8), one call
         natural_gain_rows(const, state, filt[0], G, R, scal, Pg, t, M4)
     # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
@@ -234,14 +252,14 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     return tau
 
 
-@njit(RCAC_SIGNATURE, cache=True)
+@kernel(RCAC_SIGNATURE, calls=(paper_law,))
 def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`): :func:`paper_law`
     without the joint terms, bit for bit the general kernel's results."""
     return paper_law(data, filt, data, filt, False, False, q, qd, q_d, qd_d, qdd_d)
 
 
-@njit(RCAC_SIGNATURE, cache=True)
+@kernel(RCAC_SIGNATURE, calls=(paper_law,))
 def paper_natural_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law in the natural geometry
     (:func:`is_paper_natural_law`, doc/design.md §8): :func:`paper_law` with the natural
@@ -249,7 +267,7 @@ def paper_natural_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     return paper_law(data, filt, data, filt, False, True, q, qd, q_d, qd_d, qdd_d)
 
 
-@njit(FRICTION_SIGNATURE, cache=True)
+@kernel(FRICTION_SIGNATURE, calls=(paper_law,))
 def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     """:func:`friction_step_kernel` for the paper's law
     (:func:`is_paper_law`): :func:`paper_law` with the joint terms (doc/design.md §7)."""

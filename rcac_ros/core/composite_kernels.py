@@ -14,15 +14,15 @@ The paper's law also runs a fused body, bit for bit the same results and faster
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import kernel
 
 from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
     rejects_input
 from ._packing import (ADAPT_GRADIENT, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
-from .adaptation import (adapt_link, implicit_solve, project, retract_links, tracking_active,
-                         update_least_squares)
+from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
+from .natural_step import retract_links
 from .channels import close_channels, predict_link, start_channels
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
                              FRICTION_SIGNATURE, adapt_joint, implicit_solve_joint, predict_joint,
@@ -35,18 +35,16 @@ GENERAL_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1
                      f"float64[:, :, ::1], boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
 
 
-@njit(GENERAL_SIGNATURE, cache=True)
+@kernel(GENERAL_SIGNATURE)
 def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`rcac_step_kernel` and :func:`friction_step_kernel`: one control
     period of eqs 18-24, any channels, any option of the adaptation step, with joint i's
     terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true, else without
     them (``jdata``, ``jfilt`` unread). Returns tau (empty on bad input, code in scal[I_ERR]).
 
-    Compiled once, eagerly, with ``joint`` a run-time flag (``GENERAL_SIGNATURE``), and
-    called, not inlined, by both entries: inlining it into each, with ``joint`` a constant,
-    compiled the body twice and tripled the cold compile (about 200 s against 75 s on the
-    2-core VM) for no gain per step beyond the noise (same-process A/B, new over old,
-    1.01-1.09 for the general laws, 1.08 for the unchanged fused kernel).
+    Compiled once, with ``joint`` a run-time flag (``GENERAL_SIGNATURE``), and called, not
+    inlined, by both entries: inlined into each with ``joint`` a constant, the body compiles
+    twice for no measurable gain per step.
     """
     n, const, state, scal, chan = packed_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
@@ -172,7 +170,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     return tau
 
 
-@njit(RCAC_SIGNATURE, cache=True)
+@kernel(RCAC_SIGNATURE, calls=(general_law,))
 def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
 
@@ -182,7 +180,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     return general_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
 
 
-@njit(FRICTION_SIGNATURE, cache=True)
+@kernel(FRICTION_SIGNATURE, calls=(general_law,))
 def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     """One control period of the law with joint terms (doc/design.md §7); returns tau.
 

@@ -1,7 +1,7 @@
 """Joint-space mass matrix by the composite-rigid-body algorithm on the paper's frames."""
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import joint_vectors
 from .spatial import JA, P0, RF0, TH0, joint_rotation, transform_force_T

@@ -14,7 +14,7 @@ definite, and principal moments obeying the triangle inequalities
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import as_array
 

@@ -33,7 +33,7 @@ term, implicit or explicit on the prediction term, one joint solve over all para
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import numeric
 from rcac_ros.errors import GainError
@@ -131,7 +131,7 @@ def term_gain(k, cap, x):
 
 @njit(cache=True, inline="always")
 def retract_term(v, op, on):
-    """The 1-D retraction of :func:`~rcac_ros.core.pseudo_inertia.retract` (doc/design.md
+    """The 1-D retraction of :func:`~rcac_ros.core.retraction.retract` (doc/design.md
     §8): the step ``x = v[op] -> v[on]`` of a term > 0 becomes ``x (1 + r + r^2/2)``,
     ``r = a z``, ``z = (v[on] - x) / x``, ``a = min(1, 1/|z|)``: so ``x+ >= x / 2 > 0`` for
     any gain and error. A step that is not finite is not taken; ``x+`` is kept >= FLOOR.

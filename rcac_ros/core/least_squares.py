@@ -24,7 +24,7 @@ products, O(m n) per step.
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 
 def initial_factor(P):

@@ -20,7 +20,6 @@ import numpy as np
 
 from rcac_ros.errors import ConfigError, ModelError, read_yaml
 from ._validate import as_array, joint_values, scalar
-from .spatial import pack_kinematics
 
 #: Names of the 13 inertial parameters of one link, in the paper's order (eq 13, doc/design.md §2).
 PARAMETER_NAMES = (
@@ -74,6 +73,28 @@ def theta_from_inertia(mass, com, inertia):
         m * px * py - I[0, 1], m * px * pz - I[0, 2], m * py * pz - I[1, 2],
         I[0, 0], I[1, 1], I[2, 2],
     ])
+
+
+#: Column offsets of the packed model row: p, R_fix, theta, then armature, damping, friction
+#: and the friction velocity v_c at JA, JD, JF, JV (doc/design.md §7).
+P0, RF0, TH0, JA, JD, JF, JV, KIN_COLS = 0, 3, 12, 25, 26, 27, 28, 29
+
+
+def pack_kinematics(model):
+    """Pack ``model`` into the (n, 29) row layout the kernels read: p, R_fix, theta, joint terms.
+
+    :class:`RobotModel` calls it once and keeps the result in its
+    ``packed`` field (read-only, as the model is immutable).
+    """
+    buf = np.empty((model.n, KIN_COLS))
+    buf[:, P0:P0 + 3] = model.p
+    buf[:, RF0:RF0 + 9] = model.R_fix.reshape(model.n, 9)
+    buf[:, TH0:TH0 + 13] = model.theta()
+    buf[:, JA] = model.armature
+    buf[:, JD] = model.damping
+    buf[:, JF] = model.friction
+    buf[:, JV] = model.friction_velocity
+    return buf
 
 
 class RobotModel:
@@ -176,7 +197,7 @@ class RobotModel:
         self._theta = np.array([theta_from_inertia(self.mass[i], self.com[i], self.inertia[i])
                                 for i in range(n)])
         #: (n, 29) the rows the compiled kernels read: p, R_fix, theta, the joint terms
-        #: (:mod:`.spatial`)
+        #: (:func:`pack_kinematics`)
         self.packed = pack_kinematics(self)
         for arr in (self.p, self.R_fix, self.mass, self.com, self.inertia, self.gravity,
                     self.effort_limit, self.velocity_limit, self.position_lower,

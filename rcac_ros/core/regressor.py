@@ -12,7 +12,7 @@ parameters, ``C`` evaluated at the actual angular velocity ``w``:
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import as_array
 

@@ -1,7 +1,7 @@
 """Inverse dynamics by the matrix-form recursive Newton-Euler algorithm (eqs 9, 11, 15, 16)."""
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import joint_vectors
 from .regressor import link_wrench

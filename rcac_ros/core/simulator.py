@@ -5,7 +5,7 @@ the articulated-body algorithm, so the plant has them whenever its model does.
 """
 
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 from ._validate import as_array, joint_values, scalar
 from .aba import aba_kernel

@@ -25,10 +25,11 @@ this law, step by step.
 Cost per step: O(n^3) (``W P W^T``), against O(n) for the recursive law.
 """
 
+import copy
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import kernel, njit, ready
 
 from ._blocks import INPUT_NAMES, VEC, cholesky_solve, input_error, rejects_input, \
     reference_motion
@@ -39,7 +40,8 @@ from rcac_ros.errors import GainError, InputError
 from .channels import filter_step
 from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lambda_min,
                              matched_gain, natural_gains_into, natural_metric_option, nu_gain,
-                             pseudo_inertia, retract_rows)
+                             pseudo_inertia)
+from .retraction import retract_rows
 from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
@@ -59,8 +61,8 @@ def finish(filt, scal, tau, y, e, m):
     return tau
 
 
-@njit(f"{VEC}(float64[:, ::1], {VEC}, float64[:, :, ::1], float64[:, ::1], {VEC}, {VEC}, "
-      f"{VEC}, {VEC}, {VEC})", cache=True)
+@kernel(f"{VEC}(float64[:, ::1], {VEC}, float64[:, :, ::1], float64[:, ::1], {VEC}, {VEC}, "
+        f"{VEC}, {VEC}, {VEC})")
 def slotine_li_step_kernel(data, theta_hat, filt, joint, q, qd, q_d, qd_d, qdd_d):
     """One period of eqs 2 and 7 with explicit joint-space matrices.
 
@@ -262,6 +264,7 @@ class SlotineLiCompositeController:
                  P_friction=P_FRICTION, geometry="euclidean", natural_gain=None,
                  natural_metric=None, barrier_c=None):
         self.model = model
+        self._compiled = False              # compile(): this law's kernels ready
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
         self.K_D, self.P, self.Lambda = gains.K_D, gains.P, gains.Lambda
@@ -332,8 +335,21 @@ class SlotineLiCompositeController:
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
+    def compile(self):
+        """Compile this law's kernels (or load them from the cache), once per process; returns
+        ``self``. Building the controller compiles nothing; the first :meth:`step` calls this.
+        """
+        if not self._compiled:
+            ready(slotine_li_step_kernel)
+            self._compiled = True
+            z = np.zeros(self.n)
+            copy.deepcopy(self).step(z, z, z, z, z)    # the geometry's helpers, on a copy
+        return self
+
     def step(self, q, qd, q_d, qd_d, qdd_d):
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
+        if not self._compiled:
+            self.compile()
         if self.geometry == "natural":                      # doc/design.md §8
             th = self._theta[:13 * self.n].reshape(self.n, 13)
             self._prev[:] = th

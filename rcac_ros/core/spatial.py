@@ -16,29 +16,9 @@ allocate from another dtype than their inputs, so running them with
 
 import math
 
-import numpy as np
-from numba import njit
-
-#: Column offsets of the packed model row: p, R_fix, theta, then armature, damping, friction
-#: and the friction velocity v_c at JA, JD, JF, JV (doc/design.md §7).
-P0, RF0, TH0, JA, JD, JF, JV, KIN_COLS = 0, 3, 12, 25, 26, 27, 28, 29
-
-
-def pack_kinematics(model):
-    """Pack ``model`` into the (n, 29) row layout the kernels read: p, R_fix, theta, joint terms.
-
-    :class:`~rcac_ros.core.model.RobotModel` calls it once and keeps the result in its
-    ``packed`` field (read-only, as the model is immutable).
-    """
-    buf = np.empty((model.n, KIN_COLS))
-    buf[:, P0:P0 + 3] = model.p
-    buf[:, RF0:RF0 + 9] = model.R_fix.reshape(model.n, 9)
-    buf[:, TH0:TH0 + 13] = model.theta()
-    buf[:, JA] = model.armature
-    buf[:, JD] = model.damping
-    buf[:, JF] = model.friction
-    buf[:, JV] = model.friction_velocity
-    return buf
+from ._jit import njit
+#: the packed model row's columns (:func:`rcac_ros.core.model.pack_kinematics`)
+from .model import JA, JD, JF, JV, KIN_COLS, P0, RF0, TH0  # noqa: F401  (re-exported)
 
 
 @njit(cache=True, inline="always")

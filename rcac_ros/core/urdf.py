@@ -206,8 +206,6 @@ class _ErrorLog(logging.Handler):
 
 def _load(path_or_xml):
     """Parse the URDF with yourdfpy; return ``(urdf, source label)``."""
-    import yourdfpy
-
     if isinstance(path_or_xml, bytes):
         path_or_xml = path_or_xml.decode("utf-8", errors="replace")
     if isinstance(path_or_xml, str) and path_or_xml.lstrip().startswith("<"):
@@ -222,6 +220,7 @@ def _load(path_or_xml):
         if not os.path.isfile(source):
             raise ConfigError(f"{source}: no such URDF file")
         stream = source
+    import yourdfpy                         # once the file is known to exist
     logger = logging.getLogger(yourdfpy.urdf.__name__)
     log = _ErrorLog()
     propagate = logger.propagate

@@ -6,12 +6,14 @@ code 2 (``cli.py`` makes argparse's errors one line)::
     $ rcac experiment --duration -5
     rcac experiment: error: argument --duration: must be > 0, got '-5'
 
-Every helper rejects NaN and infinities. Checks that relate two options (``--jump`` before
+Every numeric helper rejects NaN and infinities; a file that must exist (``--urdf``) is
+checked by :func:`existing_file`. Checks that relate two options (``--jump`` before
 ``--duration``) belong to the subcommand's ``run``, which raises the package's ``ConfigError``.
 """
 
 import argparse
 import math
+import os
 
 
 def _parse(text, kind):
@@ -60,6 +62,14 @@ def non_negative_int(text):
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
     return value
+
+
+def existing_file(text):
+    """The path of an existing file (a model, a URDF): checked before anything is loaded."""
+    if not os.path.isfile(text):
+        what = "a directory" if os.path.isdir(text) else "no such file"
+        raise argparse.ArgumentTypeError(f"{what}: {text!r}")
+    return text
 
 
 def add_engine_argument(parser):

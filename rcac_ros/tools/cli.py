@@ -8,7 +8,9 @@ options depend on its first argument (the forms of ``rcac sweep``, the benchmark
 subcommand. The command line is read, never rewritten.
 Numbers are checked as they are parsed (the ``type=`` helpers of ``tools/args.py``); a bad
 argument gives one line naming it and exit code 2, and so does a missing optional
-dependency (``tools/extras.py``).
+dependency (``tools/extras.py``). A subcommand's module imports at its top only what its
+parser needs, never numba, Dask, matplotlib, MuJoCo or rclpy: its arguments, and the files
+they name (a campaign, a URDF, a model), are refused before any kernel is imported.
 """
 
 import argparse
@@ -21,7 +23,7 @@ SUBCOMMANDS = {
     "experiment": ("rcac_ros.tools.demos.experiment",
                    "run the paper's Section 4 experiment (both laws)", ()),
     "bench": ("rcac_ros.tools.bench.commands",
-              "benchmarks: core, ros, faults, soak, delay-margin, noise", ()),
+              "benchmarks: core, ros, faults, soak, delay-margin, startup, noise", ()),
     "record": ("rcac_ros.tools.bags.record", "record the package's topics into a rosbag2 bag",
                ("bags", "ros")),
     "inspect": ("rcac_ros.tools.bags.inspect", "summarise a bag and plot what it holds",

@@ -13,8 +13,8 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import ConfigError, RecursiveCompositeController, SlotineLiCompositeController
 from rcac_ros.core.urdf import model_from_urdf
+from rcac_ros.errors import ConfigError
 from rcac_ros.tools.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
@@ -104,10 +104,16 @@ def gains_for(model, kappa, Lambda, rho, gamma, lam, h, adapt_all=False, law="co
                 lam=lam, h=h, theta_hat0=model.theta())
 
 
-#: the kind of a law -> the controller class that runs it
-CONTROLLERS = {"rcac": RecursiveCompositeController, "slotine_li": SlotineLiCompositeController}
+#: the kind of a law -> the name of the controller class (of :mod:`rcac_ros.core`) that runs it
+CONTROLLERS = {"rcac": "RecursiveCompositeController",
+               "slotine_li": "SlotineLiCompositeController"}
 
 
 def controller(kind, model, gains):
-    """The controller of ``kind`` (a key of :data:`CONTROLLERS`) for ``model``."""
-    return CONTROLLERS[kind](model, **gains)
+    """The controller of ``kind`` (a key of :data:`CONTROLLERS`) for ``model``.
+
+    The class is imported here, where a run starts, so that reading a scenario's
+    constants imports no kernel.
+    """
+    import rcac_ros.core
+    return getattr(rcac_ros.core, CONTROLLERS[kind])(model, **gains)

@@ -1,23 +1,18 @@
 """Compile the numba kernels into their cache once, in two processes at a time.
 
-numba caches each kernel next to its source (``cache=True``), keyed on the source file's
-modification time and size, so a new checkout compiles them on its first use: about 2.5 min
-of one core on a 2-core machine, most of it the recursive law's step kernels
-(:mod:`rcac_ros.core.composite_kernels`, :mod:`rcac_ros.core.composite_fused`, compiled
-when :mod:`rcac_ros.core` is imported).
-``make test`` and ``rcac demo`` run this first, so the tests and the nodes load them
-instead of compiling them (and a node does not compile for minutes at its start).
+The kernels compile when a law is first stepped (:mod:`rcac_ros.core._jit`), into the
+user's cache directory, keyed on the package's compiled sources and numba's version. This
+tool compiles all of them ahead, so that no later process compiles: run it once after an
+install (``make setup`` and ``make test`` do; after ``pip install`` or ``colcon build``:
+``python -m rcac_ros.tools.warm``).
 
 The work is split in two processes that compile different kernels at the same time:
 
-- ``recursive``: ``import rcac_ros.core`` (the recursive law's general kernels, compiled
-  eagerly at import: most of the time), then one step of its variants;
-- ``others``: everything else (dynamics, kinematics, the simulator, the Slotine-Li law and
-  the natural geometry's helpers, the identifiability accumulator, the command guards),
-  then the recursive law's fused kernels (:mod:`rcac_ros.core.composite_fused`). This
-  process imports those modules without running ``rcac_ros/core/__init__.py``, which would
-  compile the general kernels a second time beside the first process; what the first
-  process then needs of the second's it loads from the cache.
+- ``recursive``: the recursive law's general kernel (any channels and options, with and
+  without the joint terms: the longest compile);
+- ``others``: everything else: the paper's law's fused kernels (Euclidean, natural, with the
+  joint terms), the Slotine-Li law, dynamics, kinematics, the simulator, the
+  identifiability accumulator, the command limiter.
 
 Usage: ``python -m rcac_ros.tools.warm [--jobs N] [GROUP ...]`` (each group in its own
 process, ``N`` at a time, default 2). Prints one line per group with its time. Exit code 1 if
@@ -27,73 +22,58 @@ is missing compiles on first use, as without this tool.
 
 import argparse
 import functools
-import importlib
-import os
 import subprocess
 import sys
 import time
-import types
 
 GROUPS = ("recursive", "others")
 
 
-def _core_without_init():
-    """Make ``rcac_ros.core``'s submodules importable without its ``__init__`` (which imports
-    the recursive law and so compiles its kernels)."""
-    if "rcac_ros.core" in sys.modules:
-        return
-    import rcac_ros
-    stub = types.ModuleType("rcac_ros.core")
-    stub.__path__ = [os.path.join(os.path.dirname(rcac_ros.__file__), "core")]
-    sys.modules["rcac_ros.core"] = stub
+def _step_each(cls, model, variants):
+    import numpy as np
+    z = np.zeros(model.n)
+    q = np.full(model.n, 0.1)
+    for kwargs in variants:
+        cls(model, **kwargs).compile().step(q, z, q, z, z)
 
 
 def warm_recursive():
-    """The recursive law's step kernels (eager, at import), then one step of its variants."""
-    import numpy as np
+    """The recursive law's general kernel, with and without the joint terms, and the
+    natural geometry's and least squares' helpers that its controller calls."""
     from rcac_ros.core import RecursiveCompositeController, css_arm
-    model = css_arm()
-    z = np.zeros(model.n)
-    q = np.full(model.n, 0.1)
-    # one variant per kernel: the natural metric is a run-time scalar, so either metric
-    # compiles the same kernels
-    for kwargs in ({}, {"joint_friction": True}, {"geometry": "natural"},
-                   {"geometry": "natural", "channels": "all"},
-                   {"geometry": "natural", "adaptation": "least_squares"},
-                   {"geometry": "natural", "joint_friction": True}):
-        RecursiveCompositeController(model, **kwargs).step(q, z, q, z, z)
+    _step_each(RecursiveCompositeController, css_arm(), (
+        {"channels": "all"}, {"channels": "all", "joint_friction": True},
+        {"geometry": "natural", "channels": "all"},
+        {"geometry": "natural", "adaptation": "least_squares"},
+        {"geometry": "natural", "joint_friction": True, "channels": "all"}))
 
 
 def warm_others():
-    """Everything but the recursive law's general kernels, without importing them: dynamics,
-    kinematics, the simulator, the Slotine-Li law and the natural geometry's helpers, the
-    identifiability accumulator, the command guards, then the fused kernels."""
-    _core_without_init()
+    """Everything but the general kernel: the fused kernels, the Slotine-Li law, dynamics,
+    kinematics, the simulator, the identifiability accumulator, the command limiter."""
     import numpy as np
-
-    def core(name):
-        return importlib.import_module(f"rcac_ros.core.{name}")
-
-    model = core("model").css_arm()
+    from rcac_ros.core import (RecursiveCompositeController, Simulator,
+                               SlotineLiCompositeController, css_arm, energy, forward_dynamics,
+                               forward_kinematics, inverse_dynamics, mass_matrix)
+    from rcac_ros.core.identifiability import Excitation
+    from rcac_ros.nodes.safety.guards import DesiredLimiter
+    model = css_arm()
+    _step_each(RecursiveCompositeController, model, (
+        {}, {"joint_friction": True}, {"geometry": "natural"}))
+    _step_each(SlotineLiCompositeController, model, (
+        {}, {"joint_friction": True}, {"geometry": "natural"},
+        {"geometry": "natural", "natural_metric": "log_det"},
+        {"geometry": "natural", "joint_friction": True}))
     z = np.zeros(model.n)
     q = np.full(model.n, 0.1)
-    core("rnea").inverse_dynamics(model, q, z, z)
-    core("crba").mass_matrix(model, q)
-    core("aba").forward_dynamics(model, q, z, z)
-    core("kinematics").forward_kinematics(model, q)
-    core("kinematics").energy(model, q, z)
-    core("simulator").Simulator(model, dt=0.002).step(z)
-    core("identifiability").Excitation(model.n, 0.002).add(np.zeros((1, model.n, 13)))
-    slotine_li = core("slotine_li")
-    for kwargs in ({}, {"joint_friction": True}, {"geometry": "natural"},
-                   {"geometry": "natural", "natural_metric": "log_det"},
-                   {"geometry": "natural", "joint_friction": True}):
-        slotine_li.SlotineLiCompositeController(model, **kwargs).step(q, z, q, z, z)
-    from rcac_ros.nodes.safety.guards import DesiredLimiter
-    limiter = DesiredLimiter(0.01, 0.1, 0.002, model.n)
-    limiter(z, z, z)
-    limiter(q, z, z)
-    core("composite_fused")             # the recursive law's fused kernels (eager)
+    inverse_dynamics(model, q, z, z)
+    mass_matrix(model, q)
+    forward_dynamics(model, q, z, z)
+    forward_kinematics(model, q)
+    energy(model, q, z)
+    Simulator(model, dt=0.002).step(z)
+    Excitation(model.n, 0.002).add(np.zeros((1, model.n, 13)))
+    DesiredLimiter(0.01, 0.1, 0.002, model.n).warm()
 
 
 WARMERS = {"recursive": warm_recursive, "others": warm_others}

@@ -1,6 +1,7 @@
 """Freezing the adaptation (the ``~/set_adaptation`` service): estimates held, control intact."""
 
 import numpy as np
+import pytest
 
 from rcac_ros.core import (PaperTrajectory, RecursiveCompositeController, Simulator, css_arm,
                            inverse_dynamics)
@@ -33,3 +34,35 @@ def test_frozen_estimates_stay_and_the_law_uses_them():
     ctrl.set_adaptation(True)
     ctrl.step(q + 0.05, qd, q, qd, qdd)
     assert ctrl.adapting and not np.allclose(ctrl.theta_hat, theta0)
+
+
+@pytest.mark.parametrize("options", [{}, {"joint_friction": True}, {"geometry": "natural"}],
+                         ids=["paper", "joint_terms", "natural"])
+def test_a_freeze_keeps_the_fused_kernel_and_equals_the_general_one(options):
+    """Freezing and resuming the paper's law does not switch kernels (nothing to compile in
+    the loop), and the fused kernel's frozen steps are the general kernel's: the same
+    torques, filters, prediction errors and (held) estimates, bit for bit (with the joint
+    terms the two sum in another order: 1e-12 relative, as when adapting,
+    test_joint_friction_law.py)."""
+    model = css_arm()
+    traj = PaperTrajectory(Q0)
+    runs = []
+    for fused in (True, False):
+        ctrl = RecursiveCompositeController(model, **options)
+        ctrl.use_fused_kernel(fused)
+        sim = Simulator(model, q0=Q0)
+        taus = []
+        for k in range(600):
+            if k in (200, 400):
+                ctrl.set_adaptation(k == 400)       # frozen for steps 200-399
+            assert (ctrl._entry.__name__.startswith("paper")) == fused
+            q_d, qd_d, qdd_d = traj(k * 0.002)
+            tau = ctrl.step(sim.q, sim.qd, q_d, qd_d, qdd_d)
+            taus.append(tau.copy())
+            if k == 399:
+                held = ctrl.theta_hat.copy()
+            sim.step(tau)
+        runs.append((np.array(taus), held, ctrl.theta_hat, ctrl.E, ctrl.W))
+    rtol = 1e-12 if options.get("joint_friction") else 0.0
+    for a, b in zip(*runs):
+        np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * np.max(np.abs(b)))

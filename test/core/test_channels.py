@@ -170,7 +170,7 @@ def test_fused_paper_natural_step_equals_the_general_kernel(options):
     for fused in (True, False):
         ctrl = RecursiveCompositeController(model, geometry="natural", **options)
         ctrl.use_fused_kernel(fused)
-        assert (ctrl._kernel is composite_fused.paper_natural_step) == fused
+        assert (ctrl._entry is composite_fused.paper_natural_step) == fused
         sim = Simulator(model, q0=Q0 + 0.5)
         out = []
         for k in range(500):

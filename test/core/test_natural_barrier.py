@@ -16,11 +16,11 @@ from chains import random_chain
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR, STATE_COLS,
                                     THETA_HAT)
-from rcac_ros.core.adaptation import (barrier_apply, barrier_factor, natural_ls_apply,
-                                      natural_ls_factor)
+from rcac_ros.core.natural_step import (barrier_apply, barrier_factor, natural_ls_apply,
+                                        natural_ls_factor)
 from rcac_ros.core.model import PAPER_GAINS
-from rcac_ros.core.pseudo_inertia import (BARRIER_C, FLOOR, HALVINGS, NU_RATIO, barrier_blocks,
-                                          default_start, nu_gain, retract_short)
+from rcac_ros.core.pseudo_inertia import BARRIER_C, barrier_blocks, default_start, nu_gain
+from rcac_ros.core.retraction import FLOOR, HALVINGS, NU_RATIO, retract_short
 
 from test_natural_geometry import euclidean_twin, run
 

@@ -18,10 +18,10 @@ import pinocchio as pin
 from numba import njit
 
 from rcac_ros.core import theta_from_inertia
-from rcac_ros.core.pseudo_inertia import (COND_SHORTCUT, FLOOR, HALVINGS, NU_RATIO,
-                                          cholesky4, dual_into, inverse_cholesky4,
-                                          natural_gain_apply, pseudo_inertia,
-                                          pseudo_inertia_into, retract, theta_from_pseudo)
+from rcac_ros.core.pseudo_inertia import (cholesky4, dual_into, inverse_cholesky4,
+                                          natural_gain_apply, pseudo_inertia, pseudo_inertia_into,
+                                          theta_from_pseudo)
+from rcac_ros.core.retraction import COND_SHORTCUT, FLOOR, HALVINGS, NU_RATIO, retract
 
 
 @njit(cache=False)

@@ -11,12 +11,12 @@ import pytest
 from scipy.linalg import expm
 
 from rcac_ros.core import InputError, css_arm, link_regressor, theta_from_inertia
-from rcac_ros.core.pseudo_inertia import (FLOOR, NU_BASIS, body_theta, check_body, default_start,
+from rcac_ros.core.pseudo_inertia import (NU_BASIS, body_theta, check_body, default_start,
                                           dual_into, is_body, lambda_min, log_det_hessian,
-                                          matched_gain, natural_gain_apply, nearest_body,
-                                          nu_gain, pseudo_inertia, retract,
-                                          theta_from_pseudo,
-                                          standard_parameters, theta_from_parts)
+                                          matched_gain, natural_gain_apply, nearest_body, nu_gain,
+                                          pseudo_inertia, theta_from_pseudo, standard_parameters,
+                                          theta_from_parts)
+from rcac_ros.core.retraction import FLOOR, retract
 
 
 def random_bodies(rng, count, spread=1.5):

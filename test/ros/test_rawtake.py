@@ -143,7 +143,7 @@ def test_a_buffer_grown_within_hold_is_kept_and_reused():
         assert reader.capacity >= len(inbox.data[0]) > RawReader.KEEP, reader.capacity
         got = [deserialize_message(d, JointState) for d in inbox.data]
         assert got[0].name == LARGE.name and got[1].name == SMALL.name
-    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0} and log.lines == []
 
 
 def test_a_prefaulted_buffer_starts_at_its_bound_and_stays_there():
@@ -158,7 +158,7 @@ def test_a_prefaulted_buffer_starts_at_its_bound_and_stays_there():
         assert reader.capacity == 4 * large
         got = [deserialize_message(d, JointState) for d in inbox.data]
         assert got[0].name == LARGE.name and got[1].name == SMALL.name
-    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0} and log.lines == []
 
 
 def test_a_prefaulted_buffer_grown_past_its_bound_returns_to_the_bound():
@@ -172,7 +172,7 @@ def test_a_prefaulted_buffer_grown_past_its_bound_returns_to_the_bound():
         publish(LARGE, SMALL)
         assert inbox.wait(lambda b: len(b.data) == 2), (len(inbox.data), inbox.oversize)
         assert inbox.wait(lambda b: reader.capacity == hold), reader.capacity
-    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+    assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0} and log.lines == []
 
 
 def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
@@ -192,7 +192,8 @@ def test_the_buffer_is_freed_back_to_a_bound_after_a_large_sample():
             assert got[-1].name == SMALL.name and list(got[-1].position) == [1.5, -2.0]
             # LARGE grew the buffer past the bound; it was freed back to KEEP after it
             assert reader.capacity <= max(cap, RawReader.KEEP), reader.capacity
-        assert reader.errors == {"take": 0, "alloc": 0, "callback": 0} and log.lines == []
+        assert reader.errors == {"take": 0, "alloc": 0, "callback": 0, "thread": 0}
+        assert log.lines == []
 
 
 def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing():
@@ -202,7 +203,7 @@ def test_a_callback_exception_is_counted_logged_once_and_the_input_keeps_flowing
         assert inbox.wait(lambda b: b.calls == 4)
         assert reader._thread.is_alive()
         assert len(inbox.data) == 2                     # the 2nd and the 4th
-        assert reader.errors == {"take": 0, "alloc": 0, "callback": 2}
+        assert reader.errors == {"take": 0, "alloc": 0, "callback": 2, "thread": 0}
     assert len(log.lines) == 1, log.lines               # one line for one exception type
     assert log.lines[0].startswith("test input: the callback raised")
     assert "Traceback" in log.lines[0] and "ValueError: callback failure 1" in log.lines[0]
@@ -230,7 +231,7 @@ def test_an_rcl_error_is_counted_logged_once_and_the_input_keeps_flowing(monkeyp
     with raw_reader(inbox, 0, log) as (reader, publish):
         publish(SMALL, SMALL)
         assert inbox.wait(lambda b: len(b.data) == 2)
-        assert reader.errors == {"take": 3, "alloc": 0, "callback": 0}
+        assert reader.errors == {"take": 3, "alloc": 0, "callback": 0, "thread": 0}
     assert len(log.lines) == 1, log.lines
     assert log.lines[0].startswith("test input: rcl_take_serialized_message returned 1 (")
 
@@ -266,7 +267,7 @@ def test_a_failed_reallocation_is_counted_and_the_reader_keeps_a_buffer(monkeypa
         assert inbox.wait(lambda b: len(b.data) == 3 and reader.capacity <= RawReader.KEEP), \
             (len(inbox.data), reader.capacity, reader.errors, log.lines)
         assert reader._thread.is_alive()
-        assert reader.errors == {"take": 0, "alloc": 2, "callback": 0}
+        assert reader.errors == {"take": 0, "alloc": 2, "callback": 0, "thread": 0}
         assert fake.calls == 4                          # the first, two failed, one done
         got = [deserialize_message(d, JointState) for d in inbox.data]
         assert got[0].name == LARGE.name and list(got[0].position) == [0.25] * 20_000
@@ -291,5 +292,6 @@ def test_a_failed_reallocation_is_tried_again_without_a_further_sample(monkeypat
         publish(LARGE)
         assert inbox.wait(lambda b: len(b.data) == 1 and reader.capacity <= RawReader.KEEP), \
             (len(inbox.data), reader.capacity, reader.errors, log.lines)
-        assert reader.errors == {"take": 0, "alloc": 1, "callback": 0} and fake.calls == 3
+        assert reader.errors == {"take": 0, "alloc": 1, "callback": 0, "thread": 0}
+        assert fake.calls == 3
         assert reader._thread.is_alive() and len(log.lines) == 1

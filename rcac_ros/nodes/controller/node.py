@@ -1,12 +1,13 @@
 """The controller node: joint states in, efforts out (``ros2 run rcac_ros controller``).
 
 A managed node (:class:`~rcac_ros.nodes.runtime.managed.ManagedNode`): configure reads the
-parameters into a frozen config (:mod:`.params`) and warms the kernels, activate starts
-the efforts, deactivate sends one zero effort. Thin: message -> arrays ->
+parameters into a frozen config (:mod:`.params`) and compiles the law's kernels in a thread
+(:mod:`.compiling`), activate starts the efforts once they are ready, deactivate sends one
+zero effort. Thin: message -> arrays ->
 :class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
-(one step per valid JointState, time from its stamp) or ``timer`` mode (``rate`` Hz on
-the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop` or
-``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
+(one step, :mod:`.control`, per valid JointState, time from its stamp) or ``timer`` mode
+(``rate`` Hz on the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop`
+or ``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
 the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the desired motion (:mod:`.motion`,
 also the FollowJointTrajectory server's sink), the ``~/joint_trajectory`` topic
 (:mod:`.trajectory_input`), the outputs (:mod:`.outputs`), the estimate services
@@ -15,14 +16,13 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 """
 
 import sys
-import time
 
-import numpy as np
 from rclpy.clock import Clock, ClockType
 
 from rcac_ros import params, topics
-from rcac_ros.errors import RcacError
 from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.controller.control import ControlStep
+from rcac_ros.nodes.controller.compiling import CompileWatch, KernelWarmup
 from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.controller.diagnostics import diagnostics, LoopCounts
 from rcac_ros.nodes.controller.starvation import Starvation
@@ -36,12 +36,12 @@ from rcac_ros.nodes.controller.estimate_services import EstimateServices
 from rcac_ros.nodes.safety.failsafe import ControllerGuards
 from rcac_ros.nodes.fjt.server import create_server, FollowJointTrajectoryServer
 from rcac_ros.nodes.controller.lookahead import StatePredictor
-from rcac_ros.nodes.runtime.managed import ManagedNode
+from rcac_ros.nodes.runtime.managed import FAILURE, ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
 from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 
 
-class ControllerNode(ManagedNode):
+class ControllerNode(ControlStep, ManagedNode):
     """The recursive composite adaptive controller as a managed ROS 2 node.
 
     Constructed as :class:`~rcac_ros.nodes.runtime.managed.ManagedNode` (keyword arguments of
@@ -66,11 +66,13 @@ class ControllerNode(ManagedNode):
 
     # ------------------------------------------------------------------ lifecycle
     def _configure(self, values):
-        """Parameters, kernels (warmed), publishers, subscriptions, timers, services."""
-        self.config, self.ctrl = read_parameters(self, values)     # its kernels warmed
+        """Parameters, kernels (compiling), publishers, subscriptions, timers, services."""
+        self.config, self.ctrl = read_parameters(self, values)     # checked; nothing compiled
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
+        self.kernels = KernelWarmup(self.ctrl, self.failsafe.limiter, log)  # beside the spin
+        self.compile_watch = self.keep(CompileWatch.close, CompileWatch(self, log))
         self.realtime = RealtimeOptions.from_values(values)     # applied by run()
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
@@ -94,7 +96,7 @@ class ControllerNode(ManagedNode):
             max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
             outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
-            restarted=self._stream_restarted, control=self._control))
+            restarted=self._stream_restarted, control=self._step))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
         self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
             paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
@@ -128,7 +130,14 @@ class ControllerNode(ManagedNode):
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
         log.info(f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
                  f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
-                 f"{list(self.joints)}")
+                 f"{list(self.joints)}; compiling the law's kernels")
+
+    def _ready_to_activate(self):
+        return self.kernels.done.is_set()
+
+    def on_activate(self, state):
+        """Activate once the kernels are ready (waits for them); FAILURE if they failed."""
+        return super().on_activate(state) if self.kernels.wait() else FAILURE
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
@@ -206,64 +215,6 @@ class ControllerNode(ManagedNode):
             stamp = self.states.stamp
             return stamp if stamp else self.counts.steps * round(self.config.h * 1e9)
         return self._now_ns()
-
-    # ------------------------------------------------------------------ control
-    def _control(self, t_ns, stamp=None):
-        state = self.states.take()          # one snapshot (timer mode: set by another thread)
-        q, qd = state.q, state.qd
-        spell = self.failsafe.stop.active
-        self.watchdog.resume()              # a spell of safe effort ends here
-        if self._starvation is not None:    # timer mode: K_D within the delay margin
-            self._starvation.step(after_spell=spell)
-        if self.filters_stale:
-            self.filters_stale = False
-            self.ctrl.restart_filters()
-        if self._lookahead is not None:     # timer mode: the state when the effort acts
-            q, qd = self._lookahead(q, qd, time.monotonic_ns() - state.received)
-        q_d, qd_d, qdd_d = self.motion.sample(t_ns, q)      # limited
-        start = time.perf_counter()
-        theta_before = self.ctrl.theta_hat
-        friction_before = self.ctrl.friction_hat        # None without joint_friction
-        try:
-            tau = self.ctrl.step(q, qd, q_d, qd_d, qdd_d)
-        except RcacError as err:
-            self._throttle.warn("step", str(err))
-            tau = None
-        self.counts.stepped(time.perf_counter() - start, self.config.h)
-        if tau is None or not np.all(np.isfinite(tau)):
-            self.counts.non_finite += 1
-            self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
-                                "publishing the safe effort, estimates restored")
-            self.ctrl.reset(theta_before, friction_before)  # the last finite ones
-            self._outputs.effort(self.config.safe_effort, stamp)
-            return
-        tau = np.clip(tau, -self.config.effort_limit, self.config.effort_limit)
-        self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
-        if self._lookahead is not None:
-            self._lookahead.applied = tau
-        self._outputs.effort(tau[self.config.out], stamp)
-        if self.counts.steps % self.config.publish_every == 0:
-            self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
-                                   qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)
-        if self._fjt is not None:
-            self._fjt.update(t_ns, state.q, state.qd, q_d, qd_d, qdd_d)
-
-    def _on_tick(self):
-        """Timer mode: one control step on the latest valid state."""
-        if not self.running:
-            return
-        now = self._now_ns()
-        if self.loop is None and self._last_tick is not None \
-                and now - self._last_tick > 1.5 * self.config.h * 1e9:
-            self.counts.late_ticks += 1     # ROS-time timer (the loop counts its own)
-        self._last_tick = now
-        self.watchdog.ticked()
-        if self.watchdog.state_is_stale():
-            return self.watchdog.send_safe(no_state=True)
-        self._control(now)
-        if self.config.phase_offset_ns is not None and self.loop is not None:
-            self.phase_error_ns = self.loop.lock_phase(self.states.received,
-                                                       self.config.phase_offset_ns)
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self):

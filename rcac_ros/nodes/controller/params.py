@@ -86,7 +86,8 @@ def _frozen(arr):
 def read_parameters(node, v):
     """The configuration and the core controller of the controller ``node`` (its ``model``,
     ``joints``, ``description`` and its ``gains.<joint>.<gain>`` overrides) from the checked
-    values ``v`` (name -> value); the controller's kernels are warmed up.
+    values ``v`` (name -> value). Nothing is compiled here
+    (:class:`~rcac_ros.nodes.controller.compiling.KernelWarmup` does it next).
 
     Returns
     -------
@@ -147,9 +148,6 @@ def read_parameters(node, v):
             P_friction=list(v["P_friction"]), **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
-    z = np.zeros(n)             # warm up: one compiled step, so the first real one is not slow
-    ctrl.step(z, z, z, z, z)
-    ctrl.reset(config.theta0, config.friction0)
     return config, ctrl
 
 

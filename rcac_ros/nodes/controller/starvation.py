@@ -12,8 +12,8 @@ diagnostics ``starved``, ``starved_spells``, ``K_D_scale``, ``delay_ms``,
 ``delay_worst_ms``, ``delay_margin_ms`` (doc/failsafe.md, "Starved machine").
 """
 
-import math
 import time
+from collections import namedtuple
 
 import numpy as np
 
@@ -23,16 +23,22 @@ from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 from rcac_ros.nodes.safety.delay_guard import DelayGuard
 
 
-def feedback_bandwidth(ctrl, q, eps=1e-4):
-    """``omega = lambda_max(M(q)^-1 D)``, 1/s: how fast the law's velocity feedback acts at ``q``.
+#: the delay margin of the law's feedback in its most delay-sensitive mode: the margin, s, and
+#: that mode's crossover frequency, rad/s, and phase margin, rad
+Margin = namedtuple("Margin", "margin omega_c phase_margin")
 
-    ``D = -d tau / d qd`` of eqs 19-20 at rest on the desired state (``qd_d = qdd_d = 0``,
-    ``q_d = q``): ``sum_i J_i^T K_Di J_i`` plus ``Lambda M`` through ``qdd_r`` (with the
-    estimates ``theta_hat``), by central differences on a new controller with ``ctrl``'s
-    gains and estimates and its adaptation frozen (``ctrl`` itself is not stepped; only the
-    feedback gains and the estimates are copied, deliberately: the geometry and the
-    adaptation do not enter a frozen law's feedback);
-    ``M(q)`` is the model's joint-space inertia (the joint terms are left out).
+
+def feedback_gains(ctrl, q, eps=1e-4):
+    """``(D, K)``: the law's velocity and position feedback at rest on the desired state at ``q``.
+
+    ``D = -d tau / d qd`` and ``K = d tau / d q_d`` of eqs 19-20 at ``qd = qd_d = qdd_d = 0``,
+    ``q_d = q`` (``K`` through ``q_d``: the estimated gravity, a function of the measured
+    ``q``, stays out of it): ``D = sum_i J_i^T K_Di J_i + Lambda M`` (the latter through
+    ``qdd_r``, with the estimates ``theta_hat``) and ``K = Lambda sum_i J_i^T K_Di J_i``,
+    by central differences on a new controller with ``ctrl``'s gains and estimates and its
+    adaptation frozen (``ctrl`` itself is not stepped; only the feedback gains and the
+    estimates are copied, deliberately: the geometry and the adaptation do not enter a
+    frozen law's feedback). Both symmetrised.
     """
     probe = RecursiveCompositeController(
         ctrl.model, K_D=ctrl.K_D, Lambda=ctrl.Lambda, P=ctrl.P, gamma=ctrl.gamma,
@@ -40,30 +46,62 @@ def feedback_bandwidth(ctrl, q, eps=1e-4):
     probe.set_adaptation(False)
     q = np.asarray(q, float)
     n, zero = q.shape[0], np.zeros(q.shape[0])
-    D = np.empty((n, n))
+    D, K = np.empty((n, n)), np.empty((n, n))
     for j in range(n):
         e = np.zeros(n)
         e[j] = eps
-        probe.restart_filters()
-        plus = probe.step(q, e, q, zero, zero)
-        probe.restart_filters()
-        minus = probe.step(q, -e, q, zero, zero)
-        D[:, j] = (minus - plus) / (2.0 * eps)
-    D = 0.5 * (D + D.T)
-    return float(np.max(np.linalg.eigvals(np.linalg.solve(mass_matrix(ctrl.model, q), D)).real))
+        taus = []
+        for args in ((q, e, q), (q, -e, q), (q, zero, q + e), (q, zero, q - e)):
+            probe.restart_filters()
+            taus.append(probe.step(*args, zero, zero))
+        D[:, j] = (taus[1] - taus[0]) / (2.0 * eps)
+        K[:, j] = (taus[2] - taus[3]) / (2.0 * eps)
+    return 0.5 * (D + D.T), 0.5 * (K + K.T)
+
+
+def modal_margin(M, D, K, h):
+    """The delay margin of ``M qdd = -(D qd + K q)(t - d)`` sampled every ``h``: a
+    :class:`Margin`, the smallest over the modes.
+
+    The modes: with ``M = L L^T``, the eigenvectors ``v_i`` of ``A = L^-1 D L^-T``, of
+    eigenvalues ``a_i``, and ``b_i = v_i^T L^-1 K L^-T v_i`` (exact when ``A`` and ``B``
+    commute, as for this law with a scalar ``Lambda``: both are functions of
+    ``L^-1 sum J^T K_D J L^-T``). Each mode is ``x'' = -(a x' + b x)(t - d)``: its open loop
+    ``(a s + b) e^(-s d) / s^2`` crosses unit gain at ``omega_c^2 = (a^2 + sqrt(a^4 +
+    4 b^2)) / 2`` with the phase margin ``phi = atan2(a omega_c, b)``, lost at
+    ``d = phi / omega_c``. The effort held over a period (the zero-order hold) already
+    delays it by about ``h / 2``, which the margin of a further delay leaves out.
+    """
+    L = np.linalg.cholesky(M)
+    A = np.linalg.solve(L, np.linalg.solve(L, D).T)
+    B = np.linalg.solve(L, np.linalg.solve(L, K).T)
+    a, V = np.linalg.eigh(0.5 * (A + A.T))
+    b = np.einsum("ji,jk,ki->i", V, 0.5 * (B + B.T), V)
+    omega_c = np.sqrt(0.5 * (a ** 2 + np.sqrt(a ** 4 + 4.0 * b ** 2)))
+    phi = np.arctan2(a * omega_c, b)
+    margins = phi / omega_c - 0.5 * h
+    i = int(np.argmin(margins))
+    return Margin(float(margins[i]), float(omega_c[i]), float(phi[i]))
+
+
+def delay_margin(ctrl, q):
+    """The delay margin of the law's feedback at ``q`` (a :class:`Margin`): the effort may
+    come this much later than in the undelayed loop before the most delay-sensitive mode
+    loses its phase margin (:func:`feedback_gains`, :func:`modal_margin`, ``M(q)`` the
+    model's joint-space inertia, the joint terms left out).
+
+    Against the closed loop holding a posture with the effort ``d`` periods late
+    (``rcac bench delay-margin --check``, adaptation frozen): it settles below the margin and
+    not above it, on the CSS arm, the Panda and the UR5 (doc/failsafe.md, "Delay margin per
+    arm").
+    """
+    D, K = feedback_gains(ctrl, q)
+    return modal_margin(mass_matrix(ctrl.model, np.asarray(q, float)), D, K, ctrl.h)
 
 
 def feedback_margin(ctrl, q):
-    """The delay margin of the law's feedback at ``q``: ``(pi / 2) / omega``, s.
-
-    A velocity loop ``M qdd = -D qd(t - d)`` loses its phase margin at ``d = pi / (2 omega)``
-    (:func:`feedback_bandwidth`). Against the closed loop with the effort ``d`` periods late
-    (``rcac bench delay-margin``, adaptation frozen; doc/failsafe.md "Starved machine"): the
-    CSS arm at K_D = 1e4 gives 8.8-9.0 ms and tracked at 8 ms, diverged at 10 ms; the
-    Panda of the payload demo (kappa = 100) gives 14.3 ms and tracked at 10 ms, not at
-    20 ms.
-    """
-    return (math.pi / 2.0) / feedback_bandwidth(ctrl, q)
+    """:func:`delay_margin`'s margin, s."""
+    return delay_margin(ctrl, q).margin
 
 
 class Starvation:
@@ -73,7 +111,7 @@ class Starvation:
     ----------
     values : dict
         The checked parameters ``starvation.*`` (``delay_margin``: ``None`` for
-        :func:`feedback_margin` at ``q0``).
+        :func:`delay_margin` at ``q0``).
     ctrl : RecursiveCompositeController
         The core controller: its ``K_D`` is scaled
         (:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`).
@@ -94,9 +132,23 @@ class Starvation:
         self.state_received, self.log = state_received, log
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position
-            margin = feedback_margin(ctrl, np.zeros(ctrl.model.n) if q0 is None else q0)
+            where = "the zero position" if q0 is None else "paper.q0"
+            derived = delay_margin(ctrl, np.zeros(ctrl.model.n) if q0 is None else q0)
+            margin = derived.margin
+            source = (f"derived from model {ctrl.model.name} and the gains at {where}: phase "
+                      f"margin {derived.phase_margin:.3g} rad / crossover "
+                      f"{derived.omega_c:.4g} rad/s, less h/2")
+            if margin <= 0.0:               # the undelayed loop is at its edge already
+                log.warning(f"starvation guard: the gains leave no delay margin at h = "
+                            f"{h * 1e3:g} ms ({source}); the guard takes h/2")
+                margin = 0.5 * h
+        else:
+            source = "starvation.delay_margin"
         self.guard = DelayGuard(margin, h, values["starvation.recover_after"],
                                 values["starvation.min_scale"])
+        log.info(f"starvation guard: delay margin {margin * 1e3:.3g} ms ({source}); K_D is "
+                 f"scaled down past a smoothed delay of {self.guard.limit * 1e3:.3g} ms "
+                 "(diagnostics delay_margin_ms)")
 
     def reset(self):
         """A fresh start (activation): nominal gains."""

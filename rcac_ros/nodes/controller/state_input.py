@@ -133,11 +133,11 @@ class StateInput:
         kind (none in lockstep, where the executor takes)."""
         return {} if self._side is None else self._side.errors
 
-    # the latest valid state, each read from one Sample
-    q = property(lambda self: None if self.latest is None else self.latest.q)
-    qd = property(lambda self: None if self.latest is None else self.latest.qd)
-    stamp = property(lambda self: None if self.latest is None else self.latest.stamp)
-    received = property(lambda self: None if self.latest is None else self.latest.received)
+    # the latest valid state, each field read from one load of ``latest`` (None: none yet)
+    q = property(lambda self: getattr(self.latest, "q", None))
+    qd = property(lambda self: getattr(self.latest, "qd", None))
+    stamp = property(lambda self: getattr(self.latest, "stamp", None))
+    received = property(lambda self: getattr(self.latest, "received", None))
 
     def take(self):
         """The control thread, before a step: the latest valid state (a :class:`Sample`).

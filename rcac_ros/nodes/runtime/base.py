@@ -10,6 +10,7 @@ SIGINT/SIGTERM). Throttled warnings and compute-time statistics:
 import signal
 import sys
 import time
+import traceback
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -219,7 +220,8 @@ def run(node_factory, prog, args=None):
 
     A node with a ``loop`` attribute (a :class:`DeadlineLoop`) is paced by it; otherwise
     the executor is spun. The node's ``on_interrupt()`` runs after an interrupt (the
-    controller publishes a zero effort there). A :class:`RcacError` at start-up (a bad
+    controller publishes a zero effort there), and after an exception that no part of the
+    node caught (logged with its traceback; exit code 1). A :class:`RcacError` at start-up (a bad
     parameter) prints one line naming the parameter and returns 2.
 
     Returns
@@ -264,6 +266,18 @@ def run(node_factory, prog, args=None):
             node.on_interrupt()
     except ExternalShutdownException:
         pass
+    except Exception:                   # noqa: BLE001 -- a fault no part of the node caught
+        # its traceback in the node's log, then what an interrupt does (the controller's
+        # zero effort: the arm must not keep the last effort), then exit 1
+        text = traceback.format_exc().rstrip()
+        print(f"{prog}: fatal: {text}", file=sys.stderr, flush=True)
+        code = 1
+        if node is not None:
+            node.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
+            try:
+                node.on_interrupt()
+            except Exception:           # noqa: BLE001 -- already failing: exit regardless
+                pass
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -83,10 +83,25 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
                 raise ConfigError(self.config_error)
 
     def _start(self):
-        """Configure and activate; ``False`` if configure failed."""
+        """Configure and activate (once :meth:`_ready_to_activate`: a steady timer polls it
+        while the node spins); ``False`` if configure failed."""
         if self.trigger_configure() != SUCCESS:
             return False
-        return self.trigger_activate() == SUCCESS
+        if self._ready_to_activate():
+            return self.trigger_activate() == SUCCESS
+
+        def activate_when_ready():
+            if self._ready_to_activate():
+                self.destroy_timer(timer)
+                if lifecycle_state(self) == "inactive":
+                    self.trigger_activate()
+        timer = self.create_timer(0.05, activate_when_ready,
+                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+        return True
+
+    def _ready_to_activate(self):
+        """Whether autostart may activate now (the subclass's work of configure is done)."""
+        return True
 
     def _on_description(self, xml):
         self._description = xml

@@ -26,7 +26,10 @@ without a buffer.
 Errors do not stop the reader: a return code of ``rcl`` other than "taken" and "nothing to
 take", a failed allocation of the initial-size buffer, and an exception raised by a callback, are
 counted (:attr:`RawReader.errors`) and the first of each kind is logged (the exception with
-its traceback); the thread then goes on with the next sample.
+its traceback); the thread then goes on with the next sample. An exception of the reader's
+own loop (outside a callback) is counted and logged the same way and the loop starts again
+(doc/failsafe.md, "Thread failures"): the thread ends only when it is closed or its context
+shuts down.
 """
 
 import ctypes
@@ -41,6 +44,9 @@ RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
 ERROR_BACKOFF = 0.001
 #: the wait for a sample, ns (also the longest a failed shrink waits for its next attempt)
 WAIT_NS = 50_000_000
+#: s before the reader's loop starts again after it raised (a lasting fault is retried at
+#: 10 Hz, not spun)
+RESTART_BACKOFF = 0.1
 
 
 class _Allocator(ctypes.Structure):
@@ -125,7 +131,10 @@ class RawReader:
         sample, if any, is lost), ``"alloc"`` (the initial-size buffer that replaces
         one grown past the bound could not be allocated; the reader keeps the grown buffer,
         takes into it and tries again after the next take or wait) and ``"callback"``
-        (``on_bytes`` or ``on_oversize`` raised; the reader goes on with the next sample).
+        (``on_bytes`` or ``on_oversize`` raised; the reader goes on with the next sample)
+        and ``"thread"`` (the reader's own loop raised, outside a callback: the wait, the
+        take's bookkeeping; the loop starts again with a new wait set after
+        :data:`RESTART_BACKOFF`, the samples that came meanwhile waiting in DDS's queue).
     """
 
     #: bytes the buffer is allocated with, and replaced by after a sample larger than
@@ -142,7 +151,7 @@ class RawReader:
         self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
         self._bound = max(cap, self.KEEP, hold)
         self._name, self._log = name, log
-        self.errors = {"take": 0, "alloc": 0, "callback": 0}
+        self.errors = {"take": 0, "alloc": 0, "callback": 0, "thread": 0}
         self._logged = set()
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
@@ -233,21 +242,32 @@ class RawReader:
                         self._shrink()
 
     def _run(self):
-        try:
-            wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, self._context.handle)
-            while not self._stop.is_set() and self._context.ok():
-                with self._sub.handle, self._context.handle:
-                    wait_set.clear_entities()
-                    wait_set.add_subscription(self._sub.handle)
-                    wait_set.wait(WAIT_NS)                  # without the lock
-                if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
-                        and self._take_all():
-                    self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
-                if self._msg.buffer_capacity > self._bound:     # a failed shrink: again
-                    self._shrink()
-        except Exception:               # noqa: BLE001 -- the context or the handle went down
-            if not self._stop.is_set() and self._context.ok():
-                raise
+        """The thread: serve the subscription; a loop that raised is logged with its
+        traceback, counted (``"thread"``) and started again after :data:`RESTART_BACKOFF`."""
+        while not self._stop.is_set() and self._context.ok():
+            try:
+                self._serve()
+            except Exception as err:    # noqa: BLE001 -- the input must not end in silence
+                if self._stop.is_set() or not self._context.ok():
+                    return                  # the context or the handle went down
+                self._error("thread", "the reader's loop raised; it starts again in "
+                            f"{RESTART_BACKOFF * 1e3:g} ms:\n"
+                            + traceback.format_exc().rstrip(), type(err))
+                self._stop.wait(RESTART_BACKOFF)
+
+    def _serve(self):
+        """Wait and take until stopped (a new wait set each time the loop starts)."""
+        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, self._context.handle)
+        while not self._stop.is_set() and self._context.ok():
+            with self._sub.handle, self._context.handle:
+                wait_set.clear_entities()
+                wait_set.add_subscription(self._sub.handle)
+                wait_set.wait(WAIT_NS)                  # without the lock
+            if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
+                    and self._take_all():
+                self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
+            if self._msg.buffer_capacity > self._bound:     # a failed shrink: again
+                self._shrink()
 
     def close(self):
         """Stop the thread (the subscription is the caller's to destroy)."""

@@ -14,7 +14,7 @@ silences) are in :mod:`rcac_ros.nodes.safety.state_guards`.
   period, so no goal produces a jump in effort.
 """
 
-from numba import njit
+from rcac_ros.core._jit import njit
 import numpy as np
 
 from rcac_ros.errors import InputError
@@ -152,6 +152,11 @@ class DesiredLimiter:
         """Forget the previous desired state: the next one is taken as it is."""
         self._prev = None
 
+    def warm(self):
+        """Compile (or load) the per-step kernel now, leaving this limiter's state as it is."""
+        z = np.zeros(self.dq.shape[0])
+        _limit_step(z, z, self.dq, np.empty_like(z))
+
     def __call__(self, q_d, qd_d, qdd_d):
         """The desired ``(q_d, qd_d, qdd_d)`` moved at most one step from the previous."""
         if self._prev is None:
@@ -161,7 +166,7 @@ class DesiredLimiter:
             return q_d, qd_d, qdd_d
         q = np.empty_like(self._q)
         qd = np.empty_like(self._qd)
-        c1 = _limit_step(self._q, np.asarray(q_d, float), self.dq, q)
+        c1 = _limit_step(self._q, np.ascontiguousarray(q_d, float), self.dq, q)
         c2 = _limit_step(self._qd, np.clip(qd_d, -self.vmax, self.vmax), self.dqd, qd)
         c2 |= bool(np.any(np.abs(qd_d) > self.vmax))
         self._q[:] = q

@@ -11,6 +11,25 @@ log line. It ends at the next control step (:meth:`Watchdog.resume`), where the 
 eqs 21-24 restart; after ``watchdog.replan_after`` s of it the motion restarts from the
 measured state. In lockstep mode a state that follows the last one answered ends the spell
 at once: the simulator waited, the safe effort never acted.
+
+Its clock across threads (doc/failsafe.md, "Watchdog clock"). The watchdog keeps two
+times: ``tick_ns`` and the arrival of the latest valid state, which it does not store but
+reads through ``state_received()``. Every method of :class:`Watchdog` runs in the thread
+that runs the control step: in lockstep mode and on ``/clock`` the executor's (the state's
+callback, the ticks and the steady timer of :meth:`check` are its callbacks), on the deadline
+loop of timer mode the node's main thread, which serves the executor between its ticks. So
+``tick_ns``, ``tripped``, ``trips`` and the spells are written and read by one thread. The
+only time written by another thread is the arrival of a state in timer mode: the state
+input's side thread stamps it (steady clock) into a new immutable
+:class:`~rcac_ros.nodes.controller.state_input.Sample` together with the state, and hands it
+over by one reference assignment; ``state_received()`` reads that reference once and the
+``received`` field of the object it got (an ``int`` fixed at its construction). A reference
+load or store is atomic under the interpreter lock, so a reader gets the previous sample or
+the new one, each whole: no read can combine the time of one state with another, or see a
+half-written integer, and no lock is needed on the 500 Hz path
+(``test/ros/test_watchdog_clock.py`` hammers the hand-over). The side thread reads
+``tripped`` (one load of a ``bool``); the order of the two threads around it is argued in
+:meth:`~rcac_ros.nodes.controller.state_input.StateInput._stale`.
 """
 
 import time

@@ -700,10 +700,10 @@ def inspect(path, plots_dir=None, model="css_arm", link=None,
     dict
         ``{"summary", "metrics", "plots", "metrics_path"}``.
     """
+    theta_true = load_truth(model)               # a bad --model stops before the bag is read
     path = find_bag(path)
     report = Report(path, "")
     data = read_bag(path, report)
-    theta_true = load_truth(model)
     summ = summary(data)
     summ["info"] = bag_info(path)
     summ["checks"] = list(report.checks)

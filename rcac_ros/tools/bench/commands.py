@@ -9,6 +9,9 @@ soak           the direct fault case for minutes: memory growth, late       :mod
                ticks
 delay-margin   offline, tracking RMS against K_D with the effort 0-2        :mod:`.delay_margin`
                periods late (the stable range of timer mode)
+startup        how long the package takes to start, cold (empty cache)  :mod:`.startup`
+               and warm: import, a bad argument, the controller's first
+               answer and first effort, the warm-up
 noise          10-minute closed loops with sensor noise: are the estimates  :mod:`.noise`
                bounded? (``--sources``: where the paper law's drift comes
                from)
@@ -111,9 +114,9 @@ def add_soak(p):
 
 def add_delay_margin(p):
     p.add_argument("--plot", metavar="FILE", help="tracking RMS against K_D (PNG)")
-    p.add_argument("--model", choices=("css_arm", "panda"), default="css_arm",
-                   help="the CSS arm (gain K_D, the paper's) or the Panda of payload-demo "
-                        "(gain kappa, K_Di = kappa M_i)")
+    p.add_argument("--model", choices=("css_arm", "panda", "ur5"), default="css_arm",
+                   help="the CSS arm (gain K_D, the paper's), the Panda of payload-demo "
+                        "(gain kappa, K_Di = kappa M_i) or the UR5 (gain K_D, K_Di = K_D I6)")
     p.add_argument("--gains", metavar="LIST", type=_floats,
                    help="comma-separated gains (default: a grid for the model)")
     p.add_argument("--delays", metavar="LIST", type=_periods, default=(0, 1, 2),
@@ -121,6 +124,10 @@ def add_delay_margin(p):
     p.add_argument("--frozen", action="store_true",
                    help="adaptation frozen (what the starvation guard does)")
     p.add_argument("--no-predict", action="store_true", help="no runs with the prediction")
+    p.add_argument("--check", action="store_true",
+                   help="instead, check the derived delay margin on the Panda, the UR5 and "
+                        "the CSS arm: the loop tracks 0.7 margin late, not 1.5 margin late")
+    p.add_argument("--json", metavar="FILE", help="with --check: also write the rows as JSON")
 
 
 def _floats(text):
@@ -178,6 +185,24 @@ def add_noise(p):
     p.add_argument("--out", default="results/noise", help="output directory")
 
 
+def add_startup(p):
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--laws", type=startup_laws, default=("default",),
+                   help="the controller's laws, comma-separated, among default, all, "
+                        "joint_friction (default: default)")
+
+
+def startup_laws(text):
+    """``--laws``: comma-separated names of :data:`rcac_ros.tools.bench.startup.LAWS`."""
+    return tuple(_choices(text, ",", ("default", "all", "joint_friction")))
+
+
+def run_startup(args):
+    from rcac_ros.tools.bench.startup import run_startup_bench
+    run_startup_bench(laws=args.laws, json_path=args.json)
+    return 0
+
+
 def run_core(args):
     from rcac_ros.tools.bench.core import main
     return main(budget=args.budget, json_path=args.json, natural=args.natural)
@@ -209,7 +234,10 @@ def run_soak(args):
 
 
 def run_delay_margin(args):
-    from rcac_ros.tools.bench.delay_margin import run_delay_margin
+    from rcac_ros.tools.bench.delay_margin import check_margins, run_delay_margin
+    if args.check:
+        rows = check_margins(json_path=args.json)
+        return 0 if all(r["holds"] for r in rows) else 1
     run_delay_margin(gains=args.gains, delays=args.delays, plot_path=args.plot,
                      model_name=args.model, adapt=not args.frozen, predict=not args.no_predict)
     return 0
@@ -239,6 +267,9 @@ BENCHMARKS = {
              add_soak, run_soak, ("ros",)),
     "delay-margin": ("offline, tracking RMS against K_D with the effort 0-2 periods late",
                      add_delay_margin, run_delay_margin, ()),
+    "startup": ("how long the package takes to start, cold and warm (import, bad argument, "
+                "the controller's first effort, the warm-up)", add_startup, run_startup,
+                ("ros",)),
     "noise": ("10-minute closed loops with sensor noise (are the estimates bounded?)",
               add_noise, run_noise, ()),
 }

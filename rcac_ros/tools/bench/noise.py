@@ -31,9 +31,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           Simulator, css_arm)
-from rcac_ros.core.identifiability import Excitation
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, css_arm
 from rcac_ros.tools.progress import Progress
 
 SIGMA_Q, SIGMA_QD = 1e-4, 1e-3
@@ -75,6 +73,7 @@ def dead_zone_factor(n, steps):
 def calibrate_E(model, channels, seconds=2.0, seed=1):
     """Standard deviation of each E_c under noise alone (true parameters, no adaptation,
     2 s), the largest: E has no closed-form noise level (it depends on W and theta_hat)."""
+    from rcac_ros.core import RecursiveCompositeController, Simulator
     rng = np.random.default_rng(seed)
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0)
@@ -155,6 +154,8 @@ def run_law(model, channels, duration, variant, clean=None, seed=2, progress=Non
     The clean run also accumulates the excitation of its motion, ``Sigma_i = sum h W_i^T
     W_i`` with every joint channel (Slotine-Li's information, from a frozen shadow
     controller fed the same states), returned with the estimates."""
+    from rcac_ros.core import RecursiveCompositeController, Simulator
+    from rcac_ros.core.identifiability import Excitation
     rng = np.random.default_rng(seed)
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0)
@@ -311,6 +312,7 @@ SOURCES = {"both": (1.0, 1.0, None, 2), "both, seed 3": (1.0, 1.0, None, 3),
 
 def _estimates(model, sq, sqd, gamma, duration, seed, label):
     """The paper law's theta_hat per second (plain), noise ``sq``, ``sqd``, gain gamma."""
+    from rcac_ros.core import RecursiveCompositeController, Simulator
     rng = np.random.default_rng(seed)
     q0 = np.array(PAPER_Q0)
     traj = PaperTrajectory(q0)

@@ -42,10 +42,7 @@ import os
 import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
-from rcac_ros.core.channels import parse_channels
-from rcac_ros.core.crba import mass_matrix
-from rcac_ros.core.identifiability import Excitation, summary
-from rcac_ros.core.pseudo_inertia import default_start, lambda_min
+from rcac_ros.core.law_options import parse_channels
 from rcac_ros.errors import RcacError
 from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
@@ -223,11 +220,13 @@ def friction_gain_for(model, q, rho=RHO_FRICTION):
     proportional to the joint's inertia (the model's, which a plant's armature only raises)
     keeps that ratio the same on every joint.
     """
+    from rcac_ros.core.crba import mass_matrix
     H = mass_matrix(model, np.asarray(q, dtype=float))
     return rho * np.repeat(np.diag(H)[:, None], 3, axis=1)
 
 
 def make_controller(scenario, law, laws=None):
+    from rcac_ros.core.pseudo_inertia import default_start
     kind, extra = (laws or LAWS)[law]
     kwargs = dict(scenario.gains, **extra)
     if isinstance(kwargs.get("theta_hat0"), str):
@@ -252,6 +251,8 @@ def run_law(scenario, controller, duration, progress=None, engine=None):
     accumulated ``sum h W^T W`` of a recursive law, else None) and ``theta_end``.
     ``engine`` overrides the scenario's plant engine.
     """
+    from rcac_ros.core.identifiability import Excitation
+    from rcac_ros.core.pseudo_inertia import lambda_min
     exc = Excitation(scenario.model.n, controller.h) if hasattr(controller, "channels") else None
     events = () if scenario.loaded is None else ((scenario.jump, scenario.loaded),)
     run = closed_loop(controller, scenario.trajectory, duration, plant=scenario.plant,
@@ -285,6 +286,7 @@ def run_law(scenario, controller, duration, progress=None, engine=None):
 
 def metrics(run, scenario, last_seconds=5.0):
     """The table's figures for one run (NaN where a diverged run has no value)."""
+    from rcac_ros.core.identifiability import summary
     t, e = run["t"], run["e"]
     ok = np.all(np.isfinite(e), axis=1)
     fig = measure.tracking(t[ok], e[ok], last_seconds) if ok.any() else {}
@@ -333,6 +335,8 @@ def compare(scenarios=("paper", "payload"), laws=None, duration=20.0, progress=T
     report, series = {}, {}
     for name in scenario_names(scenarios):
         scenario = SCENARIOS[name]()
+        if extra_channels is not None:               # refused before a run, with one line
+            parse_channels(extra_channels, scenario.model.n)
         table = {law: LAWS[law] for law in (scenario.laws if laws is None else laws)}
         if extra_channels is not None:
             key = "channels=" + ",".join(str(c) for c in extra_channels)

@@ -12,8 +12,8 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveCompositeController,
-                           css_arm)
+from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, css_arm
+from rcac_ros.core.law_options import parse_channels
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, positive_float,
                                  positive_int)
 from rcac_ros.tools.closed_loop import closed_loop
@@ -35,6 +35,8 @@ def run_experiment(duration=20.0, reading="velocity", gains=None, substeps=1, pr
     ``engine``: the plant (``builtin`` or ``mujoco``, doc/plants.md).
     """
     model = css_arm()
+    parse_channels(channels, model.n)                 # refused before a kernel is imported
+    from rcac_ros.core import RecursiveCompositeController
     g = dict(PAPER_GAINS, **(gains or {}))
     q0 = np.array(PAPER_Q0)
     trajectory = PaperTrajectory(q0, reading=reading)

@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from rcac_ros.core import RecursiveCompositeController, Simulator, SinusoidTrajectory
+from rcac_ros.core import SinusoidTrajectory
 from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.scenarios import GAINS, READY, gains_for, load_panda
 
@@ -40,6 +40,7 @@ NAMES = ("armature", "damping", "friction")
 def run_friction_demo(duration=30.0, adapt_links=False, channels="all",
                       P_friction=P_FRICTION, record_every=25):
     """The closed loop; returns ``(t, friction_hat history (k, n, 3), truth (n, 3), rms)``."""
+    from rcac_ros.core import RecursiveCompositeController, Simulator
     rigid = load_panda()
     plant = rigid.replace(armature=TRUTH[0], damping=TRUTH[1], friction=TRUTH[2])
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)

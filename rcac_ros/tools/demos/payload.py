@@ -28,10 +28,10 @@ import time
 
 import numpy as np
 
-from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
+from rcac_ros.core import ConfigError, SinusoidTrajectory
 from rcac_ros.tools import metrics as measure
-from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, finite_float,
-                                 non_negative_float, positive_float)
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, existing_file,
+                                 finite_float, non_negative_float, positive_float)
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
                                       READY, with_payload)
@@ -86,6 +86,7 @@ def run_demo(duration=20.0, jump=5.0, payload_mass=2.0, payload_com=(0.03, -0.02
     g = dict(GAINS, **(gains or {}))
     model = load_panda(urdf)
     loaded = with_payload(model, payload_mass, payload_com)
+    from rcac_ros.core import RecursiveCompositeController   # once the URDF has loaded
     trajectory = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
     runs, report = {}, {}
     for law in laws or ("composite", "direct", "fixed"):
@@ -147,7 +148,7 @@ def add_arguments(parser):
                         help="payload centre of mass in the flange frame, m "
                              "(default 0.03 -0.02 0.08)")
     parser.add_argument("--out", default="results/payload_demo", help="output directory")
-    parser.add_argument("--urdf", default=None,
+    parser.add_argument("--urdf", type=existing_file, default=None,
                         help="panda.urdf (default: example-robot-data's)")
     add_gain_arguments(parser, GAINS, (
         ("kappa", "link gain K_Di = kappa * M_i (rad/s)"),

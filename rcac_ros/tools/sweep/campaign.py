@@ -38,10 +38,8 @@ import time
 import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
-from rcac_ros.core.pseudo_inertia import BARRIER_C
-from rcac_ros.core.identifiability import inertia_about_com
+from rcac_ros.core.law_options import BARRIER_C
 from rcac_ros.core.model import theta_from_inertia
-from rcac_ros.core.pseudo_inertia import lambda_min
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.plants import check_engine, ENGINES
 from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
@@ -500,6 +498,7 @@ def shifted_start(theta, mass_scale, com_shift):
     """Initial estimates: every link's nominal body with its mass and inertia scaled by
     ``mass_scale`` and its centre of mass moved by ``com_shift`` (m, link frame); a body
     stays a body (doc/design.md §8)."""
+    from rcac_ros.core.identifiability import inertia_about_com
     if mass_scale == 1.0 and not any(com_shift):
         return theta
     out = np.empty_like(theta)
@@ -528,6 +527,7 @@ def consistency_metrics(run):
     """Whether every link's estimates were a body at every period of the run, the share of
     link-periods that were, and the smallest ``lambda_min(J(theta_hat_i))`` (doc/design.md
     §8), over the periods whose estimates are finite."""
+    from rcac_ros.core.pseudo_inertia import lambda_min
     theta = run["theta_hat"]
     ok = np.all(np.isfinite(theta), axis=(1, 2))
     if not ok.any():

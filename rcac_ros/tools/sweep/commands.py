@@ -21,10 +21,6 @@ import time
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.args import non_negative_int, positive_float, positive_int
 from rcac_ros.tools.sweep import campaign as cp
-from rcac_ros.tools.sweep.bench import bench
-from rcac_ros.tools.sweep.engine import execute
-from rcac_ros.tools.sweep.report import report, rerun
-from rcac_ros.tools.sweep.store import Store
 
 ACTIONS = ("report", "rerun")
 
@@ -80,11 +76,18 @@ def add_arguments(parser, argv=()):
 
 
 def run(args):
+    """The form's work; every argument, and the campaign file, is checked before Dask or a
+    kernel is imported."""
     if args.action == "report":
+        from rcac_ros.tools.sweep.report import report
         return report(args.results, worst=args.worst, plot=args.plot)
     if args.action == "rerun":
+        from rcac_ros.tools.sweep.report import rerun
         return rerun(args.results, args.index, plot=args.plot)
     if args.bench:
+        if args.campaign is not None:
+            cp.load(args.campaign)                # a bad file stops here, before Dask loads
+        from rcac_ros.tools.sweep.bench import bench
         return bench(args.campaign, args.samples, args.duration, args.out)
     if args.campaign is None:
         raise ConfigError("CAMPAIGN: missing (rcac sweep CAMPAIGN --out DIR)")
@@ -94,6 +97,8 @@ def run(args):
         raise ConfigError("--workers: not with --scheduler (the cluster has its workers)")
     campaign = cp.with_overrides(cp.load(args.campaign), args.samples, args.duration)
     total = cp.run_count(campaign)
+    from rcac_ros.tools.sweep.engine import execute
+    from rcac_ros.tools.sweep.store import Store
     cp.setup(campaign, 0)                  # a campaign that cannot build a run fails here
     store = Store(args.out)
     store.claim(campaign, resume=args.resume)

@@ -29,8 +29,8 @@ def sensitivity(df, inputs, metric="rms_tracking_error"):
 
 def report(path, worst=10, plot=None):
     """Print the campaign's summary and write its figure."""
-    import pandas as pd
     df, meta, store = load_table(path)
+    import pandas as pd
     varied = meta["varied"]
     n = len(df)
     expected = cp.run_count(meta["campaign"])

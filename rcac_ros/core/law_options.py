@@ -1,0 +1,80 @@
+"""The laws' options that a boundary checks before any kernel is imported.
+
+The command line, the nodes' parameters and the campaign files check these options with
+numpy alone: this module imports no numba and no module that defines a kernel. The
+controllers use the same functions and values (:mod:`rcac_ros.core.channels` and
+:mod:`rcac_ros.core.pseudo_inertia` re-export them).
+
+- ``channels``: the prediction channels of the composite law (doc/design.md §4),
+  :func:`parse_channels`;
+- ``barrier_c``: the metric ``"barrier"`` of the natural geometry (doc/design.md §8),
+  :data:`BARRIER_C` and :data:`BARRIER_C_MIN`.
+"""
+
+import numpy as np
+
+from rcac_ros.errors import GainError
+
+#: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
+#: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
+BARRIER_C = 1000.0
+#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
+BARRIER_C_MIN = 1e-6
+
+#: The value of ``channels`` that gives every joint.
+ALL = "all"
+
+
+def parse_channels(value, n):
+    """Validate ``channels``: ``[1]``, ``"all"``, ``"power"``, ``"1,power"`` or a list of those.
+
+    Parameters
+    ----------
+    value : int, str or sequence of int/str
+        Joint numbers are 1-based; ``"power"`` is the energy channel; ``"all"`` is 1..n.
+    n : int or None
+        Number of joints; None checks the syntax only (``"all"`` stays ``"all"``).
+
+    Returns
+    -------
+    tuple
+        The channels in order, each an ``int`` in 1..n or ``"power"``.
+
+    Raises
+    ------
+    GainError
+        One line naming ``channels`` and the bad entry.
+    """
+    items = value.split(",") if isinstance(value, str) else value
+    if isinstance(items, (int, np.integer)):
+        items = [items]
+    try:
+        items = list(items)
+    except TypeError:
+        raise GainError(f"channels: expected joint numbers, 'power' or 'all', got {value!r}") \
+            from None
+    joints = "joint number" if n is None else f"joint number (1..{n})"
+    out = []
+    for item in items:
+        if isinstance(item, str):
+            word = item.strip().lower()
+            if word == ALL:
+                out.extend([ALL] if n is None else range(1, n + 1))
+                continue
+            if word == "power":
+                out.append("power")
+                continue
+            if not word.lstrip("+").isdigit():
+                raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
+            item = int(word)
+        if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, np.integer)):
+            raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
+        if item < 1 or (n is not None and item > n):
+            raise GainError(f"channels: joint {item} is out of range 1..{n or 'n'}")
+        out.append(int(item))
+    if not out:
+        raise GainError("channels: empty (give at least one joint number, 'power' or 'all')")
+    dup = sorted({str(c) for c in out if out.count(c) > 1})
+    if dup:
+        raise GainError(f"channels: listed twice: {', '.join(dup)}")
+    return tuple(out)

@@ -1,0 +1,64 @@
+"""The kernels' cache (rcac_ros/core/_jit.py): keyed on every compiled source, never stale."""
+
+import os
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+
+import rcac_ros
+from rcac_ros.core import _jit
+
+PACKAGE = os.path.dirname(os.path.abspath(rcac_ros.__file__))
+
+#: the RNEA of the CSS arm with joint damping, in a process of the copy
+RNEA = """
+import numpy as np
+from rcac_ros.core import css_arm, inverse_dynamics
+m = css_arm(); m = m.replace(damping=np.ones(m.n))
+print(repr(inverse_dynamics(m, np.full(m.n, 0.1), np.full(m.n, 0.5), np.zeros(m.n)).tolist()))
+"""
+
+
+def rnea_of(copy, cache):
+    env = dict(os.environ, PYTHONPATH=str(copy), NUMBA_CACHE_DIR=str(cache))
+    out = subprocess.run([sys.executable, "-c", RNEA], cwd=str(copy), env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    return np.array(eval(out.stdout.strip().splitlines()[-1]))
+
+
+def test_a_change_in_an_inlined_helper_of_another_file_is_seen(tmp_path):
+    """The RNEA kernel (rnea.py) inlines the joint friction torque of spatial.py. A copy of
+    the package fills a cache; then that helper changes in the copy (one more N m of
+    damping torque per joint) and the same cache is used again: the kernel's result changes
+    by exactly that, so the old kernel was not loaded (numba alone keys a kernel on its own
+    file, rnea.py, unchanged here)."""
+    copy = tmp_path / "src"
+    shutil.copytree(PACKAGE, copy / "rcac_ros",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    cache = tmp_path / "cache"
+    before = rnea_of(copy, cache)
+    spatial = copy / "rcac_ros" / "core" / "spatial.py"
+    text = spatial.read_text()
+    helper = text.index("def joint_friction_torque")
+    old = "    return "
+    at = text.index(old, helper)
+    spatial.write_text(text[:at] + "    return 1.0 + " + text[at + len(old):])
+    after = rnea_of(copy, cache)
+    np.testing.assert_allclose(after - before, 1.0, rtol=0, atol=1e-9)
+    assert len(os.listdir(cache / "rcac_ros")) == 2       # one directory per source digest
+
+
+def test_the_key_covers_every_compiled_source_and_numba():
+    """Every file of the package that holds compiled code is in the key."""
+    compiled = set()
+    for root, _, files in os.walk(PACKAGE):
+        for f in files:
+            path = os.path.join(root, f)
+            if f.endswith(".py") and "@njit" in open(path).read() or \
+                    f.endswith(".py") and "@kernel(" in open(path).read():
+                compiled.add(os.path.relpath(path, PACKAGE))
+    assert compiled <= set(_jit.KERNEL_SOURCES)
+    assert _jit.cache_dir().endswith(_jit.SOURCE_KEY)

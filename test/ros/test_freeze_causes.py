@@ -1,0 +1,99 @@
+"""An operator's freeze is the operator's (doc/failsafe.md, "Freeze causes"), in a controller
+process over real DDS: ``~/set_adaptation`` and the starvation guard are two causes, the
+adaptation of eq 24 runs only when neither holds, in both orders.
+
+The machine is starved as in ``test_failsafe_starved.py`` (the controller process stopped
+15 ms in every 30 ms); ``starvation.recover_after`` is 5 s so that the operator's call lands
+inside the starved spell on a loaded machine too. Each cause is read from the diagnostics
+(``adaptation``, ``adaptation_frozen_by``) and from the service's answer.
+"""
+
+import os
+import signal
+import time
+
+from std_srvs.srv import SetBool
+
+from failsafe_harness import controller, session, state_driver, wait
+
+DIAG = "rcac_controller: control loop"
+
+
+def status(probe):
+    return probe.diagnostics.get(DIAG, {})
+
+
+def frozen_by(probe):
+    return set(filter(None, status(probe).get("adaptation_frozen_by", "").split(","))) \
+        - {"none"}
+
+
+def set_adaptation(client, on):
+    future = client.call_async(SetBool.Request(data=on))
+    assert wait(future.done, timeout=20.0)
+    response = future.result()
+    assert response.success
+    return response.message
+
+
+def starve(proc, seconds=1.5):
+    """Stop the process 15 ms in every 30 ms for ``seconds``."""
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            os.kill(proc.pid, signal.SIGSTOP)
+            time.sleep(0.015)
+            os.kill(proc.pid, signal.SIGCONT)
+            time.sleep(0.015)
+    finally:
+        os.kill(proc.pid, signal.SIGCONT)
+
+
+def overs(probe):
+    """The guard's recovery lines so far."""
+    with probe.lock:
+        return [m.msg for m in probe.logs if m.msg.startswith("starvation over")]
+
+
+def fresh(probe, key, value, timeout=30.0):
+    """Wait for a diagnostics message published after now with ``key`` == ``value``."""
+    probe.diagnostics.pop(DIAG, None)
+    return wait(lambda: status(probe).get(key) == value, timeout=timeout)
+
+
+def test_the_operators_freeze_and_the_guards_are_two_causes_in_both_orders():
+    with session() as probe, controller(probe, "mode:=timer",
+                                        "starvation.recover_after:=5.0") as proc, \
+            state_driver(probe):
+        client = probe.create_client(SetBool, "/rcac_controller/set_adaptation")
+        assert client.wait_for_service(timeout_sec=30.0)
+        assert wait(lambda: len(probe.efforts) > 1000, timeout=30.0)
+        # a machine loaded by other jobs may starve it already: start from nominal
+        assert fresh(probe, "adaptation_frozen_by", "none", timeout=60.0)
+        assert status(probe)["adaptation"] == "on"
+
+        # guard, then operator: the operator's freeze outlasts the guard's recovery
+        spells, recovered = int(status(probe)["starved_spells"]), len(overs(probe))
+        starve(proc)
+        assert wait(lambda: "starved" in frozen_by(probe)
+                    and int(status(probe)["starved_spells"]) > spells, timeout=10.0)
+        assert set_adaptation(client, False).startswith("adaptation frozen")
+        assert wait(lambda: len(overs(probe)) > recovered, timeout=30.0)
+        assert "adaptation still frozen (by set_adaptation)" in overs(probe)[-1]
+        assert fresh(probe, "adaptation_frozen_by", "user")
+        assert status(probe)["adaptation"] == "frozen"
+
+        # operator (still frozen), then guard, then the operator's resume during starvation:
+        # the guard's freeze holds until its recovery
+        spells, recovered = int(status(probe)["starved_spells"]), len(overs(probe))
+        starve(proc)
+        assert wait(lambda: frozen_by(probe) == {"starved", "user"}
+                    and int(status(probe)["starved_spells"]) > spells, timeout=10.0)
+        # within recover_after (5 s) of the starving's end: the guard still holds its cause
+        message = set_adaptation(client, True)
+        assert "still frozen by the starvation guard" in message, message
+        assert wait(lambda: len(overs(probe)) > recovered, timeout=30.0)
+        assert "adaptation again" in overs(probe)[-1], overs(probe)
+        assert fresh(probe, "adaptation_frozen_by", "none", timeout=60.0)
+        assert status(probe)["adaptation"] == "on"
+        assert proc.poll() is None
