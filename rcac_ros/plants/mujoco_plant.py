@@ -198,7 +198,7 @@ class MujocoPlant:
         self._step = mujoco.mj_step
         self._forward = mujoco.mj_forward
         self._reset_data = mujoco.mj_resetData
-        self._from_urdf = False
+        self.read_from_urdf = False   # from_urdf(): MuJoCo read the file's frames
         self.reset(q0, qd0)
 
     def _restore_inertias(self, mujoco):
@@ -235,7 +235,7 @@ class MujocoPlant:
             On a plant MuJoCo read from a URDF (:meth:`from_urdf`): its last body's frame is
             the file's link frame, not the model's.
         """
-        if self._from_urdf:
+        if self.read_from_urdf:
             raise ConfigError("payload: not available on a plant MuJoCo read from a URDF")
         mujoco = require_mujoco()
         loaded = with_payload(self.base_model, payload)
@@ -363,6 +363,6 @@ def _from_urdf(cls, path, model, kwargs):
     plant.mj_model = mj_model
     plant.mj_data = mujoco.MjData(mj_model)
     plant.xml = spec.to_xml()
-    plant._from_urdf = True
+    plant.read_from_urdf = True
     plant.reset()
     return plant

@@ -193,16 +193,23 @@ NUMBA_ADAPTER = os.path.join("core", "_jit.py")
 NAMEDTUPLE_API = {"_replace", "_asdict", "_fields", "_make", "_field_defaults"}
 
 
+def _is_super(node):
+    """``super()``: the object itself, as ``self``."""
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+        and node.func.id == "super"
+
+
 def private_touches(path):
-    """``obj._name`` in the source at ``path`` where ``obj`` is not ``self``/``cls`` (a
-    dunder aside), and ``setattr``/``getattr``/``hasattr``/``delattr`` with a string
+    """``obj._name`` in the source at ``path`` where ``obj`` is not ``self``/``cls``/``super()``
+    (a dunder aside), and ``setattr``/``getattr``/``hasattr``/``delattr`` with a string
     naming a private attribute: ``["line: text", ...]``."""
     tree = ast.parse(open(path, encoding="utf-8").read(), path)
     found = []
     for node in ast.walk(tree):
         name = None
         if isinstance(node, ast.Attribute) and not (
-                isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+                isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")) \
+                and not _is_super(node.value):
             name = node.attr
         elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
                 and node.func.id in ("setattr", "getattr", "hasattr", "delattr") \

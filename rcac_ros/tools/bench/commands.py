@@ -187,7 +187,7 @@ def add_noise(p):
 
 def add_startup(p):
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
-    p.add_argument("--laws", type=startup_laws, default=("default",),
+    p.add_argument("--laws", type=startup_laws, default=None,
                    help="the controller's laws, comma-separated, among default, all, "
                         "joint_friction (default: default)")
 
@@ -199,7 +199,7 @@ def startup_laws(text):
 
 def run_startup(args):
     from rcac_ros.tools.bench.startup import run_startup_bench
-    run_startup_bench(laws=args.laws, json_path=args.json)
+    run_startup_bench(laws=args.laws or ("default",), json_path=args.json)
     return 0
 
 
