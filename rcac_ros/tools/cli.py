@@ -39,6 +39,9 @@ SUBCOMMANDS = {
                       "panda learning its joints' armature, viscous and Coulomb friction", ()),
     "sweep": ("rcac_ros.tools.sweep.commands", "Monte Carlo campaigns of closed-loop runs on Dask",
               ("sweep",)),
+    "warm": ("rcac_ros.tools.warm",
+             "compile every numba kernel into the user's cache once (after pip install or "
+             "colcon build)", ()),
     "compare": ("rcac_ros.tools.demos.compare",
                 "every adaptive law on the paper's run and the payload demo", ()),
 }

@@ -26,6 +26,9 @@ import subprocess
 import sys
 import time
 
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import positive_int
+
 GROUPS = ("recursive", "others")
 
 
@@ -130,26 +133,38 @@ def warm_once():
     return warm()
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(prog="python -m rcac_ros.tools.warm",
-                                     description=__doc__.splitlines()[0])
+def add_arguments(parser):
+    """``rcac warm``'s (and ``python -m rcac_ros.tools.warm``'s) options."""
     parser.add_argument("groups", nargs="*", metavar="GROUP",
                         help=f"of {', '.join(GROUPS)} (default: all)")
-    parser.add_argument("--jobs", type=int, default=2, help="processes at a time (default 2)")
+    parser.add_argument("--jobs", type=positive_int, default=2,
+                        help="processes at a time (default 2)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+
+
+def run(args, error=None):
+    """Run the groups of ``args``; 0 if all compiled, 1 if one failed. An unknown group is
+    ``error(text)`` (the parser's), else a :class:`~rcac_ros.errors.ConfigError`."""
     groups = list(dict.fromkeys(args.groups)) or list(GROUPS)
     unknown = [g for g in groups if g not in GROUPS]
     if unknown:
-        parser.error(f"unknown group {unknown[0]!r} (choose from {', '.join(GROUPS)})")
-    if args.jobs < 1:
-        parser.error("--jobs must be at least 1")
+        text = f"unknown group {unknown[0]!r} (choose from {', '.join(GROUPS)})"
+        if error is not None:
+            error(text)
+        raise ConfigError(text)
     if args.child:              # one group, in this process: its error on stdout
-        seconds, error = run_group(groups[0])
-        if error:
-            print(error, flush=True)
-        return 1 if error else 0
+        seconds, failure = run_group(groups[0])
+        if failure:
+            print(failure, flush=True)
+        return 1 if failure else 0
     return 0 if warm(groups, args.jobs) else 1
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m rcac_ros.tools.warm",
+                                     description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv), parser.error)
 
 
 if __name__ == "__main__":

@@ -60,8 +60,9 @@ def test_after_the_warm_up_no_law_compiles():
     assert out.stdout.strip().splitlines()[-1] == "0"
 
 
-@pytest.mark.parametrize("args, message", [(("nonsense",), "unknown group 'nonsense'"),
-                                           (("--jobs", "0"), "--jobs must be at least 1")])
+@pytest.mark.parametrize("args, message", [
+    (("nonsense",), "unknown group 'nonsense'"),
+    (("--jobs", "0"), "argument --jobs: must be an integer >= 1")])
 def test_bad_arguments_are_one_line(args, message):
     out = run(*args)
     assert out.returncode == 2
