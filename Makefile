@@ -19,6 +19,7 @@ test: $(VENV)/.test
 	$(BIN)/python -m pytest -q
 
 setup: $(VENV)/.runtime
+	$(BIN)/python -m rcac_ros.tools.warm
 setup-test: $(VENV)/.test
 
 experiment: $(VENV)/.runtime

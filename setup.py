@@ -1,6 +1,10 @@
 from glob import glob
+import os
+import subprocess
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
 
 package_name = "rcac_ros"
 
@@ -27,8 +31,30 @@ EXTRAS_REQUIRE = {
     "test": ["pytest", "flake8", "colcon-core", "colcon-python-setup-py", "colcon-ros"],
 }
 
+
+class InstallThenWarm(install):
+    """``setup.py install`` (what ``colcon build`` runs), then the numba kernels compiled into
+    the user's cache (``python -m rcac_ros.tools.warm``, keyed on the sources' content, so the
+    installed copy finds them): the installed nodes start in seconds. ``RCAC_NO_WARM=1``
+    skips it; where it fails (no numba in the build's Python) the kernels compile at the first
+    start instead."""
+
+    def run(self):
+        super().run()
+        if os.environ.get("RCAC_NO_WARM"):
+            return
+        here = os.path.dirname(os.path.abspath(__file__))
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            p for p in (here, os.environ.get("PYTHONPATH")) if p))
+        code = subprocess.call([sys.executable, "-m", "rcac_ros.tools.warm"], cwd=here, env=env)
+        if code:
+            self.warn("rcac_ros: the kernels were not compiled ahead (python -m "
+                      "rcac_ros.tools.warm failed): they compile at the first start")
+
+
 setup(
     name=package_name,
+    cmdclass={"install": InstallThenWarm},
     version="0.1.0",
     packages=find_packages(include=["rcac_ros", "rcac_ros.*"]),
     # the packages sit at the top of the project: said explicitly, an editable install is a

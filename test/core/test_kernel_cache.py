@@ -49,6 +49,21 @@ def test_a_change_in_an_inlined_helper_of_another_file_is_seen(tmp_path):
     after = rnea_of(copy, cache)
     np.testing.assert_allclose(after - before, 1.0, rtol=0, atol=1e-9)
     assert len(os.listdir(cache / "rcac_ros")) == 2       # one directory per source digest
+    # nothing is written beside the sources (a read-only install works the same)
+    beside = [f for _, _, files in os.walk(copy) for f in files if f.endswith((".nbi", ".nbc"))]
+    assert not beside, beside
+
+
+def test_without_numba_cache_dir_the_cache_is_the_users(tmp_path):
+    """Without NUMBA_CACHE_DIR the kernels go to $XDG_CACHE_HOME/rcac_ros/numba/<key>, never
+    beside the sources: a root-owned install (apt) caches per user."""
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "RCAC_CACHE_DIR")}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    code = "from rcac_ros.core import _jit; print(_jit.cache_dir())"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str(tmp_path / "rcac_ros" / "numba" / _jit.SOURCE_KEY)
 
 
 def test_the_key_covers_every_compiled_source_and_numba():
