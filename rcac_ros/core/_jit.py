@@ -22,6 +22,7 @@ else ``$RCAC_CACHE_DIR/<key>``, else ``$XDG_CACHE_HOME/rcac_ros/numba/<key>`` (d
 
 import hashlib
 import os
+import threading
 
 import numba
 from numba.core import caching
@@ -117,6 +118,8 @@ def njit(*args, **kwargs):
 
 #: dispatcher -> (the one signature :func:`ready` compiles it for, the kernels it calls)
 _SIGNATURES = {}
+#: one :func:`ready` at a time (a node compiles in a thread while its executor may build a law)
+_READY = threading.RLock()
 
 
 def kernel(signature, calls=()):
@@ -135,12 +138,13 @@ def ready(dispatcher):
     """Compile ``dispatcher`` for its signature (or load it from the cache), once, and refuse
     any other signature from then on; returns it. The first call in a process with an empty
     cache takes seconds to a minute, later ones nothing."""
-    if _compilable(dispatcher):
-        signature, calls = _SIGNATURES[dispatcher]
-        for callee in calls:
-            ready(callee)
-        dispatcher.compile(signature)
-        dispatcher.disable_compile()
+    with _READY:
+        if _compilable(dispatcher):
+            signature, calls = _SIGNATURES[dispatcher]
+            for callee in calls:
+                ready(callee)
+            dispatcher.compile(signature)
+            dispatcher.disable_compile()
     return dispatcher
 
 

@@ -50,6 +50,7 @@ class Machine:
                                  "starvation.min_scale": 0.02},
                                 ctrl=ctrl, adaptation=adaptation, h=H, q0=None,
                                 state_received=lambda: self.received, log=self.log)
+        self.guard.prepare()        # the node's warm-up thread does this after compiling
         host = types.SimpleNamespace(create_service=lambda *args: None)     # no ROS here
         self.services = EstimateServices(
             host, ctrl=ctrl, adaptation=adaptation, model=model, theta0=ctrl.theta_hat,

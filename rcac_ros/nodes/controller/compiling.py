@@ -29,24 +29,29 @@ class KernelWarmup:
         its estimates and filters are not touched, so the services may use it meanwhile).
     limiter : DesiredLimiter
         Its kernel (:meth:`warm`: its state is not touched).
+    after : sequence of callables
+        Then run in this thread: what needs compiled kernels to be built (timer mode's
+        delay margin, derived by stepping the law; the state predictor's integrator).
     log : rclpy logger
     """
 
-    def __init__(self, ctrl, limiter, log):
+    def __init__(self, ctrl, limiter, log, after=()):
         self.done = threading.Event()
         self.error = None                   # the exception's one line, if the warm-up failed
         self.seconds = None
-        self._args = ctrl, limiter
+        self._args = ctrl, limiter, after
         self._log = log
         self._t0 = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="rcac-compile", daemon=True)
         self._thread.start()
 
     def _run(self):
-        ctrl, limiter = self._args
+        ctrl, limiter, after = self._args
         try:
             ctrl.compile()
             limiter.warm()
+            for prepare in after:
+                prepare()
         except Exception as exc:  # reported by status and at activate; the thread ends
             self.error = f"{type(exc).__name__}: {exc}"
             self._log.error(f"compiling the kernels failed:\n{traceback.format_exc()}")

@@ -37,8 +37,11 @@ class StatePredictor:
         self.applied = np.zeros(model.n)
         self._kin = model.packed
         self._g = np.asarray(model.gravity, float)
-        z = np.zeros(model.n)
-        rk4_kernel(self._kin, self._g, z, z, z, MAX_STEP, 1)    # compile/load it now
+
+    def prepare(self):
+        """Compile (or load) the integrator's kernel now (the controller's warm-up thread)."""
+        z = np.zeros(self.applied.shape[0])
+        rk4_kernel(self._kin, self._g, z, z, z, MAX_STEP, 1)
 
     def __call__(self, q, qd, age_ns):
         """The state ``age_ns`` + ``lookahead`` after ``(q, qd)``."""

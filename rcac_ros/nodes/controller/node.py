@@ -71,8 +71,6 @@ class ControllerNode(ControlStep, ManagedNode):
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
         self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
-        self.kernels = KernelWarmup(self.ctrl, self.failsafe.limiter, log)  # beside the spin
-        self.compile_watch = self.keep(CompileWatch.close, CompileWatch(self, log))
         self.realtime = RealtimeOptions.from_values(values)     # applied by run()
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
@@ -80,6 +78,10 @@ class ControllerNode(ControlStep, ManagedNode):
             values, ctrl=self.ctrl, adaptation=self.adaptation, h=cfg.h, q0=cfg.paper_q0,
             state_received=lambda: self.states.received, log=log) \
             if cfg.mode == "timer" and values["starvation.delay_margin"] != 0.0 else None
+        self.kernels = KernelWarmup(        # beside the spinning node
+            self.ctrl, self.failsafe.limiter, log, after=[
+                part.prepare for part in (self._starvation, self._lookahead) if part])
+        self.compile_watch = self.keep(CompileWatch.close, CompileWatch(self, log))
         self.phase_error_ns = 0
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(
             self, self.joints, cfg.out, tagged=lockstep,

@@ -130,6 +130,15 @@ class Starvation:
     def __init__(self, values, *, ctrl, adaptation, h, q0, state_received, log):
         self.ctrl, self.adaptation = ctrl, adaptation
         self.state_received, self.log = state_received, log
+        self.guard = None                   # prepare(): the delay margin's guard
+        self._values, self._h, self._q0 = values, h, q0
+        if values["starvation.delay_margin"] is not None:
+            self.prepare()                  # nothing to derive
+
+    def prepare(self):
+        """The delay margin (derived: it steps the law, so the controller's warm-up thread
+        calls this after compiling), its guard, and the log line that reports it."""
+        values, h, q0, ctrl, log = self._values, self._h, self._q0, self.ctrl, self.log
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position
             where = "the zero position" if q0 is None else "paper.q0"
@@ -152,6 +161,8 @@ class Starvation:
 
     def reset(self):
         """A fresh start (activation): nominal gains."""
+        if self.guard is None:              # not prepared yet: nothing started
+            return
         if self.guard.starved:
             self._leave()
         self.guard.reset()
@@ -191,8 +202,11 @@ class Starvation:
         self.adaptation.freeze(AdaptationFreeze.STARVED, False)
 
     def diagnostics(self):
-        """Key-value pairs for the node's diagnostics."""
+        """Key-value pairs for the node's diagnostics (empty values before :meth:`prepare`)."""
         g = self.guard
+        if g is None:
+            return dict.fromkeys(("starved", "starved_spells", "K_D_scale", "delay_ms",
+                                  "delay_worst_ms", "delay_margin_ms"), "")
         return {"starved": "yes" if g.starved else "no", "starved_spells": g.spells,
                 "K_D_scale": f"{g.scale:.4g}", "delay_ms": f"{g.delay * 1e3:.2f}",
                 "delay_worst_ms": f"{g.worst * 1e3:.2f}",
