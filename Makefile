@@ -14,9 +14,10 @@ OUT    ?= results
 demo: $(VENV)/.runtime
 	$(BIN)/rcac demo --out $(OUT)/demo
 
+# three workers side by side; how the tests are grouped: test/conftest.py
 test: $(VENV)/.test
 	$(BIN)/python -m rcac_ros.tools.warm
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 3 --dist loadgroup
 
 setup: $(VENV)/.runtime
 	$(BIN)/python -m rcac_ros.tools.warm

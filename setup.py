@@ -28,7 +28,9 @@ EXTRAS_REQUIRE = {
     "pinocchio": ["pin"],
     # the MuJoCo plant
     "mujoco": ["mujoco"],
-    "test": ["pytest", "flake8", "colcon-core", "colcon-python-setup-py", "colcon-ros"],
+    # the tests: the runner (in parallel), scipy (an independent reference), the linter, colcon
+    "test": ["pytest", "pytest-xdist", "scipy", "flake8", "colcon-core", "colcon-python-setup-py",
+             "colcon-ros"],
 }
 
 

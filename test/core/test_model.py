@@ -77,7 +77,17 @@ def test_bad_model_raises_model_error(change, match):
 
 
 def test_triangle_check_can_be_waived():
-    RobotModel(**dict(good(), inertia=[np.diag([1.0, 1.0, 3.0])]), check_triangle=False)
+    """Waived, the inertia that fails the triangle inequality is kept as given (and the waiver
+    survives a copy); positive definiteness is still checked."""
+    flat = np.diag([1.0, 1.0, 3.0])          # 1 + 1 < 3: no rigid body has it
+    m = RobotModel(**dict(good(), inertia=[flat]), check_triangle=False)
+    np.testing.assert_array_equal(m.inertia[0], flat)
+    assert m.check_triangle is False
+    np.testing.assert_array_equal(m.replace(name="copy").inertia[0], flat)
+    with pytest.raises(ModelError, match="triangle inequality"):
+        m.replace(check_triangle=True)
+    with pytest.raises(ModelError, match="inertia is not positive"):
+        RobotModel(**dict(good(), inertia=[np.diag([1.0, -1.0, 1.0])]), check_triangle=False)
 
 
 @pytest.mark.parametrize("text,exc,match", [

@@ -16,6 +16,13 @@ from rcac_ros.core import (InputError, PaperTrajectory, RecursiveCompositeContro
 from rcac_ros.core.joint_friction import START_FLOOR, retract_terms
 from rcac_ros.core.model import PAPER_GAINS, PAPER_Q0
 
+#: The natural geometry changes the metric of the descent, not the law's fixed point nor its
+#: Lyapunov argument (doc/design.md §8), and its capped gain never exceeds the Euclidean
+#: law's: on the same plant, gains and start it tracks to the same accuracy, stated as within
+#: a factor 2 of the Euclidean law's RMS error (the slower gain below the start, which falls
+#: as x^2, is what the factor allows for).
+COMPARABLE = 2.0
+
 
 def test_retraction_closed_form_and_positivity():
     """x+ = x (1 + r + r^2/2), r = clip((x_new - x) / x, -1, 1): the step itself when it is
@@ -104,9 +111,9 @@ def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
 def test_tracks_a_plant_with_joint_friction():
     """The paper's arm with joint friction in the plant, the paper's gains and motion, the
     joint estimates from 0.1 x the true terms: the natural law's RMS error over the last 5 s
-    is within 1.5 x the Euclidean joint-friction law's (measured: 5.8e-4 vs 1.67e-3 rad) and
-    every joint term stays > 0. (The Euclidean law is the reference; random chains from
-    0.1 x the true terms: the test below.)"""
+    is within COMPARABLE x the Euclidean joint-friction law's and every joint term stays > 0.
+    (The Euclidean law is the reference; random chains from 0.1 x the true terms: the test
+    below.)"""
     rigid = css_arm()
     plant = frictional(rigid)
     q0 = np.array(PAPER_Q0)
@@ -127,7 +134,7 @@ def test_tracks_a_plant_with_joint_friction():
                 assert np.all(ctrl.friction_hat > 0.0)
             sim.step(tau)
         rms[geometry] = np.sqrt(np.mean(np.square(err)))
-    assert np.isfinite(rms["natural"]) and rms["natural"] < 1.5 * rms["euclidean"], rms
+    assert np.isfinite(rms["natural"]) and rms["natural"] < COMPARABLE * rms["euclidean"], rms
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -136,8 +143,8 @@ def test_small_start_stays_bounded_on_random_chains(seed):
     estimates from 0.1 x the true terms: the natural gain min(k_f x^2, P_f) never exceeds
     P_f, so the loop stays bounded (with the uncapped k_f x^2 every one of these runs
     diverged within 25 steps, measured: doc/design.md §8), every joint term > 0 and every
-    link a body at every step, and the RMS error over the last 2.5 s within 2.5 x the
-    Euclidean law's from the same start (measured over seeds 0-7: 0.5-1.8 x)."""
+    link a body at every step, and the RMS error over the last 2.5 s within COMPARABLE x the
+    Euclidean law's from the same start."""
     rng = np.random.default_rng(seed)
     model = frictional(random_chain(rng, 5), scale=0.05)
     q0 = rng.uniform(-1.0, 1.0, 5)
@@ -162,4 +169,4 @@ def test_small_start_stays_bounded_on_random_chains(seed):
             if k >= 1250:
                 err.append(sim.q - x[0])
         rms[geometry] = np.sqrt(np.mean(np.square(err)))
-    assert rms["natural"] < 2.5 * rms["euclidean"], rms
+    assert rms["natural"] < COMPARABLE * rms["euclidean"], rms

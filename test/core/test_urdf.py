@@ -3,31 +3,24 @@
 import os
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
-from rcac_ros.core import ConfigError, ModelError
+from rcac_ros.core import ConfigError, forward_dynamics, mass_matrix, ModelError
 from rcac_ros.core.model import rot_x
 from rcac_ros.core.rnea import inverse_dynamics
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.tools.robots import example_robots_dir
 
-pin = pytest.importorskip("pinocchio")
-
 TOL = 1e-9
 
 
+# example-robot-data and Pinocchio are test requirements (requirements-test.txt): a missing
+# one fails these tests, it does not skip them
 ROBOTS = example_robots_dir()
-PANDA = None if ROBOTS is None else os.path.join(ROBOTS, "panda_description/urdf/panda.urdf")
-UR5 = None if ROBOTS is None else os.path.join(ROBOTS, "ur_description/urdf/ur5_robot.urdf")
-needs_robots = pytest.mark.skipif(ROBOTS is None, reason="example-robot-data not installed")
-
-
-def _core(name):
-    import rcac_ros.core as core
-    fn = getattr(core, name, None)
-    if fn is None:
-        pytest.skip(f"rcac_ros.core.{name} not available yet")
-    return fn
+assert ROBOTS is not None, "example-robot-data (requirements-test.txt) is not installed"
+PANDA = os.path.join(ROBOTS, "panda_description/urdf/panda.urdf")
+UR5 = os.path.join(ROBOTS, "ur_description/urdf/ur5_robot.urdf")
 
 
 # ---------------------------------------------------------------------- Pinocchio side
@@ -63,8 +56,6 @@ def compare(model, pm, rng, states=20, gravity=True):
     if gravity:
         pm.gravity.linear = np.array(model.gravity)
     data = pm.createData()
-    mass_matrix = _core("mass_matrix")
-    forward_dynamics = _core("forward_dynamics")
     err = dict(inverse_dynamics=0.0, mass_matrix=0.0, forward_dynamics=0.0)
     for _ in range(states):
         q = rng.uniform(-np.pi, np.pi, model.n)
@@ -84,7 +75,6 @@ def compare(model, pm, rng, states=20, gravity=True):
 
 
 # ---------------------------------------------------------------------- real robots
-@needs_robots
 def test_panda_arm_matches_pinocchio():
     model = model_from_urdf(PANDA, tip_link="panda_link8")
     assert model.joint_names == tuple(f"panda_joint{k}" for k in range(1, 8))
@@ -100,7 +90,6 @@ def test_panda_arm_matches_pinocchio():
     assert max(err.values()) < TOL, err
 
 
-@needs_robots
 def test_ur5_matches_pinocchio():
     model = model_from_urdf(UR5)        # one path of moving joints: the tip is found
     assert model.joint_names == ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
@@ -112,7 +101,6 @@ def test_ur5_matches_pinocchio():
     assert max(err.values()) < TOL, err
 
 
-@needs_robots
 def test_ur5_from_an_inner_base_link_is_the_arm_with_joint1_locked():
     model = model_from_urdf(UR5, base_link="shoulder_link")
     assert model.joint_names[0] == "shoulder_lift_joint" and model.n == 5
@@ -121,28 +109,24 @@ def test_ur5_from_an_inner_base_link_is_the_arm_with_joint1_locked():
     assert max(err.values()) < TOL, err
 
 
-@needs_robots
 @pytest.mark.parametrize("path", [
     "xarm_description/urdf/xarm7.urdf", "z1_description/urdf/z1.urdf",
     "so_arm_description/urdf/so101.urdf", "kinova_description/robots/kinova.urdf",
     "double_pendulum_description/urdf/double_pendulum_continuous.urdf"])
 def test_more_arms_match_pinocchio(path):
     path = os.path.join(ROBOTS, path)
-    if not os.path.isfile(path):
-        pytest.skip(f"{path} not in this example-robot-data")
+    assert os.path.isfile(path), f"{path} not in example-robot-data"
     model = model_from_urdf(path)
     pm = pin_reference(pin.buildModelFromUrdf(path), model.joint_names)
     err = compare(model, pm, np.random.default_rng(7), states=5)
     assert max(err.values()) < TOL, err
 
 
-@needs_robots
 def test_panda_without_tip_names_the_branches():
     with pytest.raises(ConfigError, match="panda_leftfinger.*panda_rightfinger"):
         model_from_urdf(PANDA)
 
 
-@needs_robots
 def test_panda_tip_at_link7_or_link8_is_the_same_body():
     a = model_from_urdf(PANDA, tip_link="panda_link7")
     b = model_from_urdf(PANDA, tip_link="panda_link8")

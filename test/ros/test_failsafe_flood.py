@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from failsafe_harness import controller, ROOT, session, state_driver, wait
+from failsafe_harness import controller, PAPER_Q0, ROOT, session, state_driver, wait
 
 from rcac_ros.tools.bench.faults import PLAIN_LOOP  # noqa: E402
 
@@ -54,8 +54,28 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
                     proc.wait()
         assert "flood: sent" in out, out
         sent = int(out.split("flood: sent")[1].split()[0])
+
+        # what the flood is withstood with (doc/failsafe.md): every huge sample is refused on
+        # its size, counted in the diagnostics, and none is taken for a state or a goal
+        def loop_diagnostics():
+            with probe.lock:
+                return dict(probe.diagnostics.get("rcac_controller: control loop", {}))
+
+        def sizes(d):
+            return int(d.get("rejected_size", 0)), int(d.get("rejected_trajectory_size", 0))
+        assert wait(lambda: min(sizes(loop_diagnostics())) >= 1, timeout=30.0)
         with probe.lock:
             efforts = list(probe.efforts)
+            desired = np.array([q for _, q in probe.desired])
+    diag = loop_diagnostics()
+    states, goals = sizes(diag)
+    # each refused sample counted once, nothing else refused, no input error
+    assert states + goals <= sent and int(diag["rejected_messages"]) == states + goals, \
+        ({k: v for k, v in diag.items() if k.startswith("rejected")}, sent)
+    assert all(int(diag[f"input_errors_{k}"]) == 0 for k in ("take", "alloc", "callback")), diag
+    assert probe.warned("rejected (size)") and probe.warned("rejected (trajectory size)")
+    # the flood's goal (every joint to 0) was never followed: the desired state held the arm
+    assert desired.size and np.all(desired == PAPER_Q0), np.max(np.abs(desired - PAPER_Q0))
     gaps = gaps_ms(efforts, t_start, t_end)
     machine = np.diff(np.array(ticks.split(), dtype=np.int64)) * 1e-6
     for name, g in (("controller efforts", gaps), ("idle sleeper", machine)):

@@ -2,6 +2,7 @@
 real files)."""
 
 import subprocess
+import threading
 
 import pytest
 
@@ -17,25 +18,40 @@ rcac_simulater:
 """
 
 
-def run_node(module, *overrides, params_file=None, timeout=8.0):
-    """Run a node for ``timeout`` s at most; return ``(exit code or None, output)``."""
+def run_node(module, *overrides, params_file=None, until=None, timeout=120.0):
+    """Run a node until it exits, or (``until``) until a line of its output contains
+    ``until``, and then stop it; ``timeout`` s at most (generous: a loaded machine). Return
+    ``(exit code, or None if it was still running, output)``."""
     with ros_domain():
         proc = subprocess.Popen(node_cmd(module, *overrides, params_file=params_file),
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 cwd=ROOT)
-        try:
-            out, _ = proc.communicate(timeout=timeout)
-            return proc.returncode, out
-        except subprocess.TimeoutExpired:
+        lines, seen, ended = [], threading.Event(), threading.Event()
+
+        def read():
+            for line in proc.stdout:
+                lines.append(line)
+                if until is not None and until in line:
+                    seen.set()
+            ended.set()                 # the output closed: the process is exiting
+            seen.set()
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        seen.wait(timeout)
+        code = proc.wait(timeout=30) if ended.is_set() else proc.poll()
+        if proc.poll() is None:
             proc.terminate()
-            out, _ = proc.communicate(timeout=30)
-            return None, out
+            proc.wait(timeout=30)
+        reader.join(timeout=30)
+        return code, "".join(lines)
 
 
 def test_unknown_keys_are_warned_with_a_suggestion(tmp_path):
     path = tmp_path / "typo.yaml"
     path.write_text(TYPO)
-    code, out = run_node("controller_node", params_file=path)
+    code, out = run_node("controller_node", params_file=path,
+                         until="active: publishing efforts")
+    assert "active: publishing efforts" in out, out
     assert code is None, out                    # still running: a warning, not a refusal
     assert "'K_d' (did you mean 'K_D'?)" in out, out
     assert "'rcac_simulater'" in out and "rcac_simulator" in out, out
@@ -44,8 +60,7 @@ def test_unknown_keys_are_warned_with_a_suggestion(tmp_path):
 def test_unknown_keys_are_refused_when_strict(tmp_path):
     path = tmp_path / "typo.yaml"
     path.write_text(TYPO)
-    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path,
-                         timeout=60.0)
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path)
     assert code == 2, out
     errors = [ln for ln in out.splitlines() if "error" in ln]
     assert len(errors) == 1 and "K_d" in errors[0], out
@@ -59,7 +74,7 @@ def test_unknown_keys_are_refused_when_strict(tmp_path):
 def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
-    code, out = run_node(module, params_file=path, timeout=60.0)
+    code, out = run_node(module, params_file=path)
     assert code == 2, out
     assert "Traceback" not in out
     lines = [ln for ln in out.splitlines() if ln.strip()]

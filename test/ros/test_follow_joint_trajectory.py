@@ -359,8 +359,13 @@ class Loop:
     """The controller node (trajectory: topic) in lockstep with the core simulator.
 
     While the test waits (discovery, a goal's answer), :meth:`wait` re-sends the last state:
-    the controller answers a repeat without stepping, and its watchdog (``state_timeout``
-    is at most 1 s) does not trip; a trip restarts the filters, which is not deterministic.
+    the controller answers a repeat without stepping.
+
+    The watchdog reads the steady clock: a loaded machine can hold the test's process (the
+    node runs in it) for longer than ``state_timeout`` (at most 1 s as a parameter) between
+    two states, and a trip restarts the filters, so the closed loop is not the deterministic
+    one compared. The watchdog has tests of its own; here its timeout is set beyond any
+    stall on the node's object, and the run asserts it never tripped.
     """
 
     def __init__(self, ctx, ex):
@@ -369,9 +374,9 @@ class Loop:
         from rcac_ros.core.model import css_arm
         from rcac_ros.core.simulator import Simulator
         from rcac_ros.nodes.controller.node import ControllerNode
-        # no watchdog trip on a slow step: a trip restarts the filters (not deterministic)
         self.node = ControllerNode(context=ctx, parameter_overrides=[
             Parameter("trajectory", value="topic"), Parameter("state_timeout", value=1.0)])
+        self.node.watchdog.state_timeout = math.inf     # no trip on a stalled process
         self.probe = Probe(ctx, record=("efforts",))
         self.ex = ex
         ex.add_node(self.node)
@@ -423,26 +428,11 @@ class Loop:
         return sent.result()
 
 
-def _closed_loop(via, steps, attempts=3, **tolerances):
+def _closed_loop(via, steps, **tolerances):
     """The trajectory, stamped to start at step START_STEP, goes through ``via`` ("topic"
     or "action") at step 5. Returns the simulated positions and the efforts per step, the
     goal's ``(status, result, feedback)`` for the action, and whether the controller holds.
-
-    ``state_timeout`` is at most 1 s, and a loaded machine (the CI run of the whole suite
-    beside other work) can hold the test's process for longer between two states: the
-    watchdog then trips and restarts the filters, and the run is not the deterministic one
-    compared. Such a run is done again, up to ``attempts`` times.
     """
-    for _ in range(attempts):
-        run = _closed_loop_once(via, steps, **tolerances)
-        if run is not None:
-            return run
-    raise AssertionError(f"the watchdog tripped in each of {attempts} runs: the loop is not "
-                         "deterministic")
-
-
-def _closed_loop_once(via, steps, **tolerances):
-    """One run of :func:`_closed_loop`, or ``None`` if the watchdog tripped."""
     from test_nodes_support import PAPER_Q0
     with ros_context() as (ctx, ex):
         loop = Loop(ctx, ex)
@@ -465,8 +455,7 @@ def _closed_loop_once(via, steps, **tolerances):
         assert node.motion.active is not None
         for k in range(5, steps):
             loop.step(k)
-        if node.watchdog.trips:
-            return None
+        assert node.watchdog.trips == 0
         if via == "action":
             assert spin_until(ex, result.done, 20.0)
             outcome = (result.result().status, result.result().result, loop.feedback)

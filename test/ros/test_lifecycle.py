@@ -5,8 +5,8 @@ import os
 
 import numpy as np
 
-from test_nodes_support import (DEEP, H_NS, JOINTS, PAPER_Q0, Probe, ros_context, spin_until,
-                                start, stop)
+from test_nodes_support import (DEEP, H_NS, PAPER_Q0, Probe, ros_context, spin_until, start,
+                                stop)
 
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
@@ -168,7 +168,7 @@ with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "three_link.u
 
 def test_description_topic_waits_unconfigured_then_both_nodes_use_it():
     with ros_context() as (ctx, ex):
-        probe = Probe(ctx, record=("logs",))
+        probe = Probe(ctx, record=("efforts", "logs"))
         names = []
         sub = probe.create_subscription(JointState, "/joint_states",
                                         lambda m: names.append(list(m.name)), DEEP)
@@ -199,4 +199,7 @@ def test_description_topic_waits_unconfigured_then_both_nodes_use_it():
     assert sim_code == 0, sim_out
     assert "finished: 100 steps" in sim_out and "lockstep misses 0" in sim_out, sim_out + out
     assert code == 0, out
-    assert JOINTS != ["shoulder", "elbow", "wrist"]
+    # the controller's efforts have the description's three joints (its default arm has 7)
+    answers = [d for lab, d in probe.efforts if "stamp=" in lab]
+    assert answers
+    assert {d.shape for d in answers} == {(3,)}

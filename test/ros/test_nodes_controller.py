@@ -312,7 +312,7 @@ def _trajectory(names, times, pos, vel=None, acc=None, stamp_ns=0):
 
 def test_topic_trajectory_is_followed_like_jtc():
     """Cubic segments from the held state through the points, against scipy's Hermite spline."""
-    interpolate = pytest.importorskip("scipy.interpolate")
+    from scipy import interpolate       # a test requirement (requirements-test.txt)
     from test_nodes_support import DEEP
     with ros_context() as (ctx, ex):
         node, probe = make(ctx, ex, trajectory="topic")

@@ -8,19 +8,23 @@ import json
 import signal
 import time
 
+import numpy as np
+import pytest
 import yaml
 from bagtest_support import (bag_file, clock_k, Publisher, rcac, read_mcap_ros2, read_rosbags,
                              Recorder, wait_for)
 from bagtest_support import ros_env  # noqa: F401 - a fixture
 
 
-def _record(tmp_path, env, pub, *args, seconds=2.0):
+def _record(tmp_path, env, pub, *args, count=1000):
+    """Record while ``pub`` sends ``count`` messages of each topic (2 s at its 2 ms pace,
+    however long a loaded machine takes)."""
     bag = tmp_path / "bag"
     rec = Recorder(tmp_path, env, "--out", str(bag), *args)
     try:
         wait_for(pub.matched, 60, "the recorder subscribes", rec)
         pub.start()
-        time.sleep(seconds)
+        wait_for(lambda: len(pub.sent) >= count, 300, f"{count} messages sent", rec)
         pub.stop()
         time.sleep(0.3)
         rec.proc.send_signal(signal.SIGINT)
@@ -57,9 +61,14 @@ def test_recorded_qos_distro_and_two_readers(tmp_path, ros_env):  # noqa: F811
     ks = [clock_k(m) for _, _, m in via_mcap["/clock"]]
     assert ks == [clock_k(m) for _, m in via_rosbags["/clock"]]
     assert ks == list(range(ks[0], ks[0] + len(ks)))     # nothing lost, in order
-    # the publisher's send time precedes the receive time, by well under a second
+    # the publisher's send time precedes the receive time
     lag = [log - pub_t for log, pub_t, _ in via_mcap["/clock"]]
-    assert all(0 <= x < 1e9 for x in lag)
+    assert all(0 <= x for x in lag)
+    # and it is the publisher's: state k was sent between the wall times the publisher
+    # noted after sending k - 1 and after sending k
+    for _, pub_t, m in via_mcap["/joint_states"]:
+        k = int(m.position[0])
+        assert (pub.sent[k - 1] if k else 0) <= pub_t <= pub.sent[k], k
     # the mcap channels carry the same QoS as metadata.yaml
     from mcap.reader import make_reader
     with open(bag_file(str(bag)), "rb") as f:
@@ -73,7 +82,10 @@ def test_recorded_qos_distro_and_two_readers(tmp_path, ros_env):  # noqa: F811
     assert res.returncode == 0, res.stderr
     metrics = json.loads((tmp_path / "plots" / "metrics.json").read_text())["metrics"]
     assert metrics["timing_stamps"] == "send"
-    assert 1.5 <= metrics["state_period_p50_ms"] <= 2.5
+    # the period is the send stamps' (read back through mcap), whatever the machine's load
+    sent = np.array([pub_t for _, pub_t, _ in via_mcap["/joint_states"]])
+    assert metrics["state_period_p50_ms"] == pytest.approx(
+        np.percentile(1e-6 * np.diff(sent), 50), rel=1e-12)
     for field in ("Files:", "Bag size:", "Storage id:        mcap", "ROS Distro:        jazzy",
                   "Duration:", "Start:", "End:", "Messages:",
                   "Topic information: Topic: ",
@@ -84,7 +96,7 @@ def test_recorded_qos_distro_and_two_readers(tmp_path, ros_env):  # noqa: F811
 
 def test_use_sim_time_stamps_with_clock(tmp_path, ros_env):  # noqa: F811
     pub = Publisher(ros_env["_DOMAIN"])
-    bag, rec = _record(tmp_path, ros_env, pub, "--use-sim-time", seconds=1.5)
+    bag, rec = _record(tmp_path, ros_env, pub, "--use-sim-time", count=750)
     assert "stamped with the ROS time (/clock)" in rec.output()
     data = read_rosbags(str(bag))
     states = data["/joint_states"]

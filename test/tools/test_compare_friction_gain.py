@@ -27,8 +27,13 @@ def test_direct_friction_tracks_the_rigid_panda_as_the_direct_law():
     scenario = C.SCENARIOS["panda_rigid"]()
     direct = rms(scenario, "direct")
     aware = rms(scenario, "direct_friction")
-    assert aware < 2.0 * direct, (aware, direct)          # 1.0e-6 against 3.3e-6 (20 s)
-    # the check can fail: the uniform gain of the first table, 300 on every joint, is
-    # h P |Y_f|^2 / H_77 about 10x the feedback rate on joint 7 (H_77 = 0.0067 kg m^2)
+    # "as well as", a stated tolerance: within a factor 2. On the rigid plant the joint
+    # terms' truth is 0 and the inertia-scaled gain keeps the step's bound of §7 (25/s
+    # against kappa = 100/s on every joint), so they may not change the accuracy's order.
+    assert aware < 2.0 * direct, (aware, direct)
+    # the check can fail: the uniform gain of the first table, 300 on every joint, puts
+    # h P |Y_f|^2 / H_77 about 10x above the feedback rate on joint 7 (H_77 = 0.0067 kg m^2):
+    # the step is unstable, the estimates run away, and the error leaves the tracking regime
+    # (three orders of magnitude above the stable law's: not a matter of a factor)
     uniform = rms(scenario, "direct_friction", P_friction=300.0)
     assert uniform > 1000.0 * direct, (uniform, direct)

@@ -169,8 +169,12 @@ def test_friction_aware_laws_track_the_frictional_panda(tmp_path):
     with open(tmp_path / "compare.json", encoding="utf-8") as f:
         report = json.load(f)
     joints, rigid = report["panda_joints"], report["panda_rigid"]
-    # paper_friction's inertia-scaled joint gain (doc/design.md §7) learns the wrist joints'
-    # armature more slowly: 0.30x the paper law over this first second (0.16x over 20 s)
-    for law, factor in (("paper_friction", 0.4), ("all_friction", 0.2)):
-        assert joints[law]["rms"] < factor * joints["paper"]["rms"], (law, joints)
-        assert rigid[law]["rms"] < 5.0 * rigid["paper"]["rms"], (law, rigid)
+    # The bounds are the claim's, stated, not measured figures. The plant is in the model
+    # class of the friction-aware laws (the builtin engine integrates the model's own joint
+    # law), so the blind law's extra error on panda_joints is the unmodelled joint torque:
+    # "far better" = the aware law removes at least half of the blind law's error. On the
+    # rigid plant the joint terms only add parameters whose truth is 0: "at its level" =
+    # within a factor 2 of the paper law.
+    for law in ("paper_friction", "all_friction"):
+        assert joints[law]["rms"] < 0.5 * joints["paper"]["rms"], (law, joints)
+        assert rigid[law]["rms"] < 2.0 * rigid["paper"]["rms"], (law, rigid)
