@@ -15,7 +15,7 @@ All read and write the packed arrays of :mod:`rcac_ros.core._packing`; the contr
 import math
 
 import numpy as np
-from ._jit import kernel, njit
+from ._jit import kernel
 
 from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
@@ -31,24 +31,23 @@ from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
 
-@njit(cache=True, inline="always")
 def paper_options(chan, scal):
     """The paper's law's options, whatever the geometry: one channel (joint 1), the fixed
     gain, implicit update, no dead zone, no projection, no leakage; adapting or frozen
-    (``set_adaptation``: the same kernel, so that a freeze never needs another one)."""
+    (``set_adaptation``: the same kernel, so that a freeze never needs another one).
+    Plain Python, as the two below: the controller chooses its kernel with them, and
+    choosing compiles nothing."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
             and scal[I_PROJECT] == 0.0 and scal[I_LEAK] <= 0.0)
 
 
-@njit(cache=True, inline="always")
 def is_paper_law(chan, scal):
     """True for the paper's law exactly: :func:`paper_options` and the Euclidean geometry.
     The controller then runs :func:`paper_step` or :func:`paper_friction_step`."""
     return paper_options(chan, scal) and scal[I_NATURAL] == 0.0
 
 
-@njit(cache=True, inline="always")
 def is_paper_natural_law(chan, scal):
     """True for the paper's law in the natural geometry (doc/design.md §8, either metric):
     :func:`paper_options` and ``geometry="natural"``. Without the joint terms the controller

@@ -77,3 +77,29 @@ def test_the_key_covers_every_compiled_source_and_numba():
                 compiled.add(os.path.relpath(path, PACKAGE))
     assert compiled <= set(_jit.KERNEL_SOURCES)
     assert _jit.cache_dir().endswith(_jit.SOURCE_KEY)
+
+
+def test_building_a_law_compiles_nothing_until_it_is_compiled(tmp_path):
+    """Building the controller (checks, packing, choosing its kernel) compiles nothing; its
+    compile() compiles the law's kernel and the kernels that kernel calls, nothing else
+    (numba's compile events, in a process with an empty cache)."""
+    code = """
+import numpy as np
+from numba.core import event
+from rcac_ros.core import RecursiveCompositeController, css_arm
+with event.install_recorder("numba:compile") as built:
+    ctrl = RecursiveCompositeController(css_arm())
+with event.install_recorder("numba:compile") as compiled:
+    ctrl.compile()
+names = sorted({ev.data["dispatcher"].py_func.__name__ for _, ev in compiled.buffer})
+print(len(built.buffer), names)
+"""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=900)
+    assert out.returncode == 0, out.stderr
+    count, names = out.stdout.strip().splitlines()[-1].split(" ", 1)
+    assert count == "0"
+    assert "paper_step" in names and "paper_law" in names
+    assert "rcac_step_kernel" not in names and "general_law" not in names
+    assert "slotine_li_step_kernel" not in names
