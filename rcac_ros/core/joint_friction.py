@@ -24,8 +24,8 @@ as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
 terms use least squares); the leakage acts on the link terms only; the projection keeps
 the joint terms >= 0. Natural geometry (doc/design.md §8): each term adapts in the positive
-orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, then
-:func:`retract_term`), so it
+orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with
+``k_f`` following the estimate, :func:`follow_gain`, then :func:`retract_term`), so it
 stays > 0. Discretisation as the link terms' (explicit Euler on the tracking
 term, implicit or explicit on the prediction term, one joint solve over all parameters).
 """
@@ -270,9 +270,10 @@ def natural_friction_start(friction_hat0, model_terms, exc):
 
 
 def friction_natural_gain(P_friction, start):
-    """Default natural gain of the joint terms, ``k_f = P_f / x0^2``: the natural law's gain
-    ``min(k_f x^2, P_f)`` (:func:`term_gain`) equals ``P_friction`` from the start up, and
-    falls as ``x^2`` below it (doc/design.md §8)."""
+    """The natural gain of the joint terms at the start, ``k_f = P_f / x0^2``: the natural
+    law's gain ``min(k_f x^2, P_f)`` (:func:`term_gain`) equals ``P_friction`` from the start
+    up, and falls as ``x^2`` below it; then ``k_f`` follows the estimate
+    (:func:`follow_gain`, doc/design.md §8)."""
     return P_friction / start ** 2
 
 
