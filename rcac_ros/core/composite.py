@@ -390,6 +390,8 @@ class RecursiveCompositeController:
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
             if self.geometry == "natural":
                 fh = natural_friction_start(fh, None, InputError)
+                # k_f follows the estimate (joint_friction.follow_gain): matched anew
+                self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction, fh)
             self._jdata[:, F_HAT:F_HAT + 3] = fh
             self._jfilt[:] = 0.0
         self._state[:] = 0.0

@@ -19,14 +19,14 @@ from ._jit import kernel
 from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
     rejects_input
 from ._packing import (ADAPT_GRADIENT, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
-                       I_G, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
+                       I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
 from .natural_step import retract_links
 from .channels import close_channels, predict_link, start_channels
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
-                             FRICTION_SIGNATURE, adapt_joint, implicit_solve_joint, predict_joint,
-                             retract_term, term_gain)
+                             FOLLOW_TIME, FRICTION_SIGNATURE, adapt_joint, follow_gain,
+                             implicit_solve_joint, predict_joint, retract_term, term_gain)
 from .regressor import reference_wrench, regressor_row
 from .spatial import P0, transform_force_T
 
@@ -123,9 +123,11 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
                              + jrow[F_Y + 2] * jrow[F_HAT + 2])                    # eq 20
             if not frozen:
                 if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
+                    a = min(1.0, scal[I_H] / FOLLOW_TIME)
                     for k in range(3):
                         x = jrow[F_HAT + k]
                         jrow[F_PREV + k] = x
+                        jrow[F_K + k] = follow_gain(jrow[F_K + k], jrow[F_CAP + k], x, a)
                         jrow[F_GAIN + k] = term_gain(jrow[F_K + k], jrow[F_CAP + k], x)
                 adapt_joint(chan, jfilt, i, jrow, scal, tracking)
         else:

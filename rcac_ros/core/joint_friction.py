@@ -24,8 +24,8 @@ as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
 terms use least squares); the leakage acts on the link terms only; the projection keeps
 the joint terms >= 0. Natural geometry (doc/design.md §8): each term adapts in the positive
-orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, then
-:func:`retract_term`), so it
+orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with
+``k_f`` following the estimate, :func:`follow_gain`, then :func:`retract_term`), so it
 stays > 0. Discretisation as the link terms' (explicit Euler on the tracking
 term, implicit or explicit on the prediction term, one joint solve over all parameters).
 """
@@ -69,6 +69,9 @@ P_FRICTION = (1.0, 10.0, 10.0)
 START_FLOOR = 1e-3
 #: natural geometry: no joint term goes below this (rounding never reaches 0)
 TERM_FLOOR = 1e-12
+#: natural geometry: the time constant (s) with which a joint term's natural gain follows
+#: its estimate (:func:`follow_gain`)
+FOLLOW_TIME = 0.2
 
 FRICTION_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
                       f"float64[:, :, ::1], {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
@@ -127,6 +130,19 @@ def term_gain(k, cap, x):
     ``sqrt(cap / k)``, so the gain never exceeds the Euclidean one.
     """
     return min(k * x * x, cap)
+
+
+@njit(cache=True, inline="always")
+def follow_gain(k, cap, x, a):
+    """The natural gain ``k_f`` of a joint term following its estimate ``x > 0``
+    (doc/design.md §8): ``log k_f`` moves the fraction ``a = min(1, h / T_f)`` of the way
+    to ``log(cap / x^2)``, the value at which :func:`term_gain` is ``cap`` at ``x``. So the
+    knee ``sqrt(cap / k_f)`` of ``min(k_f x^2, cap)`` is a low-pass of the estimate, in
+    the positive orthant's (logarithmic) coordinate, with the time constant
+    :data:`FOLLOW_TIME`: a term driven toward 0 within a few ``T_f`` meets the barrier, and
+    one that settles anywhere (0.1 x or 10 x its start) is adapted with the gain ``cap``
+    after a few ``T_f``, whatever its start."""
+    return k * (cap / (k * x * x)) ** a
 
 
 @njit(cache=True, inline="always")
@@ -254,9 +270,10 @@ def natural_friction_start(friction_hat0, model_terms, exc):
 
 
 def friction_natural_gain(P_friction, start):
-    """Default natural gain of the joint terms, ``k_f = P_f / x0^2``: the natural law's gain
-    ``min(k_f x^2, P_f)`` (:func:`term_gain`) equals ``P_friction`` from the start up, and
-    falls as ``x^2`` below it (doc/design.md §8)."""
+    """The natural gain of the joint terms at the start, ``k_f = P_f / x0^2``: the natural
+    law's gain ``min(k_f x^2, P_f)`` (:func:`term_gain`) equals ``P_friction`` from the start
+    up, and falls as ``x^2`` below it; then ``k_f`` follows the estimate
+    (:func:`follow_gain`, doc/design.md §8)."""
     return P_friction / start ** 2
 
 

@@ -42,7 +42,7 @@ from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lam
                              matched_gain, natural_gains_into, natural_metric_option, nu_gain,
                              pseudo_inertia)
 from .retraction import retract_rows
-from .joint_friction import (P_FRICTION, friction_gain, friction_natural_gain,
+from .joint_friction import (FOLLOW_TIME, P_FRICTION, friction_gain, friction_natural_gain,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
@@ -331,6 +331,7 @@ class SlotineLiCompositeController:
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
             if self.geometry == "natural":
                 fh = natural_friction_start(fh, None, InputError)
+                self._friction_k = friction_natural_gain(self.P_friction, fh)   # follows
             self._theta[nl:] = fh.ravel()
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
@@ -362,6 +363,8 @@ class SlotineLiCompositeController:
             if self.joint_friction:
                 fh = self._theta[13 * self.n:].reshape(self.n, 3)
                 self._prev_f = fh.copy()
+                a = min(1.0, self.h / FOLLOW_TIME)                  # follow_gain
+                self._friction_k *= (self.P_friction / (self._friction_k * fh * fh)) ** a
                 self._joint[:, :3] = np.minimum(self._friction_k * fh * fh,   # term_gain
                                                 self.P_friction)
         try:
