@@ -20,6 +20,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 TIMING = {
     "ros/test_failsafe_flood.py",       # effort gaps against an idle sleeper's
     "ros/test_failsafe_starved.py",     # must start unstarved; SIGSTOP every 30 ms
+    "ros/test_freeze_causes.py",        # starved by SIGSTOP, then not
     "ros/test_realtime.py",             # SCHED_FIFO threads
     "ros/test_nodes_pacing.py",         # the timer loop's deadlines
 }
