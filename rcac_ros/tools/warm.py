@@ -9,8 +9,8 @@ install (``make setup`` and ``make test`` do; after ``pip install`` or ``colcon 
 The work is split in two processes that compile different kernels at the same time:
 
 - ``recursive``: the recursive law's general kernel (any channels and options, with and
-  without the joint terms: the longest compile);
-- ``others``: everything else: the paper's law's fused kernels (Euclidean, natural, with the
+  without the joint terms) and the natural geometry's steps, the Slotine-Li law's too;
+- ``others``: everything else: the paper's law's fused kernel (Euclidean, natural, with the
   joint terms), the Slotine-Li law, dynamics, kinematics, the simulator, the
   identifiability accumulator, the command limiter.
 
@@ -41,18 +41,23 @@ def _step_each(cls, model, variants):
 
 
 def warm_recursive():
-    """The recursive law's general kernel, with and without the joint terms, and the
-    natural geometry's and least squares' helpers that its controller calls."""
-    from rcac_ros.core import RecursiveCompositeController, css_arm
-    _step_each(RecursiveCompositeController, css_arm(), (
+    """The recursive law's general kernel, with and without the joint terms, the natural
+    geometry's and least squares' helpers that its controller calls, and the Slotine-Li
+    law's natural geometry (the two groups take about the same time)."""
+    from rcac_ros.core import RecursiveCompositeController, SlotineLiCompositeController, css_arm
+    model = css_arm()
+    _step_each(RecursiveCompositeController, model, (
         {"channels": "all"}, {"channels": "all", "joint_friction": True},
         {"geometry": "natural", "channels": "all"},
         {"geometry": "natural", "adaptation": "least_squares"},
         {"geometry": "natural", "joint_friction": True, "channels": "all"}))
+    _step_each(SlotineLiCompositeController, model, (
+        {"geometry": "natural"}, {"geometry": "natural", "natural_metric": "log_det"},
+        {"geometry": "natural", "joint_friction": True}))
 
 
 def warm_others():
-    """Everything but the general kernel: the fused kernels, the Slotine-Li law, dynamics,
+    """Everything else: the paper's law's fused kernel, the Slotine-Li law, dynamics,
     kinematics, the simulator, the identifiability accumulator, the command limiter."""
     import numpy as np
     from rcac_ros.core import (RecursiveCompositeController, Simulator,
@@ -63,10 +68,7 @@ def warm_others():
     model = css_arm()
     _step_each(RecursiveCompositeController, model, (
         {}, {"joint_friction": True}, {"geometry": "natural"}))
-    _step_each(SlotineLiCompositeController, model, (
-        {}, {"joint_friction": True}, {"geometry": "natural"},
-        {"geometry": "natural", "natural_metric": "log_det"},
-        {"geometry": "natural", "joint_friction": True}))
+    _step_each(SlotineLiCompositeController, model, ({}, {"joint_friction": True}))
     z = np.zeros(model.n)
     q = np.full(model.n, 0.1)
     inverse_dynamics(model, q, z, z)
