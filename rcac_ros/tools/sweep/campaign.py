@@ -409,8 +409,8 @@ def input_columns(inputs):
             row[q] = "" if v is None else json.dumps(v)
         elif q in ("law", "geometry"):
             row[q] = v
-        elif v is None:                 # P_friction: the library's default
-            row[q] = float("nan")
+        elif v is None:                 # P_friction: the library's default (0: a gain is > 0)
+            row[q] = 0.0
         elif q == "delay":
             row[q] = int(v)
         else:
