@@ -323,6 +323,8 @@ class RecursiveCompositeController:
         general kernel) on 2 cores (doc/results.md).
         """
         self._kernel = self._bind(ready(self._entry))
+        if self.joint_friction and self._gain_at_start:     # the gain waits for the first q
+            self._kernel = self._friction_gain_at_start
         return self
 
     def use_fused_kernel(self, fused):
