@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo bench bench-ros readme-timings \
+.PHONY: demo test setup setup-test experiment payload-demo friction-ros bench bench-ros readme-timings \
 	readme-bench clean
 
 demo: $(VENV)/.runtime
@@ -26,6 +26,11 @@ experiment: $(VENV)/.runtime
 
 payload-demo: $(VENV)/.test
 	$(BIN)/rcac payload-demo --out $(OUT)/payload_demo
+
+# over ROS 2, the MuJoCo plant with joint friction: the controller blind, then with
+# joint_friction: true; two bags, their tracking errors and the joint estimates plotted
+friction-ros: $(VENV)/.test
+	$(BIN)/rcac friction-ros --out $(OUT)/friction_ros
 
 bench: $(VENV)/.test
 	$(BIN)/rcac bench core --json $(OUT)/bench.json

@@ -45,6 +45,7 @@ TOPIC_TYPES = (
     (topics.TRACKING_ERROR, "std_msgs/msg/Float64MultiArray"),
     (topics.DESIRED_STATE, "sensor_msgs/msg/JointState"),
     (topics.DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
+    (topics.FRICTION_ESTIMATES, "std_msgs/msg/Float64MultiArray"),
 )
 
 STORAGE_CHOICES = STORAGES
