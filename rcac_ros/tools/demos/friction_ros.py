@@ -21,8 +21,10 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.tools.args import positive_float
 
-#: The plant's joint terms on every joint: armature kg m^2, damping N m s/rad, friction N m.
-TRUTH = (0.1, 0.5, 0.5)
+#: The plant's joint terms on every joint: armature kg m^2, damping N m s/rad, friction N m;
+#: at the scale of the paper's arm and of its feedback ``K_D = 1e4 I6`` (the Panda-sized
+#: 0.1, 0.5, 0.5 change the blind law's RMS error there by under 1 %, measured).
+TRUTH = (5.0, 200.0, 100.0)
 NAMES = ("armature", "damping", "friction")
 
 
