@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo capture-demo bench bench-ros readme-timings \
+.PHONY: demo test setup setup-test experiment payload-demo capture-demo friction-ros bench bench-ros readme-timings \
 	readme-bench clean
 
 demo: $(VENV)/.runtime
@@ -31,6 +31,11 @@ payload-demo: $(VENV)/.test
 
 capture-demo: $(VENV)/.runtime
 	$(BIN)/rcac capture-demo --out $(OUT)/capture_demo
+
+# over ROS 2, the MuJoCo plant with joint friction: the controller blind, then with
+# joint_friction: true; two bags, their tracking errors and the joint estimates plotted
+friction-ros: $(VENV)/.test
+	$(BIN)/rcac friction-ros --out $(OUT)/friction_ros
 
 bench: $(VENV)/.test
 	$(BIN)/rcac bench core --json $(OUT)/bench.json

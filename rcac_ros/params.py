@@ -240,8 +240,10 @@ CONTROLLER = _robot("controller") + (
     Param("joint_friction", "bool", False,
           "also estimate each joint's armature, viscous and Coulomb friction "
           "(doc/design.md §7), published on ~/friction_estimates"),
-    Param("P_friction", "double_array", (1.0, 10.0, 10.0),
-          "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0"),
+    Param("P_friction", "double_array", None,
+          "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0 "
+          "(unset: each joint's scaled from its feedback gain at the first state, "
+          "doc/design.md §7)"),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),

@@ -46,7 +46,8 @@ from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction
                               paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, friction_natural_gain, natural_friction_start)
+                             friction_gain, friction_natural_gain, feedback_scaled_gain,
+                             natural_friction_start, start_posture)
 from .least_squares import initial_factor
 from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
                              is_body, lambda_min, matched_gain, natural_metric_option, nu_gain)
@@ -136,9 +137,10 @@ class RecursiveCompositeController:
     friction_hat0 : array_like (n, 3), optional
         Initial joint estimates (armature, damping, friction); default the model's (natural
         geometry: every term > 0, default the model's floored at 1e-3, doc/design.md §8).
-    P_friction : float, (3,) or (n, 3)
-        Diagonal adaptation gains of the joint terms, positive (default
-        :data:`~rcac_ros.core.joint_friction.P_FRICTION`).
+    P_friction : "feedback", float, (3,) or (n, 3)
+        Diagonal adaptation gains of the joint terms, positive; default ``"feedback"``:
+        :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at the first step's
+        measured ``q`` (doc/design.md §7 "Joint terms without per-arm tuning").
 
     Raises
     ------
@@ -248,9 +250,14 @@ class RecursiveCompositeController:
             self._const[:, BAR_F:BAR_F + 30] = F.reshape(self.n, 30)
 
     def _joint_terms(self, friction_hat0, P_friction, m):
-        """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates."""
+        """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates.
+        ``P_friction="feedback"``: the gain at the zero posture until the first step
+        (:meth:`_friction_gain_at_start`)."""
         n = self.n
         self.P_friction = friction_gain(P_friction, n)
+        self._gain_at_start = self.P_friction is None
+        if self._gain_at_start:
+            self.P_friction = feedback_scaled_gain(self.model, self.K_D, np.zeros(n))
         self._friction_hat0_given = None if friction_hat0 is None else \
             as_array(friction_hat0, (n, 3), "friction_hat0")
         self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
@@ -275,6 +282,25 @@ class RecursiveCompositeController:
         else:
             self._entry = paper_step if fused else rcac_step_kernel
         self._kernel = self._bind(self._entry) if is_ready(self._entry) else self._compile_step
+        if self.joint_friction and self._gain_at_start:
+            self._kernel = self._friction_gain_at_start
+
+    def _friction_gain_at_start(self, data, buf, q, *rest):
+        """The first step with ``P_friction="feedback"``: the gain
+        :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at the measured ``q``
+        (doc/design.md §7), then the step."""
+        q0 = start_posture(q, self.n)
+        if q0 is not None:
+            self.P_friction = feedback_scaled_gain(self.model, self.K_D, q0)
+            self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
+            if self.geometry == "natural":
+                self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
+                                                                    self.friction_hat0)
+                self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
+            self._gain_at_start = False
+            self._choose_kernel()
+        return (self._bind(self._entry) if is_ready(self._entry) else self._compile_step)(
+            data, buf, q, *rest)
 
     def _bind(self, kernel):
         if not self.joint_friction:
@@ -297,6 +323,8 @@ class RecursiveCompositeController:
         general kernel) on 2 cores (doc/results.md).
         """
         self._kernel = self._bind(ready(self._entry))
+        if self.joint_friction and self._gain_at_start:     # the gain waits for the first q
+            self._kernel = self._friction_gain_at_start
         return self
 
     def use_fused_kernel(self, fused):

@@ -22,12 +22,13 @@ qd_i^2) + sum (damping_i qd_i^2 + friction_i qd_i sigma(qd_i))``, so ``phi_f = [
 as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 
 Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
-terms use least squares); the leakage acts on the link terms only; the projection keeps
-the joint terms >= 0. Natural geometry (doc/design.md §8): each term adapts in the positive
-orthant's geometry (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with
-``k_f`` following the estimate, :func:`follow_gain`, then :func:`retract_term`), so it
-stays > 0. Discretisation as the link terms' (explicit Euler on the tracking
-term, implicit or explicit on the prediction term, one joint solve over all parameters).
+terms use least squares), by default :func:`feedback_scaled_gain` at the first step's
+posture; the leakage acts on the link terms only; the projection keeps the joint terms >= 0.
+Natural geometry (doc/design.md §8): each term adapts in the positive orthant's geometry
+(gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with ``k_f`` following
+the estimate, :func:`follow_gain`, then :func:`retract_term`), so it stays > 0.
+Discretisation as the link terms' (explicit Euler on the tracking term, implicit or explicit
+on the prediction term, one joint solve over all parameters).
 """
 
 import math
@@ -63,8 +64,16 @@ JW = 12             #: W_f,cj (3)
 JU = 15             #: U_f,cj = P_f,j W_f,cj^T (3)
 JFILT_COLS = 18
 
-#: Default diagonal gain of the joint terms (armature, damping, friction).
-P_FRICTION = (1.0, 10.0, 10.0)
+#: Default ``P_friction``: each joint's gain scaled from its feedback at the start
+#: (:func:`feedback_scaled_gain`, doc/design.md §7 "Joint terms without per-arm tuning").
+P_FRICTION = "feedback"
+#: ``beta_f`` (s) of :func:`feedback_scaled_gain`: the joint terms' rate per unit of the
+#: weighted ``|Y_f,i|^2``.
+BETA_FRICTION = 30.0
+#: Relative weights ``w`` of the three terms (armature, damping, friction) in
+#: :func:`feedback_scaled_gain`: the armature's column ``qdd_ri`` is the largest and the
+#: fastest-varying of the three.
+TERM_WEIGHTS = (0.1, 1.0, 1.0)
 #: natural geometry: the default start floors each model term at this value (SI units)
 START_FLOOR = 1e-3
 #: natural geometry: no joint term goes below this (rounding never reaches 0)
@@ -277,8 +286,56 @@ def friction_natural_gain(P_friction, start):
     return P_friction / start ** 2
 
 
+def joint_feedback(model, K_D, q):
+    """``D_ii = sum_j J_ji^T K_Dj J_ji`` (n,): the diagonal of the joint-space feedback gain
+    at ``q`` (eq 2), ``J_ji`` the spatial velocity ``[v; w]`` of link j's frame (in its own
+    axes, about its origin) per unit speed of joint i <= j. With ``K_Dj = kappa M_j`` it is
+    ``kappa`` times the diagonal of the rigid arm's mass matrix."""
+    from .kinematics import forward_kinematics
+    R, o = forward_kinematics(model, q)
+    n = model.n
+    D = np.zeros(n)
+    for i in range(n):
+        z = R[i][:, 2]
+        for j in range(i, n):
+            S = np.concatenate((R[j].T @ np.cross(z, o[j] - o[i]), R[j].T @ z))
+            D[i] += S @ K_D[j] @ S
+    return D
+
+
+def feedback_scaled_gain(model, K_D, q, beta=BETA_FRICTION, weights=TERM_WEIGHTS):
+    """``P_f,i = beta D_ii(q) w`` (n, 3): joint i's gain proportional to its feedback
+    :func:`joint_feedback` at ``q`` (doc/design.md §7 "Joint terms without per-arm tuning").
+
+    Joint i's explicit tracking step is stable while ``h Y_f,i P_f,i Y_f,i^T`` stays below
+    ``D_ii`` (for the plant's inertia ``H_ii``: ``D_ii / H_ii`` is the feedback's rate), and
+    the joint terms converge at the rate ``Y_f,i P_f,i Y_f,i^T / D_ii``: with ``P_f,i``
+    proportional to ``D_ii`` both are the same on every joint of every arm, for any scale
+    of its masses and of ``K_D``.
+    """
+    return beta * np.outer(joint_feedback(model, K_D, np.asarray(q, dtype=float)),
+                           np.asarray(weights, dtype=float))
+
+
+def start_posture(q, n):
+    """``q`` as a finite float array of n values, or None (the step then reports the bad
+    input, and the gain waits for the next)."""
+    try:
+        q = np.asarray(q, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return q if q.shape == (n,) and np.all(np.isfinite(q)) else None
+
+
 def friction_gain(value, n):
-    """``P_friction`` as (n, 3) positive diagonal gains: a scalar, a (3,) or an (n, 3)."""
+    """``P_friction`` as (n, 3) positive diagonal gains: a scalar, a (3,) or an (n, 3).
+    ``"feedback"`` (:data:`P_FRICTION`) gives None: the caller scales it from the joint's
+    feedback at the start (:func:`feedback_scaled_gain`)."""
+    if isinstance(value, str):
+        if value != P_FRICTION:
+            raise GainError(f"P_friction: expected {P_FRICTION!r}, a scalar, 3 values or "
+                            f"({n}, 3) values, got {value!r}")
+        return None
     arr = numeric(value, "P_friction", GainError)
     if arr.ndim > 2 or (arr.ndim == 1 and arr.shape != (3,)) or \
             (arr.ndim == 2 and arr.shape != (n, 3)):

@@ -43,6 +43,7 @@ from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lam
                              pseudo_inertia)
 from .retraction import retract_rows
 from .joint_friction import (FOLLOW_TIME, P_FRICTION, friction_gain, friction_natural_gain,
+                             feedback_scaled_gain, start_posture,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
@@ -301,6 +302,9 @@ class SlotineLiCompositeController:
         self._joint = np.zeros((n if self.joint_friction else 0, 4))
         if self.joint_friction:
             self.P_friction = friction_gain(P_friction, n)
+            self._gain_at_start = self.P_friction is None   # "feedback": at the first step
+            if self._gain_at_start:
+                self.P_friction = feedback_scaled_gain(model, self.K_D, np.zeros(n))
             self.friction_hat0 = model.joint_terms() if friction_hat0 is None else \
                 as_array(friction_hat0, (n, 3), "friction_hat0")
             self._joint[:, :3] = self.P_friction
@@ -351,6 +355,15 @@ class SlotineLiCompositeController:
         """One control period (eqs 2, 7); same contract as the recursive controller's ``step``."""
         if not self._compiled:
             self.compile()
+        if self.joint_friction and self._gain_at_start:     # doc/design.md §7
+            q0 = start_posture(q, self.n)
+            if q0 is not None:
+                self.P_friction = feedback_scaled_gain(self.model, self.K_D, q0)
+                self._joint[:, :3] = self.P_friction
+                if self.geometry == "natural":
+                    self._friction_k = friction_natural_gain(self.P_friction,
+                                                             self.friction_hat0)
+                self._gain_at_start = False
         if self.geometry == "natural":                      # doc/design.md §8
             th = self._theta[:13 * self.n].reshape(self.n, 13)
             self._prev[:] = th

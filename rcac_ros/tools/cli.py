@@ -37,6 +37,9 @@ SUBCOMMANDS = {
                      "panda with an unknown 2 kg payload attached", ()),
     "friction-demo": ("rcac_ros.tools.demos.friction",
                       "panda learning its joints' armature, viscous and Coulomb friction", ()),
+    "friction-ros": ("rcac_ros.tools.demos.friction_ros",
+                     "over ROS 2 on a MuJoCo plant with joint friction: blind and aware, bags, "
+                     "plots", ("bags", "ros")),
     "sweep": ("rcac_ros.tools.sweep.commands", "Monte Carlo campaigns of closed-loop runs on Dask",
               ("sweep",)),
     "warm": ("rcac_ros.tools.warm",

@@ -36,7 +36,12 @@ def test_frozen_estimates_stay_and_the_law_uses_them():
     assert ctrl.adapting and not np.allclose(ctrl.theta_hat, theta0)
 
 
-@pytest.mark.parametrize("options", [{}, {"joint_friction": True}, {"geometry": "natural"}],
+# the joint terms at a fixed gain: the default one, scaled from the paper's K_D = 1e4 I6,
+# reaches 7e7 on the CSS arm and amplifies the two kernels' different summation orders to
+# 1.3e-10 relative (measured); the check is the kernels' equivalence, not the gain's
+@pytest.mark.parametrize("options", [{}, {"joint_friction": True,
+                                          "P_friction": (1.0, 10.0, 10.0)},
+                                     {"geometry": "natural"}],
                          ids=["paper", "joint_terms", "natural"])
 def test_a_freeze_keeps_the_fused_kernel_and_equals_the_general_one(options):
     """Freezing and resuming the paper's law does not switch kernels (nothing to compile in

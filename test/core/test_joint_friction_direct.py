@@ -10,7 +10,7 @@ from rcac_ros.core import RecursiveCompositeController, SlotineLiCompositeContro
 from rcac_ros.core.model import PAPER_Q0
 
 
-@pytest.mark.parametrize("P_friction", [(0.5, 5.0, 5.0), 50.0])
+@pytest.mark.parametrize("P_friction", [(0.5, 5.0, 5.0), 50.0, "feedback"])
 def test_direct_law_with_joint_terms_equals_slotine_li(P_friction):
     """Closed loops on the CSS arm with gravity and joint friction, from zero joint
     estimates: efforts and estimates (link and joint) equal to 1e-9 at every step."""

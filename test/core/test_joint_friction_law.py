@@ -93,7 +93,7 @@ def test_reset_and_set_friction_hat():
 @pytest.mark.parametrize("kw,exc,match", [
     (dict(P_friction=-1.0), GainError, "P_friction: every entry must be finite and > 0"),
     (dict(P_friction=[1.0, 2.0]), GainError, "P_friction: expected a scalar, 3 values"),
-    (dict(P_friction="big"), GainError, "P_friction: not a numeric array"),
+    (dict(P_friction="big"), GainError, "P_friction: expected 'feedback', a scalar"),
     (dict(friction_hat0=np.zeros((7, 2))), InputError, "friction_hat0: expected shape"),
 ])
 def test_bad_joint_options(cls, kw, exc, match):

@@ -108,6 +108,11 @@ def test_all_channels_equal_slotine_li_natural_with_joint_friction(update):
     assert np.max(np.abs(b.friction_hat - gains["friction_hat0"])) > 1e-3     # they adapted
 
 
+#: the joint terms' gain of the comparison: one fixed gain for both geometries (the
+#: default, scaled from the feedback, is measured on unseen arms: doc/tools.md)
+P_FIXED = (1.0, 10.0, 10.0)
+
+
 def test_tracks_a_plant_with_joint_friction():
     """The paper's arm with joint friction in the plant, the paper's gains and motion, the
     joint estimates from 0.1 x the true terms: the natural law's RMS error over the last 5 s
@@ -122,7 +127,7 @@ def test_tracks_a_plant_with_joint_friction():
     for geometry in ("euclidean", "natural"):
         ctrl = RecursiveCompositeController(rigid, geometry=geometry, joint_friction=True,
                                             friction_hat0=0.1 * plant.joint_terms(),
-                                            **PAPER_GAINS)
+                                            P_friction=P_FIXED, **PAPER_GAINS)
         sim = Simulator(plant, dt=ctrl.h, q0=q0)
         err = []
         for k in range(5000):

@@ -114,3 +114,23 @@ def test_controller_natural_metric_reaches_the_core_and_a_misuse_is_one_line():
         text = str(err.value)
         assert "natural_metric: 'barrier' only with geometry='natural'" in text, text
         assert "\n" not in text, text
+
+
+def test_joint_friction_alone_scales_each_joints_gain_at_the_first_state():
+    """``joint_friction: true`` and nothing else: the joint terms' gain is the library's
+    default, each joint's scaled from its feedback at the first state (doc/design.md §7),
+    not one triple for every joint."""
+    from rcac_ros.core.joint_friction import feedback_scaled_gain
+    with ros_context() as (ctx, _):
+        n = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("joint_friction", value=True)])
+        try:
+            assert n.kernels.wait()             # the node compiles before any step
+            ctrl = n.ctrl
+            q0 = np.linspace(0.1, 0.7, ctrl.n)
+            ctrl.step(q0, np.zeros(ctrl.n), q0, np.zeros(ctrl.n), np.zeros(ctrl.n))
+            np.testing.assert_allclose(ctrl.P_friction,
+                                       feedback_scaled_gain(ctrl.model, ctrl.K_D, q0))
+            assert np.ptp(ctrl.P_friction[:, 1]) > 0.0      # joints get different gains
+        finally:
+            n.destroy_node()

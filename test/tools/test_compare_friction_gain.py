@@ -1,12 +1,14 @@
 """``rcac compare``'s friction-aware direct law on the rigid panda (built-in simulator): the
-explicit tracking step of the joint terms with the inertia-scaled gain tracks as well as
-the friction-blind direct law, where a uniform gain too large for the light wrist joints
-does not (doc/design.md §7, "Gain and step")."""
+explicit tracking step of the joint terms with the library's default gain (scaled from each
+joint's feedback) tracks as well as the friction-blind direct law, where a uniform gain too
+large for the light wrist joints does not (doc/design.md §7, "Gain and step")."""
 
 import numpy as np
 
 from rcac_ros.core.crba import mass_matrix
+from rcac_ros.core.joint_friction import BETA_FRICTION, TERM_WEIGHTS
 from rcac_ros.tools.demos import compare as C
+from rcac_ros.tools.scenarios import GAINS
 
 
 def rms(scenario, law, **override):
@@ -16,11 +18,14 @@ def rms(scenario, law, **override):
     return C.metrics(run, scenario)["rms"]
 
 
-def test_inertia_scaled_gain_is_rho_times_the_joint_inertia():
+def test_the_default_gain_is_beta_kappa_times_the_joint_inertia():
+    """With the scenario's ``K_Di = kappa M_i`` the joint's feedback is ``kappa H_ii`` of the
+    rigid arm (its mass matrix, Pinocchio-checked elsewhere)."""
     scenario = C.SCENARIOS["panda_rigid"]()
-    P = C.friction_gain_for(scenario.model, scenario.q0)
+    P = C.friction_gain_for(scenario)
     H = mass_matrix(scenario.model, scenario.q0)
-    np.testing.assert_allclose(P, C.RHO_FRICTION * np.outer(np.diag(H), np.ones(3)))
+    np.testing.assert_allclose(
+        P, BETA_FRICTION * GAINS["kappa"] * np.outer(np.diag(H), TERM_WEIGHTS), rtol=1e-10)
 
 
 def test_direct_friction_tracks_the_rigid_panda_as_the_direct_law():

@@ -15,6 +15,7 @@ import numpy as np
 from rcac_ros import params
 from rcac_ros.core.channels import parse_channels
 from rcac_ros.core.composite import RecursiveCompositeController
+from rcac_ros.core.joint_friction import P_FRICTION
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import declare, joint_order
 from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
@@ -145,7 +146,8 @@ def read_parameters(node, v):
             model, K_D=gains["K_D"], Lambda=gains["Lambda"], P=gains["P"],
             gamma=v["gamma"], lam=v["lambda"], h=h, theta_hat0=config.theta0,
             joint_friction=v["joint_friction"], friction_hat0=config.friction0,
-            P_friction=list(v["P_friction"]), **adaptation_options(v, channels))
+            P_friction=P_FRICTION if v["P_friction"] is None else list(v["P_friction"]),
+            **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(f"gains: {err}") from None
     return config, ctrl

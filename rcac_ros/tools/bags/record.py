@@ -46,6 +46,7 @@ TOPIC_TYPES = (
     (topics.DESIRED_STATE, "sensor_msgs/msg/JointState"),
     (topics.DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
     (topics.resolve(topics.PAYLOAD, topics.SIMULATOR_NODE), "geometry_msgs/msg/InertiaStamped"),
+    (topics.FRICTION_ESTIMATES, "std_msgs/msg/Float64MultiArray"),
 )
 
 STORAGE_CHOICES = STORAGES

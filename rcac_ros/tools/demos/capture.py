@@ -545,7 +545,8 @@ def run(args):
         hook = capture_hook(at, release, payload, log)
         try:
             bag = args.bag or run_demo(args.duration, out, args.storage, log=log, hook=hook,
-                                       prog="rcac capture-demo", overrides=(slowed, {}))
+                                       prog="rcac capture-demo",
+                                       controller_overrides=slowed)
         except KeyboardInterrupt:
             print("rcac capture-demo: interrupted; both nodes stopped", file=sys.stderr)
             return 130

@@ -48,6 +48,8 @@ from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
+from rcac_ros.core.joint_friction import P_FRICTION as P_FRICTION_DEFAULT
+from rcac_ros.core.joint_friction import feedback_scaled_gain
 from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.scenarios import controller, FIXED_P
 
@@ -58,13 +60,10 @@ LS_FORGETTING = 1.0
 #: where the scenario gives none.
 NATURAL_START = "natural_default"
 
-#: ``rho_f`` of the friction-aware direct and paper laws: ``P_f,i = rho_f H_ii(q0)`` on each
-#: joint's three terms (:func:`friction_gain_for`, doc/design.md §7 "Gain and step").
-RHO_FRICTION = 1000.0
-
-#: The value of ``P_friction`` in :data:`LAWS` that :func:`make_controller` replaces by
-#: :func:`friction_gain_for` of the scenario's model and start.
-INERTIA_SCALED = "rho_f H_ii(q0)"
+#: ``P_friction`` of the friction-aware direct and paper laws: the library's default, each
+#: joint's gain scaled from its feedback at the start (doc/design.md §7 "Joint terms without
+#: per-arm tuning").
+INERTIA_SCALED = P_FRICTION_DEFAULT
 
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
 #: "4,6" and "4..7" are the best fixed-m channel sets found by a search over both scenarios
@@ -212,17 +211,12 @@ def scenario_names(names):
     return out
 
 
-def friction_gain_for(model, q, rho=RHO_FRICTION):
-    """``P_friction`` (n, 3): ``rho H_ii(q)`` on joint i's three terms (doc/design.md §7).
-
-    The explicit step of the tracking term is stable on joint i while
-    ``h P_f,i |Y_f,i|^2 / H_ii`` stays below the feedback's rate ``kappa``; a gain
-    proportional to the joint's inertia (the model's, which a plant's armature only raises)
-    keeps that ratio the same on every joint.
-    """
-    from rcac_ros.core.crba import mass_matrix
-    H = mass_matrix(model, np.asarray(q, dtype=float))
-    return rho * np.repeat(np.diag(H)[:, None], 3, axis=1)
+def friction_gain_for(scenario):
+    """``P_friction`` (n, 3) the friction-aware laws use on ``scenario``: the library's
+    :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at its start (doc/design.md
+    §7)."""
+    return feedback_scaled_gain(scenario.model, np.asarray(scenario.gains["K_D"], float),
+                                scenario.q0)
 
 
 def make_controller(scenario, law, laws=None):
@@ -232,8 +226,6 @@ def make_controller(scenario, law, laws=None):
     if isinstance(kwargs.get("theta_hat0"), str):
         start = scenario.gains.get("theta_hat0")
         kwargs["theta_hat0"] = default_start(scenario.model.theta()) if start is None else start
-    if isinstance(kwargs.get("P_friction"), str):              # INERTIA_SCALED
-        kwargs["P_friction"] = friction_gain_for(scenario.model, scenario.q0)
     return controller(kind, scenario.model, kwargs)
 
 

@@ -70,13 +70,14 @@ def warm_kernels(log, prog="rcac demo"):
 
 
 def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=2.0,
-             start_timeout=120.0, stall_timeout=30.0, log=None, overrides=({}, {}), hook=None,
-             prog="rcac demo"):
+             start_timeout=120.0, stall_timeout=30.0, log=None, controller_overrides=None,
+             simulator_overrides=None, hook=None, prog="rcac demo"):
     """Run the two nodes in lockstep, record, stop everything; return the bag path.
 
-    ``overrides``: extra parameters of the controller and of the simulator; ``hook``:
-    ``hook(context, executor)`` once the recorder runs, returning a callable called with
-    the simulated time (s, None before the first /clock) while the run goes (what
+    ``controller_overrides`` and ``simulator_overrides`` (name -> value) add to the
+    lockstep parameters of :func:`demo_overrides` (e.g. the plant's model and engine);
+    ``hook``: ``hook(context, executor)`` once the recorder runs, returning a callable called
+    with the simulated time (s, None before the first /clock) while the run goes (what
     ``rcac capture-demo`` changes at run time); ``prog`` prefixes the log lines.
 
     Raises
@@ -95,7 +96,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     warm_kernels(log, prog)
     logs = os.path.join(out, "logs")
     ctrl_over, sim_over = demo_overrides(duration, dt)
-    ctrl_over, sim_over = dict(ctrl_over, **overrides[0]), dict(sim_over, **overrides[1])
+    ctrl_over.update(controller_overrides or {})
+    sim_over.update(simulator_overrides or {})
     tick = None
     stop = StopFlag()
     children = []
@@ -127,8 +129,10 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                 if stop:
                     raise KeyboardInterrupt
 
+            joint_terms = topics.resolve(topics.FRICTION_ESTIMATES)   # joint_friction only
             ctrl_topics = [n for n, _ in recorder.topics
-                           if n.startswith(f"/{topics.CONTROLLER_NODE}/")]
+                           if n.startswith(f"/{topics.CONTROLLER_NODE}/")
+                           and (n != joint_terms or ctrl_over.get("joint_friction"))]
             ctrl_topics.append("/" + topics.EFFORT_COMMANDS)
             ctrl_cmd = node_command("controller", overrides=ctrl_over)
             children.append(Child("controller", ctrl_cmd, env,

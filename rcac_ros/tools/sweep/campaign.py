@@ -54,7 +54,7 @@ LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 GEOMETRIES = ("euclidean", "natural", "natural_log_det", "natural_barrier")
 #: The columns that differ from one execution of a run to the next (everything else is equal).
 TIMING = ("wall_time_s", "cpu_time_s")
-MODELS = ("css_arm", "panda")
+MODELS = ("css_arm", "panda", "ur5", "xarm7")
 DISTRIBUTIONS = ("normal", "uniform", "loguniform", "choice", "grid")
 
 #: quantity -> (kind, size): kind "float" (>= 0 unless in POSITIVE), "int" (>= 0),
@@ -75,7 +75,7 @@ QUANTITIES = {
     # the plant's joint terms, per joint (doc/design.md §7), and the gain of the joint
     # estimates of composite_friction
     "joint_damping": ("float", 7), "joint_friction": ("float", 7), "joint_armature": ("float", 7),
-    "P_friction": ("float", 1),
+    "P_friction": ("float", 1),     # absent: the library's default (doc/design.md §7)
     # c of the barrier metric (geometries natural and natural_barrier, doc/design.md §8)
     "barrier_c": ("float", 1),
 }
@@ -102,6 +102,17 @@ MODEL_DEFAULTS = {
                   tool=(0.0, 0.0, 0.107), initial_estimate="nominal",
                   trajectory=dict(type="sinusoid")),
 }
+#: The other URDF arms of example-robot-data: the Panda's gains at their scale
+#: (:func:`~rcac_ros.tools.scenarios.gains_for`, last link adapting from the URDF's), no
+#: tool; the sinusoids of the Panda's motion about each arm's posture (:data:`POSTURES`).
+for _arm in ("ur5", "xarm7"):
+    MODEL_DEFAULTS[_arm] = dict(MODEL_DEFAULTS["panda"], tool=(0.0, 0.0, 0.0))
+#: example-robot-data's URDF of each URDF arm (the Panda: :func:`load_panda`).
+URDFS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "xarm7": "xarm_description/urdf/xarm7.urdf"}
+#: The centre of each URDF arm's sinusoids (rad): the Panda's "ready", the UR5 with its
+#: forearm level and wrist down, the xArm7 with its elbow and wrist bent.
+POSTURES = {"panda": READY, "ur5": (0.0, -1.2, 1.4, -1.8, -1.57, 0.0),
+            "xarm7": (0.0, -0.3, 0.0, 1.0, 0.0, 1.3, 0.0)}
 SCENARIO_KEYS = ("model", "law", "trajectory", "duration", "gains", "substeps", "error_limit",
                  "initial_estimate", "payload_time", "engine", "adapt_all")
 TOP_KEYS = ("name", "seed", "samples", "paired", "scenario", "vary")
@@ -239,8 +250,8 @@ def check_trajectory(value, model):
                                     f"{key}.amplitude"),
                    period=number(value.get("period", 20.0), f"{key}.period", 0.0, True))
         return out
-    defaults = dict(offset=READY, amplitude=AMPLITUDE, frequency=FREQUENCY) \
-        if model == "panda" else {}
+    defaults = dict(offset=POSTURES[model], amplitude=AMPLITUDE, frequency=FREQUENCY) \
+        if model in POSTURES else {}
     for k in ("offset", "amplitude", "frequency"):
         if k not in value and k not in defaults:
             fail(f"{key}.{k}", f"missing (no default for {model})")
@@ -285,7 +296,7 @@ def validate(doc, source="campaign"):
                  channels=None, noise_q=0.0, noise_qd=0.0, delay=0, payload_mass=0.0,
                  payload_com=[0.0, 0.0, 0.0], payload_inertia=[0.0, 0.0, 0.0],
                  estimate_error=0.0, trajectory_scale=1.0, joint_damping=[0.0] * 7,
-                 joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=30.0,
+                 joint_friction=[0.0] * 7, joint_armature=[0.0] * 7, P_friction=None,
                  geometry="euclidean", start_mass_scale=1.0, start_com_shift=[0.0, 0.0, 0.0],
                  barrier_c=BARRIER_C)
     for q in QUANTITIES:
@@ -303,8 +314,9 @@ def validate(doc, source="campaign"):
         payload_time=number(sc.get("payload_time", 0.0), "scenario.payload_time", 0.0),
         adapt_all=sc.get("adapt_all", False))
     if not isinstance(out["scenario"]["adapt_all"], bool) or (
-            out["scenario"]["adapt_all"] and model != "panda"):
-        fail("scenario.adapt_all", "expected true or false (panda only: P on every link)")
+            out["scenario"]["adapt_all"] and model not in POSTURES):
+        fail("scenario.adapt_all", "expected true or false (URDF arms only: P on every "
+             "link)")
     engine = check_engine(sc.get("engine", ENGINES[0]), "scenario.engine")
     if engine != ENGINES[0]:         # recorded only when not the default: older results resume
         out["scenario"]["engine"] = engine
@@ -397,6 +409,8 @@ def input_columns(inputs):
             row[q] = "" if v is None else json.dumps(v)
         elif q in ("law", "geometry"):
             row[q] = v
+        elif v is None:                 # P_friction: the library's default (0: a gain is > 0)
+            row[q] = 0.0
         elif q == "delay":
             row[q] = int(v)
         else:
@@ -409,6 +423,14 @@ def nominal_model(name):
     """The controller's model of a scenario (loaded once per process)."""
     if name == "css_arm":
         return css_arm()
+    if name in URDFS:
+        from rcac_ros.core.urdf import model_from_urdf
+        from rcac_ros.tools.robots import example_robot_urdf
+        path = example_robot_urdf(URDFS[name])
+        if path is None:
+            raise ConfigError(f"scenario.model: {name}: example-robot-data's {URDFS[name]} "
+                              "not found (the 'robots' extra: pip install 'rcac_ros[robots]')")
+        return model_from_urdf(path).replace(damping=0.0, friction=0.0)
     return load_panda()
 
 
@@ -419,9 +441,10 @@ def controller_for(campaign, inputs, model, theta_hat0=None):
     law = inputs["law"]
     g = dict(K_D=inputs["K_D"], Lambda=inputs["Lambda"], P=inputs["P"],
              gamma=0.0 if law == "direct" else inputs["gamma"], lam=inputs["lam"], h=sc["h"])
-    friction = dict(joint_friction=True, P_friction=inputs["P_friction"]) \
-        if law == "composite_friction" else {}
-    if sc["model"] == "panda":
+    friction = dict(joint_friction=True) if law == "composite_friction" else {}
+    if friction and inputs["P_friction"] is not None:
+        friction["P_friction"] = inputs["P_friction"]
+    if sc["model"] in POSTURES:
         gamma = g["gamma"]
         g = gains_for(model, kappa=g["K_D"], Lambda=g["Lambda"], rho=g["P"], gamma=gamma,
                       lam=g["lam"], h=g["h"], adapt_all=sc["adapt_all"])
@@ -453,10 +476,12 @@ def trajectory_for(campaign, inputs, model):
         q0 = np.array(PAPER_Q0[:model.n]) if model.n <= len(PAPER_Q0) else np.zeros(model.n)
         return (PaperTrajectory(q0, tr["reading"], tr["amplitude"] * scale, tr["period"]),
                 q0, np.zeros(model.n))
-    amplitude = np.broadcast_to(np.array(tr["amplitude"]), model.n) * scale
-    trajectory = SinusoidTrajectory(np.broadcast_to(np.array(tr["offset"]), model.n),
-                                    amplitude, np.broadcast_to(np.array(tr["frequency"]),
-                                                               model.n))
+
+    def per_joint(v):                   # one value, or one per joint (the first n of 7)
+        v = np.array(v)
+        return np.broadcast_to(v if v.size == 1 else v[:model.n], model.n)
+    trajectory = SinusoidTrajectory(per_joint(tr["offset"]), per_joint(tr["amplitude"]) * scale,
+                                    per_joint(tr["frequency"]))
     return trajectory, None, None
 
 
