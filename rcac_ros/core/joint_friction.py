@@ -66,7 +66,7 @@ JFILT_COLS = 18
 
 #: Default ``P_friction``: each joint's gain scaled from its feedback at the start
 #: (:func:`feedback_scaled_gain`, doc/design.md §7 "Joint terms without per-arm tuning").
-P_FRICTION = "feedback"
+from .law_options import P_FRICTION  # noqa: E402  (defined where the boundaries read it)
 #: ``beta_f`` (s) of :func:`feedback_scaled_gain`: the joint terms' rate per unit of the
 #: weighted ``|Y_f,i|^2``.
 BETA_FRICTION = 30.0

@@ -8,7 +8,8 @@ controllers use the same functions and values (:mod:`rcac_ros.core.channels` and
 - ``channels``: the prediction channels of the composite law (doc/design.md §4),
   :func:`parse_channels`;
 - ``barrier_c``: the metric ``"barrier"`` of the natural geometry (doc/design.md §8),
-  :data:`BARRIER_C` and :data:`BARRIER_C_MIN`.
+  :data:`BARRIER_C` and :data:`BARRIER_C_MIN`;
+- ``P_friction``: the joint terms' gain (doc/design.md §7), default :data:`P_FRICTION`.
 """
 
 import numpy as np
@@ -20,6 +21,10 @@ from rcac_ros.errors import GainError
 BARRIER_C = 1000.0
 #: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
 BARRIER_C_MIN = 1e-6
+
+#: default ``P_friction``: the joint terms' gain scaled from each joint's feedback at the
+#: first posture (:func:`rcac_ros.core.joint_friction.feedback_scaled_gain`)
+P_FRICTION = "feedback"
 
 #: The value of ``channels`` that gives every joint.
 ALL = "all"

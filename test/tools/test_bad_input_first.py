@@ -62,6 +62,7 @@ CASES = [
     (["payload-demo", "--duration", "3", "--jump", "5"], "--jump: the payload must attach"),
     (["friction-demo", "--duration", "-5"], "argument --duration: must be > 0"),
     (["capture-demo", "--mass", "-3"], "argument --mass: must be > 0"),
+    (["friction-ros", "--duration", "-1"], "argument --duration: must be > 0"),
     (["warm", "--jobs", "0"], "argument --jobs: must be an integer >= 1"),
     (["warm", "nonsense"], "unknown group 'nonsense'"),
     (["capture-demo", "--at", "50"], "--at: the capture must come before the end of the run"),

@@ -48,8 +48,7 @@ from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
-from rcac_ros.core.joint_friction import P_FRICTION as P_FRICTION_DEFAULT
-from rcac_ros.core.joint_friction import feedback_scaled_gain
+from rcac_ros.core.law_options import P_FRICTION as P_FRICTION_DEFAULT
 from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.scenarios import controller, FIXED_P
 
@@ -215,6 +214,7 @@ def friction_gain_for(scenario):
     """``P_friction`` (n, 3) the friction-aware laws use on ``scenario``: the library's
     :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at its start (doc/design.md
     §7)."""
+    from rcac_ros.core.joint_friction import feedback_scaled_gain
     return feedback_scaled_gain(scenario.model, np.asarray(scenario.gains["K_D"], float),
                                 scenario.q0)
 
