@@ -1,0 +1,361 @@
+"""The sources of doc/results.md: one JSON file each, and how each is rendered.
+
+To add a source: write a ``render(data) -> str`` (markdown) for the tool's JSON, add a
+:class:`Source` to :data:`SOURCES` (its command, the JSON file the command writes inside
+``{out}``, a title and a paragraph on what it measures), run ``python -m
+rcac_ros.tools.results record NAME`` and ``make results``, and commit the JSON with the page.
+Every function here reads the JSON only: rendering imports neither numba nor rclpy.
+"""
+
+import math
+import re
+
+from rcac_ros.tools.demos.compare_report import markdown as compare_markdown
+
+
+def fmt(v, digits=3):
+    """A number as the docs print it: ``digits`` significant digits, ``-`` for none."""
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, int):
+        return f"{v:,}".replace(",", " ")
+    return f"{v:.{digits}g}"
+
+
+def pct(v):
+    return "-" if v is None else f"{100 * v:.3g} %"
+
+
+def table(header, rows):
+    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def law_table(report, laws, keys=None, digits=4):
+    """Rows: the numeric figures of each law's report (or ``keys``); columns: ``laws``."""
+    first = report[laws[0]]
+    keys = keys or [k for k, v in first.items() if isinstance(v, (int, float)) and
+                    not isinstance(v, bool)]
+    return table(["figure", *laws], [[k, *(fmt(report[law].get(k), digits) for law in laws)]
+                                     for k in keys])
+
+
+# --- renderers, one per source --------------------------------------------------------------
+
+def render_experiment(d):
+    laws = ["direct", "composite"]
+    body = law_table(d, laws)
+    c, r = d["composite"], d["direct"]
+    s = d.get("settings", {})
+    body += (f"\n\nSettings: {s.get('duration', '-')} s, reading `{s.get('trajectory', '-')}`, "
+             f"K_D {fmt(s.get('K_D'))}, Lambda {fmt(s.get('Lambda'))}, P {fmt(s.get('P'))}, "
+             f"gamma {fmt(s.get('gamma'))}, lambda {fmt(s.get('lam'))}, h {fmt(s.get('h'))} s, "
+             f"engine `{s.get('engine', '-')}`.\n\n"
+             f"Composite over direct: RMS tracking error "
+             f"{c['rms_tracking_error'] / r['rms_tracking_error']:.2f}x, over the last 5 s "
+             f"{c['rms_tracking_error_last_5s'] / r['rms_tracking_error_last_5s']:.2f}x; final "
+             f"prediction error {c['final_abs_prediction_error']:.3g} against "
+             f"{r['final_abs_prediction_error']:.3g} N m.")
+    return body
+
+
+#: goal of each ratio of ``rcac bench core`` (doc/tools.md, ``rcac bench core``)
+CORE_GOALS = {
+    "paper_over_pin_rnea_n7": ("<=", 3.0), "controller_n7_over_pin_rnea_n7": ("<=", 3.0),
+    "controller_over_pin_rnea_panda": ("<=", 3.0), "controller_over_pin_rnea_ur5": ("<=", 3.0),
+    "controller_n224_over_n28": ("<=", 10.0), "friction_n224_over_n28": ("<=", 10.0),
+    "slotine_li_over_controller_n56": (">=", 20.0), "all_over_paper_n7": ("<=", 2.0),
+    "all_over_slotine_li_n56": ("<=", 0.1), "friction_over_paper_n7": ("<=", 1.3),
+    "barrier_over_paper_closed_loop_n7": ("<=", 1.3),
+    "log_det_over_paper_closed_loop_n7": ("<=", 1.3),
+}
+
+CORE_COLUMNS = (("controller_us", "paper law"), ("pin_rnea_us", "pin.rnea"),
+                ("slotine_li_us", "Slotine-Li"), ("simulator_us", "simulator"),
+                ("power_us", "`[1,\"power\"]`"), ("all_us", "`\"all\"`"),
+                ("all_explicit_us", "`\"all\"` explicit"), ("least_squares_us", "least squares"),
+                ("natural_us", "natural"), ("friction_us", "joint terms"))
+
+
+def _goal_rows(ratios):
+    rows = []
+    for key, value in ratios.items():
+        goal = CORE_GOALS.get(key)
+        if goal is None:
+            rows.append([f"`{key}`", f"{value:.3g}", "", ""])
+        else:
+            op, bound = goal
+            met = value <= bound if op == "<=" else value >= bound
+            rows.append([f"`{key}`", f"{value:.3g}", f"{op} {bound:g}", "met" if met else
+                         "**missed**"])
+    return rows
+
+
+def render_bench_core(d):
+    cols = [(k, h) for k, h in CORE_COLUMNS if any(k in r for r in d["rows"])]
+    body = ["µs per step, medians over blocks:", "",
+            table(["chain", "n", *(h for _, h in cols)],
+                  [[r["model"], r["n"], *(fmt(r.get(k), 4) for k, _ in cols)]
+                   for r in d["rows"]]),
+            "", "Ratios of the medians above:", "",
+            table(["ratio", "measured", "goal", ""], _goal_rows(d["ratios"]))]
+    if d.get("goals"):
+        body += ["", "Cost goals, the two steps timed side by side block by block (median of "
+                 "the per-block ratios):", "",
+                 table(["ratio", "measured", "goal", ""], _goal_rows(d["goals"]))]
+    ops = d.get("operations")
+    if ops:
+        fit = ops["rcac_all_mul_fit"]
+        c7 = ops["rcac_n7"]
+        body += ["", "Operations per step, counted on the kernels' own source "
+                 "(`rcac_ros/tools/bench/opcount.py`):", "",
+                 table(["law", "multiplications (incl. divisions)", "additions"], [
+                     ["paper law, n = 7", c7["mul"] + c7["div"], c7["add"]],
+                     ["paper law, per link", fmt(ops["rcac_per_link_mul"], 4),
+                      fmt(ops["rcac_per_link_add"], 4)],
+                     ["the paper's count, per link", ops["paper_per_link"]["mul"],
+                      ops["paper_per_link"]["add"]],
+                     ["Slotine-Li, n = 7",
+                      ops["slotine_li_n7"]["mul"] + ops["slotine_li_n7"]["div"],
+                      ops["slotine_li_n7"]["add"]],
+                     *([k.replace("rcac_", "").replace("_n7", "") + ", n = 7",
+                        ops[k]["mul"] + ops[k]["div"], ops[k]["add"]]
+                       for k in ("rcac_all_explicit_n7", "rcac_power_n7",
+                                 "rcac_least_squares_n7") if k in ops)]),
+                 "", f"`channels=\"all\"`: {fit['n2']:.0f} n^2 {fit['n']:+.0f} n "
+                 f"{fit['1']:+.0f} multiplications (fit on n = 7, 14, 21), against the "
+                 f"{fit['wang_n2']} n^2 the paper cites for Wang's O(n^2) law."]
+    return "\n".join(body)
+
+
+def render_bench_ros_modes(d):
+    from rcac_ros.tools.readme_bench import ROWS
+    cols = list(d["columns"])
+    rows = [[label, *(fmt_row(d["columns"][c]) for c in cols)] for label, fmt_row in ROWS]
+    return d["conditions"] + "\n\n" + table(["", *cols], rows)
+
+
+def render_timings(d):
+    from rcac_ros.tools.readme_timings import TEMPLATE
+    return TEMPLATE.format(**d)
+
+
+PAYLOAD_KEYS = ("rms_error_before_jump", "rms_error_first_window_after_jump",
+                "rms_error_last_window", "peak_error_norm_after_jump", "link7_mass_true",
+                "link7_mass_estimate_end", "link7_mass_relative_error_end",
+                "link7_first_moments_relative_error_end", "link7_mass_settling_time_5pct",
+                "max_torque_over_effort_limit", "wall_time_s")
+
+
+def render_payload(d):
+    laws = [k for k in ("composite", "direct", "fixed") if k in d]
+    s = d.get("settings", {})
+    keys = [k for k in PAYLOAD_KEYS if k in d[laws[0]]]
+    return (law_table(d, laws, keys) + "\n\nRMS of `q - q_d` over all joints (rad) in 1 s "
+            f"windows; payload {fmt(s.get('payload_mass'))} kg attached at "
+            f"{fmt(s.get('jump'))} s of {fmt(s.get('duration'))} s.")
+
+
+def render_friction(d):
+    rows = [[term, pct(d["worst_relative_error"][term]), pct(d["goals"][term]),
+             "met" if d["met"][term] else "**missed**"] for term in d["worst_relative_error"]]
+    return (table(["joint term", "worst relative error over the 7 joints", "goal", ""], rows)
+            + f"\n\nRMS tracking error {fmt(d['rms_error_rad'])} rad over "
+            f"{fmt(d['duration_s'])} s; links {'adapting' if d['adapt_links'] else 'known'}.")
+
+
+def render_compare(d):
+    report = {k: v for k, v in d.items() if k != "settings"}
+    return compare_markdown(report)
+
+
+def render_consistency_campaign(d):
+    geos = list(d["by_geometry"])
+    keys = list(d["by_geometry"][geos[0]])
+    rows = [[k, *(fmt(d["by_geometry"][g][k], 4) if not isinstance(d["by_geometry"][g][k], list)
+                  else (", ".join(map(str, d["by_geometry"][g][k])) or "none") for g in geos)]
+            for k in keys]
+    out = [f"`{d['campaign']}`, {d['samples']} samples, paired: {fmt(d['paired'])}.", "",
+           table(["figure", *geos], rows)]
+    for key, paired in d.items():
+        if key.startswith("paired_") and isinstance(paired, dict):
+            out += ["", f"Per sample, {key[len('paired_'):].replace('_over_', ' over ')}:", "",
+                    table(["figure", "value"], [[k, fmt(v, 4)] for k, v in paired.items()])]
+    return "\n".join(out)
+
+
+def render_noise(d):
+    s = d["settings"]
+    rows = []
+    for name, r in d.items():
+        if name == "settings":
+            continue
+        g = r["theta_norm_growth"]
+        dev = r.get("deviation")
+        rows.append([name, fmt(r["theta_norm"][-1], 4), f"{100 * g['last_half_rise']:+.1f} %",
+                     f"{g['exponent']:.2f}", fmt(g["still_growing"]), fmt(r["theta_error"][-1], 4),
+                     fmt(dev[-1], 4) if dev else "-",
+                     pct(r["deviation_weak_share"]["0.0001"]) if "deviation_weak_share" in r
+                     else "-", fmt(r["rms"]), fmt(r["rms_last_minute"]),
+                     pct(r["adapting_share"])])
+    return (f"{s['duration']:g} s per run, noise sigma {s['sigma_q']:g} rad on q and "
+            f"{s['sigma_qd']:g} rad/s on qd; ‖θ‖ of the truth {s['theta_norm_true']:.0f}; "
+            f"`sigma`: leakage {s['sigma_fixed']:g}, `switching`: leakage "
+            f"{s['sigma_switching']:g} with `leakage_bound` {s['M0_factor']:g} ‖θ_i‖ per link. "
+            "\"last half\": the least-squares rise of ‖θ̂‖ over the second half relative to its "
+            f"mean there (\"growing\" above {100 * s['growth_tol']:g} %), ~t^a the exponent "
+            "fitted there; \"from clean\": ‖θ̂ − θ̂_clean‖ at the end, \"poorly excited\" its "
+            "share in the directions excited less than 1e-4 of the most.\n\n"
+            + table(["law / variant", "‖θ̂‖ end", "last half", "~t^a", "growing",
+                     "‖θ̂ − θ‖ end", "from clean", "poorly excited", "RMS (rad)",
+                     "RMS last min", "adapting"], rows))
+
+
+def render_noise_sources(d):
+    rows = [[name, fmt(r["sigma_q"]), fmt(r["sigma_qd"]), fmt(r["gamma"]), r["seed"],
+             fmt(r["deviation_end"], 4), fmt(r["theta_norm_end"], 4),
+             fmt(r["cosine_with_both"], 3)]
+            for name, r in d.items() if name != "settings"]
+    return (f"The paper law, {d['settings']['duration']:g} s per run; deviation: ‖θ̂ − "
+            "θ̂_clean‖ at the end; cosine: of that deviation with the run `both`'s.\n\n"
+            + table(["run", "sigma_q", "sigma_qd", "gamma", "seed", "deviation end",
+                     "‖θ̂‖ end", "cosine"], rows))
+
+
+# --- the table of sources -------------------------------------------------------------------
+
+class Source:
+    """One block of doc/results.md. ``command``: the argv that writes ``output`` into
+    ``{out}`` (``rcac`` is the venv's); None when a maintenance tool writes the JSON itself
+    (``shown`` names it)."""
+
+    def __init__(self, title, about, render, command=None, output=None, shown=None):
+        self.title, self.about, self.render = title, about, render
+        self.command, self.output = command, output
+        self.shown = shown or " ".join(a.replace("{out}", "results/run") for a in command)
+        self.anchor = re.sub(r"[^\w\- ]", "", title.lower()).replace(" ", "-")
+
+
+SOURCES = {
+    "experiment": Source(
+        "The paper's experiment",
+        "Section 4 on the CSS arm for the direct (gamma = 0) and the composite law: the "
+        "paper's gains, the velocity reading of the desired motion, `theta_hat(0) = 0` "
+        "(doc/design.md §5). Figures of merit of `rcac_ros/tools/metrics.py`.",
+        render_experiment, ["rcac", "experiment", "--quiet", "--out", "{out}"], "metrics.json"),
+    "bench_core": Source(
+        "Speed of one step",
+        "The controller step against Pinocchio's `pin.rnea` on the same chain, the "
+        "non-recursive Slotine-Li baseline (compiled the same way), the simulator (RK4, four "
+        "ABA calls) and the recursive law's variants, on the CSS arm repeated to n = 224 and "
+        "the Panda and UR5 URDFs.",
+        render_bench_core, ["rcac", "bench", "core", "--json", "{out}/bench.json"],
+        "bench.json"),
+    "bench_ros_modes": Source(
+        "Timing over ROS, per controller mode",
+        "The simulator (real time, its own 500 Hz deadline loop) and the controller as two "
+        "processes, K_D = 1000, with a third process echoing a JointState (a plain DDS ping), "
+        "once per controller mode. The rows that count are ratios of two figures of the same "
+        "run: effort period p99 over state period p99 (goal <= 1.1) and state→effort latency "
+        "p50 over the ping's one-way p50 (doc/nodes.md, \"Timing\").",
+        render_bench_ros_modes, shown="make readme-bench"),
+    "timings": Source(
+        "The two make targets",
+        "`make demo` and `make test` timed on a fresh clone, as a new user runs them (venv, "
+        "install, the one-time compile of the kernels, the run).",
+        render_timings, shown="make readme-timings"),
+    "payload": Source(
+        "An unknown payload",
+        "The Panda with gravity, from the URDF's nominal parameters, adapting link 7 only; a "
+        "2 kg payload attached in the simulator at 5 s. The composite law, the direct law "
+        "(gamma = 0) and a fixed-parameter computed-torque law with the same feedback "
+        "(doc/tools.md, `rcac payload-demo`).",
+        render_payload, ["rcac", "payload-demo", "--quiet", "--out", "{out}"], "metrics.json"),
+    "friction": Source(
+        "Joint friction and rotor inertia learnt, links known",
+        "The Panda on the built-in simulator with armature 0.1 kg m^2, damping 0.5 N m s/rad "
+        "and tanh friction 0.5 N m on every joint, the law `channels=\"all\"` with "
+        "`joint_friction=True` from zero joint estimates (doc/tools.md, "
+        "`rcac friction-demo`).",
+        render_friction, ["rcac", "friction-demo", "--out", "{out}"], "metrics.json"),
+    "friction_adapt_links": Source(
+        "Joint friction and rotor inertia learnt, links adapting",
+        "As above, every link adapting too from the URDF's nominal parameters.",
+        render_friction, ["rcac", "friction-demo", "--adapt-links", "--out", "{out}"],
+        "metrics.json"),
+    "compare": Source(
+        "Every adaptive law compared",
+        "Every law of `rcac compare` on the paper's experiment (`paper`) and the payload run "
+        "(`payload`), each with the scenario's gains. `ident.` counts the parameter "
+        "combinations the run excited, `consist.` the links whose final estimates are a "
+        "physical body; µs/step is the in-loop time (a noisy figure: the cost ratios are "
+        "those of \"Speed of one step\").",
+        render_compare, ["rcac", "compare", "--duration", "20", "--out", "{out}"],
+        "compare.json"),
+    "compare_consistency": Source(
+        "Physically consistent estimates compared",
+        "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
+        "laws from the same start (`*_nat_start`) and from the paper's `theta_hat(0) = 0` "
+        "(doc/design.md §8).",
+        render_compare,
+        shown="rcac compare --duration 20 --laws paper paper_nat_start paper_natural all "
+              "all_nat_start all_natural slotine_li slotine_li_natural"),
+    "consistency_campaign": Source(
+        "Physically consistent estimates over a campaign",
+        "`campaigns/consistency.yaml`: the Euclidean law, the natural geometry with its "
+        "default (barrier) metric and with the log-det metric on the same random draws "
+        "(doc/campaigns.md).",
+        render_consistency_campaign,
+        shown="rcac sweep campaigns/consistency.yaml; "
+              "python doc/compare/consistency/campaign_summary.py"),
+    "noise": Source(
+        "Sensor noise over 10 minutes",
+        "The paper's experiment with white Gaussian noise on what the controller reads, per "
+        "law and variant: `clean` (no noise, the reference), `plain`, `dead zone`, `sigma` "
+        "(fixed leakage) and `switching` (doc/tools.md, `rcac bench noise`).",
+        render_noise, shown="rcac bench noise"),
+    "noise_sources": Source(
+        "Sensor noise: where the drift comes from",
+        "The paper law's drift by noise source and by term (`gamma = 0`: the tracking term "
+        "alone).",
+        render_noise_sources, shown="rcac bench noise --sources"),
+}
+
+
+def headlines(docs):
+    """The README's results lines (at most six), computed from the sources' data."""
+    e, b, c = docs["experiment"], docs["bench_core"], docs["compare"]
+    comp, direct = e["composite"], e["direct"]
+    goals = {**b["ratios"], **b.get("goals", {})}
+    p = docs["payload"]
+    pa = c["paper"]
+    anchor = ("paper_over_pin_rnea_n7" if "paper_over_pin_rnea_n7" in goals
+              else "controller_n7_over_pin_rnea_n7")
+    same = f"{pa['all']['rms']:.3g}" == f"{pa['slotine_li']['rms']:.3g}"
+    anchor = ("paper_over_pin_rnea_n7" if "paper_over_pin_rnea_n7" in goals
+              else "controller_n7_over_pin_rnea_n7")
+    same = f"{pa['all']['rms']:.3g}" == f"{pa['slotine_li']['rms']:.3g}"
+    lines = [
+        f"- **Paper's experiment**: composite RMS tracking error "
+        f"{comp['rms_tracking_error']:.3g} rad against {direct['rms_tracking_error']:.3g} for "
+        f"direct adaptation; final prediction error {comp['final_abs_prediction_error']:.2g} "
+        f"against {direct['final_abs_prediction_error']:.3g} N m "
+        "([results](doc/results.md#the-papers-experiment)).",
+        f"- **Cost**: one step of the paper's law {b['rows'][0]['controller_us']:.3g} µs at "
+        f"n = 7, {goals[anchor]:.2f}x "
+        f"Pinocchio's `rnea`; {goals['slotine_li_over_controller_n56']:.0f}x faster than the "
+        "non-recursive Slotine-Li law at n = 56 ([results](doc/results.md#speed-of-one-step)).",
+        f"- **Unknown payload**: last-second RMS {p['composite']['rms_error_last_window']:.2g} "
+        f"rad composite, {p['direct']['rms_error_last_window']:.2g} direct, "
+        f"{p['fixed']['rms_error_last_window']:.2g} fixed parameters "
+        "([results](doc/results.md#an-unknown-payload)).",
+        f"- **Identification power**: `channels=\"all\"` tracks the paper's experiment at "
+        f"{pa['all']['rms'] / pa['paper']['rms']:.2f}x the paper law's RMS"
+        + (", as the non-recursive Slotine-Li law does" if same else
+           f" (Slotine-Li: {pa['slotine_li']['rms'] / pa['paper']['rms']:.2f}x)")
+        + " ([results](doc/results.md#every-adaptive-law-compared)).",
+    ]
+    return lines
