@@ -295,6 +295,20 @@ SOURCES = {
         "those of \"Speed of one step\").",
         render_compare, ["rcac", "compare", "--duration", "20", "--out", "{out}"],
         "compare.json"),
+    "compare_joints": Source(
+        "Joint friction and rotor inertia: the Panda on MuJoCo",
+        "The `panda_*` scenarios of `rcac compare` on MuJoCo (damping, dry friction as "
+        "MuJoCo's friction loss, armature; doc/tools.md, `rcac compare`): friction-blind "
+        "laws against the laws with the joint terms (`*_friction`).",
+        render_compare, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
+                         "panda_damping_armature", "--out", "{out}"], "compare.json"),
+    "compare_joints_builtin": Source(
+        "Joint friction and rotor inertia: the same plants on the built-in simulator",
+        "As above with `--engine builtin`: the package's own dynamics, whose dry friction is "
+        "the model's tanh law (inside the laws' model class).",
+        render_compare, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
+                         "panda_damping_armature", "--engine", "builtin", "--out", "{out}"],
+        "compare.json"),
     "compare_consistency": Source(
         "Physically consistent estimates compared",
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
