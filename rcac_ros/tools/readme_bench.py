@@ -89,7 +89,12 @@ def main(argv=None):
     print(json.dumps(data, indent=1))
     if not args.dry_run:
         page.write_source("bench_ros_modes", data, record)
-        page.render()
+        try:
+            page.render()
+        except page.SourceError as err:
+            print(f"readme-bench: stored the source, but doc/results.md was not rendered: {err}",
+                  file=sys.stderr)
+            return 1
         print("readme-bench: wrote doc/results/bench_ros_modes.json, doc/results.md")
     return 0
 

@@ -114,7 +114,12 @@ def main(argv=None):
     print(TEMPLATE.format(**fields))
     if not args.dry_run:
         page.write_source("timings", fields, record)
-        page.render()
+        try:
+            page.render()
+        except page.SourceError as err:
+            print(f"readme-timings: stored the source, but doc/results.md was not rendered: {err}",
+                  file=sys.stderr)
+            return 1
         print("readme-timings: wrote doc/results/timings.json, doc/results.md")
     return 0
 
