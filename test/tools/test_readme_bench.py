@@ -55,7 +55,7 @@ def test_the_table_lists_every_mode_and_row():
     data = {"conditions": "Measured by hand.", "columns": {c: r for c in rb.MODES}}
     lines = render_bench_ros_modes(data).splitlines()
     assert lines[0] == "Measured by hand."
-    assert lines[2] == "| | " + " | ".join(rb.MODES) + " |"
+    assert lines[2] == "|  | " + " | ".join(rb.MODES) + " |"
     assert len(lines) == 4 + len(rb.ROWS)
     ratio_row = next(x for x in lines if x.startswith("| **effort p99 / state p99**"))
     assert ratio_row.count(f"{r['period_ratio']:.2f}") == len(rb.MODES)

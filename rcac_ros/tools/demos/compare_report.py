@@ -14,7 +14,7 @@ COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", 
            ("payload_mass_error", "payload |m̃|"), ("payload_first_moment_error", "payload ‖h̃‖"))
 
 
-def _cell(v, key):
+def cell(v, key):
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "—"
     if key in ("identifiable", "consistent"):
@@ -37,7 +37,7 @@ def side_by_side(report):
         for law in laws:
             m = rows.get(law)
             cells.append("" if m is None else "diverged" if m["diverged_at"] is not None
-                         else _cell(m["rms"], "rms"))
+                         else cell(m["rms"], "rms"))
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -52,7 +52,7 @@ def markdown(report, n_links=None):
         lines.append("| law | " + " | ".join(h for _, h in COLUMNS) + " |")
         lines.append("|---|" + "---:|" * len(COLUMNS))
         for law, m in rows.items():
-            cells = [_cell(m.get(k), k) for k, _ in COLUMNS]
+            cells = [cell(m.get(k), k) for k, _ in COLUMNS]
             if m["diverged_at"] is not None:
                 cells[0] = f"diverged at {m['diverged_at']:.3f} s"
             lines.append(f"| {law} | " + " | ".join(cells) + " |")

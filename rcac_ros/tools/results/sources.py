@@ -10,7 +10,7 @@ Every function here reads the JSON only: rendering imports neither numba nor rcl
 import math
 import re
 
-from rcac_ros.tools.demos.compare_report import markdown as compare_markdown
+from rcac_ros.tools.demos.compare_report import cell, COLUMNS, side_by_side
 
 
 def fmt(v, digits=3):
@@ -167,9 +167,32 @@ def render_friction(d):
             f"{fmt(d['duration_s'])} s; links {'adapting' if d['adapt_links'] else 'known'}.")
 
 
+#: the columns of ``rcac compare``'s tables that doc/results.md shows (the JSON has them all)
+COMPARE_KEYS = ("rms", "rms_last_5s", "theta_error_end", "max_abs_E", "us_per_step",
+                "identifiable", "consistent", "consistent_steps", "payload_mass_error")
+
+
 def render_compare(d):
+    """RMS side by side, then per scenario the figures of :data:`COMPARE_KEYS`."""
     report = {k: v for k, v in d.items() if k != "settings"}
-    return compare_markdown(report)
+    heads = dict(COLUMNS)
+    out = ["RMS tracking error (rad):", "", side_by_side(report).rstrip()]
+    for name, rows in report.items():
+        keys = [k for k in COMPARE_KEYS if any(m.get(k) is not None for m in rows.values())]
+        body = []
+        for law, m in rows.items():
+            cells = [cell(m.get(k), k) for k in keys]
+            if m["diverged_at"] is not None:
+                cells[0] = f"diverged at {m['diverged_at']:.3f} s"
+            body.append([law, *cells])
+        out += ["", f"`{name}`:", "", table(["law", *(heads[k] for k in keys)], body)]
+    return "\n".join(out)
+
+
+def render_compare_rms(d):
+    """RMS tracking error of every law on every scenario, side by side."""
+    report = {k: v for k, v in d.items() if k != "settings"}
+    return "RMS tracking error (rad):\n\n" + side_by_side(report).rstrip()
 
 
 def render_consistency_campaign(d):
@@ -300,15 +323,15 @@ SOURCES = {
         "The `panda_*` scenarios of `rcac compare` on MuJoCo (damping, dry friction as "
         "MuJoCo's friction loss, armature; doc/tools.md, `rcac compare`): friction-blind "
         "laws against the laws with the joint terms (`*_friction`).",
-        render_compare, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
-                         "panda_damping_armature", "--out", "{out}"], "compare.json"),
+        render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
+                             "panda_damping_armature", "--out", "{out}"], "compare.json"),
     "compare_joints_builtin": Source(
         "Joint friction and rotor inertia: the same plants on the built-in simulator",
         "As above with `--engine builtin`: the package's own dynamics, whose dry friction is "
         "the model's tanh law (inside the laws' model class).",
-        render_compare, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
-                         "panda_damping_armature", "--engine", "builtin", "--out", "{out}"],
-        "compare.json"),
+        render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
+                             "panda_damping_armature", "--engine", "builtin", "--out",
+                             "{out}"], "compare.json"),
     "compare_consistency": Source(
         "Physically consistent estimates compared",
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
@@ -324,7 +347,7 @@ SOURCES = {
         "(doc/campaigns.md).",
         render_consistency_campaign,
         shown="rcac sweep campaigns/consistency.yaml; "
-              "python doc/compare/consistency/campaign_summary.py"),
+              "python -m rcac_ros.tools.sweep.consistency"),
     "noise": Source(
         "Sensor noise over 10 minutes",
         "The paper's experiment with white Gaussian noise on what the controller reads, per "
