@@ -98,7 +98,6 @@ def measure(root, clean):
 
 
 def main(argv=None):
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     parser = argparse.ArgumentParser(prog="readme_timings", description=__doc__.split("\n")[0])
     parser.add_argument("--clean", action="store_true",
                         help="run in a fresh clone of HEAD (install included), as a new user")
@@ -107,7 +106,7 @@ def main(argv=None):
     from rcac_ros.tools.results import page
     started, rev = datetime.datetime.now(datetime.timezone.utc), page.revision()
     load0, t0 = os.getloadavg()[0], time.monotonic()
-    fields = measure(root, args.clean)
+    fields = measure(page.ROOT, args.clean)
     record = page.provenance("make readme-timings" if args.clean else
                              "python -m rcac_ros.tools.readme_timings", started,
                              time.monotonic() - t0, load0, os.getloadavg()[0], rev=rev)

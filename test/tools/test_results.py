@@ -3,11 +3,15 @@
 import json
 import os
 import shutil
+import subprocess
+import sys
 
 import pytest
 
 from rcac_ros.tools.results import page
 from rcac_ros.tools.results.sources import SOURCES
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def test_the_committed_page_and_readme_block_are_the_generated_ones():
@@ -67,3 +71,14 @@ def test_the_readme_has_at_most_six_headline_lines():
         text = f.read()
     block = text[text.index(page.BEGIN):text.index(page.END)]
     assert 1 <= len(block.splitlines()) - 1 <= 6
+
+
+def test_rendering_loads_neither_numba_nor_rclpy():
+    """`make results` runs with any Python that has the package on its path: rendering reads
+    JSON only (the modules a source's renderer imports included)."""
+    code = ("import sys; from rcac_ros.tools.results import page; page.render_page(); "
+            "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert not {"numba", "rclpy"} & set(out.stdout.split())
