@@ -145,13 +145,13 @@ def provenance_line(record):
 def render_page(results_dir=RESULTS_DIR):
     """The text of doc/results.md from the sources' JSON."""
     docs = {name: read_source(name, results_dir) for name in SOURCES}
-    out = [HEADER, "| block | source |", "| --- | --- |"]
-    for name, src in SOURCES.items():
-        out.append(f"| [{src.title}](#{src.anchor}) | `doc/results/{name}.json` |")
+    links = "; ".join(f"[{src.title}](#{src.anchor})" for src in SOURCES.values())
+    out = [HEADER, f"Blocks: {links}."]
     for name, src in SOURCES.items():
         doc = docs[name]
         out += ["", f"## {src.title}", "", src.about.strip(), "",
-                provenance_line(doc["record"]), "", src.render(doc["data"]).rstrip()]
+                provenance_line(doc["record"]) + f" · `doc/results/{name}.json`", "",
+                src.render(doc["data"]).rstrip()]
     return "\n".join(out) + "\n"
 
 
