@@ -80,8 +80,8 @@ def measure(root, clean):
             raise SystemExit(f"readme-timings: make demo failed (exit {code})")
         test_s, test_out, code = timed(["make", "test"], where, env)
         if code:
-            raise SystemExit(f"readme-timings: make test failed (exit {code}): the README "
-                             "keeps its timings")
+            raise SystemExit(f"readme-timings: make test failed (exit {code}): "
+                             "doc/results/timings.json is kept as it was")
     finally:
         if work:
             shutil.rmtree(work, ignore_errors=True)

@@ -82,3 +82,24 @@ def test_the_process_words_are_caught(text):
                                   "each in its own session", "Stop the nodes, then restart"])
 def test_citations_and_code_are_not_process_words(text):
     assert not PROCESS_WORDS.search(text)
+
+
+def slug(heading):
+    """GitHub's anchor of a markdown heading: lower case, punctuation dropped, '-' for ' '."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_anchor_of_a_relative_link_names_a_heading():
+    anchors = {}
+    for path in tracked(".md"):
+        text = re.sub(r"```.*?```", "", read(path), flags=re.DOTALL)
+        anchors[path] = {slug(h) for h in re.findall(r"^#+ (.*)$", text, re.MULTILINE)}
+    checked = 0
+    for path in anchors:
+        for target, anchor in re.findall(r"\]\(([^)#\s]*)#([^)\s]+)\)", read(path)):
+            where = os.path.normpath(os.path.join(os.path.dirname(path), target)) if target \
+                else path
+            if where in anchors:
+                assert anchor in anchors[where], f"{path}: no heading for {target}#{anchor}"
+                checked += 1
+    assert checked >= 20
