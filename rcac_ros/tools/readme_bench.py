@@ -19,6 +19,7 @@ import sys
 import time
 
 from rcac_ros.tools.bench.commands import RT_OPTIONS, SIM_RT_OPTIONS
+from rcac_ros.tools.results.sources import BENCH_ROS_ROWS as ROWS  # noqa: F401
 
 #: column -> (controller mode of the bench, controller overrides, simulator overrides)
 MODES = {
@@ -28,27 +29,6 @@ MODES = {
     "timer, `--rt`": ("timer", RT_OPTIONS, SIM_RT_OPTIONS),
     "`on_state`, `--rt`": ("on_state", RT_OPTIONS, SIM_RT_OPTIONS),
 }
-
-#: (row label, how to format the figures of one run)
-ROWS = (
-    ("controller rate (Hz)", lambda r: _f(r["controller_rate_hz"], 1)),
-    ("effort period p99 (ms)", lambda r: _f(r["period_p99_ms"], 2)),
-    ("state period p99 (ms)", lambda r: _f(r["state_period_p99_ms"], 2)),
-    ("**effort p99 / state p99** (goal <= 1.1)", lambda r: _f(r["period_ratio"], 2)),
-    ("state→effort latency p50 / p99 (ms)",
-     lambda r: f"{_f(r['state_to_effort_latency_p50_ms'], 2)} / "
-               f"{_f(r['state_to_effort_latency_p99_ms'], 2)}"),
-    ("plain DDS ping, one way p50 (ms)", lambda r: _f(r["ping_one_way_p50_ms"], 2)),
-    ("**latency p50 / ping p50**", lambda r: _f(r["latency_ratio"], 2)),
-    ("effort periods > 1.5 h", lambda r: str(r["late_periods"])),
-    ("controller compute p50 / p99 (µs)",
-     lambda r: f"{_f(r.get('controller_compute_time_p50_us'), 0)} / "
-               f"{_f(r.get('controller_compute_time_p99_us'), 0)}"),
-)
-
-
-def _f(v, digits):
-    return "-" if v is None else f"{v:.{digits}f}"
 
 
 def measure(duration, rate=500.0):

@@ -22,9 +22,8 @@ import sys
 import tempfile
 import time
 
-TEMPLATE = ("Measured on {where} on {date} ({cores} cores, Python {python}): `make demo` "
-            "{demo_min:.1f} min ({demo_parts}), `make test` {test_min:.1f} min "
-            "({tests}).")
+from rcac_ros.tools.results.sources import TIMINGS_TEMPLATE as TEMPLATE
+
 DEMO_WALL = re.compile(r"rcac demo: ([\d.]+) s simulated in ([\d.]+) s wall")
 PYTEST_SUMMARY = re.compile(r"^=*\s*(\d+ passed[^=]*?) in [\d.]+s", re.MULTILINE)
 

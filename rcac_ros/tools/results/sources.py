@@ -131,16 +131,43 @@ def render_bench_core(d):
     return "\n".join(body)
 
 
+#: the rows of the ROS timing table (``make readme-bench``): (label, how to format one run)
+BENCH_ROS_ROWS = (
+    ("controller rate (Hz)", lambda r: _f(r["controller_rate_hz"], 1)),
+    ("effort period p99 (ms)", lambda r: _f(r["period_p99_ms"], 2)),
+    ("state period p99 (ms)", lambda r: _f(r["state_period_p99_ms"], 2)),
+    ("**effort p99 / state p99** (goal <= 1.1)", lambda r: _f(r["period_ratio"], 2)),
+    ("state→effort latency p50 / p99 (ms)",
+     lambda r: f"{_f(r['state_to_effort_latency_p50_ms'], 2)} / "
+               f"{_f(r['state_to_effort_latency_p99_ms'], 2)}"),
+    ("plain DDS ping, one way p50 (ms)", lambda r: _f(r["ping_one_way_p50_ms"], 2)),
+    ("**latency p50 / ping p50**", lambda r: _f(r["latency_ratio"], 2)),
+    ("effort periods > 1.5 h", lambda r: str(r["late_periods"])),
+    ("controller compute p50 / p99 (µs)",
+     lambda r: f"{_f(r.get('controller_compute_time_p50_us'), 0)} / "
+               f"{_f(r.get('controller_compute_time_p99_us'), 0)}"),
+)
+
+
+def _f(v, digits):
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
 def render_bench_ros_modes(d):
-    from rcac_ros.tools.readme_bench import ROWS
     cols = list(d["columns"])
-    rows = [[label, *(fmt_row(d["columns"][c]) for c in cols)] for label, fmt_row in ROWS]
+    rows = [[label, *(fmt_row(d["columns"][c]) for c in cols)]
+            for label, fmt_row in BENCH_ROS_ROWS]
     return d["conditions"] + "\n\n" + table(["", *cols], rows)
 
 
+#: the sentence of ``make readme-timings``'s figures
+TIMINGS_TEMPLATE = ("Measured on {where} on {date} ({cores} cores, Python {python}): "
+                    "`make demo` {demo_min:.1f} min ({demo_parts}), `make test` "
+                    "{test_min:.1f} min ({tests}).")
+
+
 def render_timings(d):
-    from rcac_ros.tools.readme_timings import TEMPLATE
-    return TEMPLATE.format(**d)
+    return TIMINGS_TEMPLATE.format(**d)
 
 
 PAYLOAD_KEYS = ("rms_error_before_jump", "rms_error_first_window_after_jump",
