@@ -29,9 +29,10 @@ def pct(v):
 
 
 def table(header, rows):
-    lines = ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header)]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines)
+    """A markdown table; a ``|`` inside a cell is escaped."""
+    def line(cells):
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+    return "\n".join([line(header), "|" + " --- |" * len(header), *(line(r) for r in rows)])
 
 
 def law_table(report, laws, keys=None, digits=4):
@@ -216,6 +217,22 @@ def render_compare(d):
     return "\n".join(out)
 
 
+def render_compare_consistency(d):
+    """RMS side by side, then per scenario the consistency figures of every law."""
+    report = {k: v for k, v in d.items() if k != "settings"}
+    out = [render_compare_rms(d)]
+    for name, rows in report.items():
+        out += ["", f"`{name}`: share of link-steps whose estimates were a body, smallest "
+                "λ_min(Ĵ), payload mass error:", "",
+                table(["law", *(f"`{law}`" for law in rows)],
+                      [[heads, *(cell(m.get(k), k) for m in rows.values())]
+                       for k, heads in (("consistent_steps", "bodies"),
+                                        ("lambda_min", "min λ_min(Ĵ)"),
+                                        ("payload_mass_error", "payload |m̃|"))
+                       if any(m.get(k) is not None for m in rows.values())])]
+    return "\n".join(out)
+
+
 def render_compare_rms(d):
     """RMS tracking error of every law on every scenario, side by side."""
     report = {k: v for k, v in d.items() if k != "settings"}
@@ -361,7 +378,7 @@ SOURCES = {
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
         "laws from the same start (`*_nat_start`) and from the paper's `theta_hat(0) = 0` "
         "(doc/design.md §8).",
-        render_compare,
+        render_compare_consistency,
         shown="rcac compare --duration 20 --laws paper paper_nat_start paper_natural all "
               "all_nat_start all_natural slotine_li slotine_li_natural"),
     "consistency_campaign": Source(
