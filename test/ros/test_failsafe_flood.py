@@ -1,4 +1,4 @@
-"""doc/failsafe.md, "starvation": a flood of huge messages does not starve the 500 Hz loop
+"""doc/failsafe.md, "Oversized inputs": a flood of huge messages does not starve the 500 Hz loop
 (processes over DDS)."""
 
 import subprocess
