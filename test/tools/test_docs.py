@@ -103,3 +103,8 @@ def test_every_anchor_of_a_relative_link_names_a_heading():
                 assert anchor in anchors[where], f"{path}: no heading for {target}#{anchor}"
                 checked += 1
     assert checked >= 20
+
+
+def test_the_readme_is_a_first_screen_not_a_report():
+    """README.md stays short (12 KB): results go to doc/results.md, reference to doc/."""
+    assert len(read("README.md").encode("utf-8")) <= 12 * 1024
