@@ -197,14 +197,15 @@ def run_source(name):
         raise SourceError(f"{name}: written by `{src.shown}`, not by record")
     rcac = os.path.join(os.path.dirname(sys.executable), "rcac")
     with tempfile.TemporaryDirectory(prefix=f"rcac_results_{name}_") as tmp:
-        argv = [rcac if a == "rcac" else a.format(out=tmp) for a in src.command]
         print(f"results: {src.shown}", flush=True)
         started, rev = datetime.datetime.now(datetime.timezone.utc), revision()
         load0, t0 = os.getloadavg()[0], time.monotonic()
-        code = subprocess.run(argv, cwd=ROOT).returncode
+        for command in src.commands:
+            argv = [rcac if a == "rcac" else a.format(out=tmp) for a in command]
+            code = subprocess.run(argv, cwd=ROOT).returncode
+            if code:
+                raise SourceError(f"{name}: `{src.shown}` failed (exit {code})")
         seconds, load1 = time.monotonic() - t0, os.getloadavg()[0]
-        if code:
-            raise SourceError(f"{name}: `{src.shown}` failed (exit {code})")
         with open(os.path.join(tmp, src.output), encoding="utf-8") as f:
             data = json.load(f)
     return data, provenance(src.shown, started, seconds, load0, load1, rev=rev)

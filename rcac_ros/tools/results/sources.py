@@ -289,17 +289,42 @@ def render_noise_sources(d):
                      "‖θ̂‖ end", "cosine"], rows))
 
 
+def render_campaign(d):
+    """Per law (a law and its channel set): runs, divergences, the distribution of the RMS
+    error and the median of the last 5 s and of the final parameter error."""
+    rows = []
+    for law, r in d["per_law"].items():
+        rms = r.get("rms_tracking_error", {})
+        rows.append([f"`{law}`", r["runs"], r["diverged"],
+                     f"{fmt(rms.get('median'))} [{fmt(rms.get('p5'))}, {fmt(rms.get('p95'))}]",
+                     fmt(r.get("rms_tracking_error_last_5s", {}).get("median")),
+                     fmt(r.get("parameter_error_norm_end", {}).get("median"))])
+    head = f"`{d['campaign']}`: {d['runs']} of {d['expected']} runs, {d['diverged']} diverged."
+    header = ["law", "runs", "diverged", "RMS (rad): median [5 %, 95 %]",
+              "RMS last 5 s, median", "‖θ̃‖ end, median"]
+    return head + "\n\n" + table(header, rows)
+
+
+def campaign_commands(name):
+    return [["rcac", "sweep", f"campaigns/{name}.yaml", "--out", "{out}/results", "--quiet"],
+            ["rcac", "sweep", "report", "{out}/results", "--json", "{out}/summary.json",
+             "--plot", "{out}/report.png"]]
+
+
 # --- the table of sources -------------------------------------------------------------------
 
 class Source:
-    """One block of doc/results.md. ``command``: the argv that writes ``output`` into
-    ``{out}`` (``rcac`` is the venv's); None when a maintenance tool writes the JSON itself
-    (``shown`` names it)."""
+    """One block of doc/results.md. ``command``: the argv (or a list of argvs, run in turn)
+    that writes ``output`` into ``{out}`` (``rcac`` is the venv's); None when a maintenance
+    tool writes the JSON itself (``shown`` names it)."""
 
     def __init__(self, title, about, render, command=None, output=None, shown=None):
         self.title, self.about, self.render = title, about, render
         self.command, self.output = command, output
-        self.shown = shown or " ".join(a.replace("{out}", "results/run") for a in command)
+        self.commands = [] if command is None else \
+            command if isinstance(command[0], list) else [command]
+        self.shown = shown or "; ".join(" ".join(a.replace("{out}", "results/run") for a in c)
+                                        for c in self.commands)
         self.anchor = re.sub(r"[^\w\- ]", "", title.lower()).replace(" ", "-")
 
 
@@ -373,6 +398,23 @@ SOURCES = {
         render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
                              "panda_damping_armature", "--engine", "builtin", "--out",
                              "{out}"], "compare.json"),
+    "channels_paper": Source(
+        "Channel sets out of sample: the paper arm",
+        "`campaigns/channels_paper.yaml`: the paper arm with the motion scaled 0.5-1.5x, K_D "
+        "and P spread; the paper's channel `[1]`, the linear-cost set `4..7` (picked on the "
+        "`rcac compare` scenarios) and `\"all\"` (= Slotine-Li), each run drawn anew.",
+        render_campaign, campaign_commands("channels_paper"), "summary.json"),
+    "channels_payload": Source(
+        "Channel sets out of sample: Panda payloads",
+        "`campaigns/channels_payload.yaml`: random Panda payloads (mass 0.2-3 kg, centre of "
+        "mass, inertia, motion scale), the same channel sets.",
+        render_campaign, campaign_commands("channels_payload"), "summary.json"),
+    "friction_campaign": Source(
+        "Joint friction and rotor inertia over a campaign",
+        "`campaigns/friction.yaml`: the Panda on MuJoCo with damping, dry friction and "
+        "armature drawn per joint over a decade; the friction-blind `composite` law against "
+        "`composite_friction`, paired (the same joint terms for both laws).",
+        render_campaign, campaign_commands("friction"), "summary.json"),
     "compare_consistency": Source(
         "Physically consistent estimates compared",
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
