@@ -42,8 +42,8 @@ the tools write (`doc/results/NAME.json`: the tool's own output and its provenan
 `test/tools/test_results.py` fails when the committed page differs from what the JSON makes.
 Timings depend on the machine and its load (the load average is part of the provenance
 where it was recorded): the ratios of two figures timed side by side are what the cost goals
-are about. Results that depend on the arithmetic only (tracking errors, estimates) repeat to
-the digits shown on any machine. To refresh a block: `python -m rcac_ros.tools.results record
+are about. Results of the arithmetic alone (tracking errors, estimates) do not depend on the
+load. To refresh a block: `python -m rcac_ros.tools.results record
 NAME`, then `make results`.
 """
 
