@@ -201,7 +201,8 @@ def run_source(name):
         started, rev = datetime.datetime.now(datetime.timezone.utc), revision()
         load0, t0 = os.getloadavg()[0], time.monotonic()
         for command in src.commands:
-            argv = [rcac if a == "rcac" else a.format(out=tmp) for a in command]
+            argv = [{"rcac": rcac, "python": sys.executable}.get(a, a.format(out=tmp))
+                    for a in command]
             code = subprocess.run(argv, cwd=ROOT).returncode
             if code:
                 raise SourceError(f"{name}: `{src.shown}` failed (exit {code})")

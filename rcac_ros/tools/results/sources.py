@@ -421,27 +421,30 @@ SOURCES = {
         "laws from the same start (`*_nat_start`) and from the paper's `theta_hat(0) = 0` "
         "(doc/design.md §8).",
         render_compare_consistency,
-        shown="rcac compare --duration 20 --laws paper paper_nat_start paper_natural all "
-              "all_nat_start all_natural slotine_li slotine_li_natural"),
+        ["rcac", "compare", "--quiet", "--duration", "20", "--laws", "paper", "paper_nat_start",
+         "paper_natural", "all", "all_nat_start", "all_natural", "slotine_li",
+         "slotine_li_natural", "--out", "{out}"], "compare.json"),
     "consistency_campaign": Source(
         "Physically consistent estimates over a campaign",
         "`campaigns/consistency.yaml`: the Euclidean law, the natural geometry with its "
         "default (barrier) metric and with the log-det metric on the same random draws "
         "(doc/campaigns.md).",
         render_consistency_campaign,
-        shown="rcac sweep campaigns/consistency.yaml; "
-              "python -m rcac_ros.tools.sweep.consistency"),
+        [["rcac", "sweep", "campaigns/consistency.yaml", "--out", "{out}/results", "--quiet"],
+         ["python", "-m", "rcac_ros.tools.sweep.consistency", "{out}/results",
+          "{out}/summary.json"]], "summary.json"),
     "noise": Source(
         "Sensor noise over 10 minutes",
         "The paper's experiment with white Gaussian noise on what the controller reads, per "
         "law and variant: `clean` (no noise, the reference), `plain`, `dead zone`, `sigma` "
         "(fixed leakage) and `switching` (doc/tools.md, `rcac bench noise`).",
-        render_noise, shown="rcac bench noise"),
+        render_noise, ["rcac", "bench", "noise", "--out", "{out}"], "noise.json"),
     "noise_sources": Source(
         "Sensor noise: where the drift comes from",
         "The paper law's drift by noise source and by term (`gamma = 0`: the tracking term "
         "alone).",
-        render_noise_sources, shown="rcac bench noise --sources"),
+        render_noise_sources, ["rcac", "bench", "noise", "--sources", "--out", "{out}"],
+        "sources.json"),
 }
 
 
