@@ -8,8 +8,8 @@ VENV   ?= .venv
 BIN     = $(VENV)/bin
 OUT    ?= results
 
-.PHONY: demo test setup setup-test experiment payload-demo capture-demo friction-ros bench bench-ros readme-timings \
-	readme-bench clean
+.PHONY: demo test setup setup-test experiment payload-demo capture-demo friction-ros bench bench-ros \
+	results readme-timings readme-bench clean
 
 demo: $(VENV)/.runtime
 	$(BIN)/rcac demo --out $(OUT)/demo
@@ -43,11 +43,15 @@ bench: $(VENV)/.test
 bench-ros: $(VENV)/.runtime
 	$(BIN)/rcac bench ros --json $(OUT)/bench_ros.json
 
-# time `make demo` and `make test` in a fresh clone of HEAD and write them into README.md
-readme-timings:
-	$(PYTHON) rcac_ros/tools/readme_timings.py --clean
+# doc/results.md and the README's results lines, from the committed doc/results/*.json
+results:
+	$(PYTHON) -m rcac_ros.tools.results render
 
-# run rcac bench ros in each controller mode and write the timing table into README.md
+# time `make demo` and `make test` in a fresh clone of HEAD (doc/results/timings.json)
+readme-timings:
+	$(PYTHON) -m rcac_ros.tools.readme_timings --clean
+
+# run rcac bench ros in each controller mode (doc/results/bench_ros_modes.json)
 readme-bench: $(VENV)/.runtime
 	$(BIN)/python -m rcac_ros.tools.readme_bench
 

@@ -28,11 +28,11 @@ def test_every_channel_stays_exact_with_the_true_joint_terms(gravity):
     rigid = css_arm(gravity)
     model = frictional(rigid)
     traj = PaperTrajectory(Q0, reading="position", amplitude=0.3, period=4.0)   # reverses
-    today = exact_run(rigid, rigid, 0.002, 1500, ["all", "power"], traj)
+    blind = exact_run(rigid, rigid, 0.002, 1500, ["all", "power"], traj)
     opts = dict(joint_friction=True, P_friction=1e-12)
     coarse = exact_run(model, model, 0.002, 1500, ["all", "power"], traj, **opts)
     fine = exact_run(model, model, 0.001, 3000, ["all", "power"], traj, **opts)
-    assert coarse.max() < 2.0 * today.max(), (coarse, today)       # 2.6e-4 vs 2.2e-4
+    assert coarse.max() < 2.0 * blind.max(), (coarse, blind)       # 2.6e-4 vs 2.2e-4
     assert np.all(coarse / fine > 3.5), (coarse, coarse / fine)
     # the check can fail: the friction-blind law on the same plant predicts badly
     blind = exact_run(model, model, 0.002, 1500, ["all", "power"], traj)

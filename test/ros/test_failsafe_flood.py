@@ -1,4 +1,4 @@
-"""doc/failsafe.md, "starvation": a flood of huge messages does not starve the 500 Hz loop
+"""doc/failsafe.md, "Oversized inputs": a flood of huge messages does not starve the 500 Hz loop
 (processes over DDS)."""
 
 import subprocess
@@ -33,7 +33,7 @@ def test_flood_of_huge_messages_does_not_starve_the_loop():
             time.sleep(1.0)
             # the flood lasts 6 s, the measured window is the sleeper's first 3 s of it: each
             # message is converted from Python on every publish, and a slow VM sent only 8 in
-            # 3 s (two clean-clone CI runs of stop 24), too few to call it a flood
+            # 3 s (in clean-clone CI runs), too few to call it a flood
             flood = subprocess.Popen(FLOOD + ["6.0"], stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, cwd=ROOT)
             assert flood.stdout.readline().startswith("flood: start")

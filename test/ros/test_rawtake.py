@@ -254,7 +254,7 @@ class FailingAlloc:
 
 
 def test_a_failed_reallocation_is_counted_and_the_reader_keeps_a_buffer(monkeypatch):
-    """Issue 17: the buffer of KEEP bytes that replaces one grown by a large sample cannot be
+    """The buffer of KEEP bytes that replaces one grown by a large sample cannot be
     allocated (twice): the reader keeps the large buffer, takes the next samples into it, the
     failures are counted and the first logged, and the third attempt restores the bound."""
     rcl, rcutils = rawtake._libraries()

@@ -1,12 +1,12 @@
-"""The README's ROS timing table: its ratios, its block, and the bench's ratio figures."""
-
-import os
+"""The ROS timing per controller mode: the bench's ratios, and their table in doc/results.md."""
 
 import numpy as np
 import pytest
 
 from rcac_ros.tools import readme_bench as rb
 from rcac_ros.tools.bench.ros import analyse
+from rcac_ros.tools.results.page import read_source
+from rcac_ros.tools.results.sources import render_bench_ros_modes
 
 
 class FakeProbe:
@@ -46,36 +46,23 @@ def test_without_pings_the_latency_ratio_is_none():
     probe.ping_rtt = []
     r = analyse(probe, 4.0, 500.0)
     assert r["latency_ratio"] is None and r["ping_one_way_p50_ms"] is None
-    assert "-" in rb.render({"timer": r}, "x").splitlines()[-4]   # the ratio row
+    row = dict(rb.ROWS)["**latency p50 / ping p50**"]
+    assert row(r) == "-"
 
 
-def test_block_lists_every_mode_and_replaces_only_itself():
+def test_the_table_lists_every_mode_and_row():
     r = analyse(FakeProbe(np.random.default_rng(3)), 4.0, 500.0)
-    results = {c: r for c in rb.MODES}
-    block = rb.render(results, "Measured by hand.")
-    lines = block.splitlines()
-    assert lines[0] == rb.BEGIN and lines[-1] == rb.END and lines[1] == "Measured by hand."
-    assert lines[3] == "| | " + " | ".join(rb.MODES) + " |"
-    assert len(lines) == 5 + len(rb.ROWS) + 1
+    data = {"conditions": "Measured by hand.", "columns": {c: r for c in rb.MODES}}
+    lines = render_bench_ros_modes(data).splitlines()
+    assert lines[0] == "Measured by hand."
+    assert lines[2] == "|  | " + " | ".join(rb.MODES) + " |"
+    assert len(lines) == 4 + len(rb.ROWS)
     ratio_row = next(x for x in lines if x.startswith("| **effort p99 / state p99**"))
     assert ratio_row.count(f"{r['period_ratio']:.2f}") == len(rb.MODES)
-    text = f"before\n{rb.BEGIN}\nold\n{rb.END}\nafter\n"
-    new = rb.replace_block(text, block)
-    assert new == f"before\n{block}\nafter\n"
-    assert rb.replace_block(new, block) == new
-    with pytest.raises(rb.BlockError):
-        rb.replace_block("no markers", block)
-    with pytest.raises(rb.BlockError):
-        rb.replace_block(f"{rb.END}\n{rb.BEGIN}\n", block)
 
 
-def test_readme_has_the_block_as_generated():
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    with open(os.path.join(root, "README.md"), encoding="utf-8") as f:
-        text = f.read()
-    block = text[text.index(rb.BEGIN):text.index(rb.END) + len(rb.END)]
-    assert rb.replace_block(text, block) == text
-    lines = block.splitlines()
-    assert lines[1].startswith("Measured by `make readme-bench` on ")
-    assert lines[3] == "| | " + " | ".join(rb.MODES) + " |"
-    assert [x.split(" | ")[0] for x in lines[5:-1]] == [f"| {label}" for label, _ in rb.ROWS]
+def test_the_committed_source_has_every_mode_and_row():
+    data = read_source("bench_ros_modes")["data"]
+    assert list(data["columns"]) == list(rb.MODES)
+    for label, fmt in rb.ROWS:
+        assert all(fmt(r) for r in data["columns"].values()), label

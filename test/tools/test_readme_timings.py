@@ -1,10 +1,9 @@
-"""The README's timings block is the generated one (its form, not its numbers)."""
+"""The timings of make demo and make test: pytest's counts, the timing of a target, the source."""
 
 import os
 
-import pytest
-
 from rcac_ros.tools import readme_timings as rt
+from rcac_ros.tools.results.sources import render_timings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FIELDS = dict(where="this checkout", date="2031-01-02", cores=8, python="3.12.1", demo_min=0.52,
@@ -12,38 +11,16 @@ FIELDS = dict(where="this checkout", date="2031-01-02", cores=8, python="3.12.1"
               tests="240 passed, 3 skipped, 1 xfailed")
 
 
-def readme():
-    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
-        return f.read()
-
-
-def test_the_readme_holds_one_well_formed_timings_block():
-    fields = rt.read_block(readme())
+def test_the_committed_source_renders_the_sentence_of_the_template():
+    from rcac_ros.tools.results.page import read_source
+    fields = read_source("timings")["data"]
     assert fields["where"] in ("a clean clone", "this checkout")
     assert fields["demo_min"] > 0 and fields["test_min"] > 0
-    # the block reads back to itself: it is exactly what the tool writes
-    text = readme()
-    block = text[text.index(rt.BEGIN):text.index(rt.END) + len(rt.END)]
-    assert rt.render(fields) == block
-
-
-def test_the_block_is_replaced_and_the_rest_kept():
-    text = f"# title\n\nbefore\n\n{rt.render(FIELDS)}\n\nafter {rt.END[:4]}\n"
-    new = rt.replace_block(text, dict(FIELDS, demo_min=2.0))
-    assert rt.read_block(new)["demo_min"] == 2.0
-    assert new.startswith("# title\n\nbefore\n\n") and new.endswith("\n\nafter <!--\n")
-    assert all(len(line) <= 99 for line in new.splitlines())
-
-
-@pytest.mark.parametrize("broken", [
-    lambda b: b.replace(rt.END, ""),                                   # no end marker
-    lambda b: b + "\n" + b,                                            # two blocks
-    lambda b: b.replace("`make test`", "make test"),                   # edited by hand
-    lambda b: rt.END + "\n" + b.replace(rt.END, ""),                   # end before start
-])
-def test_a_malformed_block_is_refused(broken):
-    with pytest.raises(rt.BlockError):
-        rt.read_block(broken(rt.render(FIELDS)))
+    assert render_timings(fields).endswith(f"({fields['tests']}).")
+    assert render_timings(FIELDS) == (
+        "Measured on this checkout on 2031-01-02 (8 cores, Python 3.12.1): `make demo` 0.5 min "
+        "(the venv as it was, 20 s simulated in 24 s, plots), `make test` 12.0 min (240 passed, "
+        "3 skipped, 1 xfailed).")
 
 
 def test_pytest_counts_come_from_the_last_summary_line():

@@ -22,9 +22,8 @@ class RcacNodeMixin:
         """rclpy's, without its default event handlers unless ``event_callbacks`` is given.
 
         rclpy gives every publisher two handlers (incompatible QoS, incompatible type) that only
-        log, and its executor adds each to the wait set it rebuilds at every spin: at 500 Hz
-        they were most of the wait set (24 of the controller's 30 waitables) and cost about a
-        third of each spin (doc/failsafe.md, "Where a tick's time goes"). The subscriber of an
+        log, and its executor adds each to the wait set it rebuilds at every spin, where they
+        were most of the waitables (doc/failsafe.md, "Real-time options"). The subscriber of an
         incompatible pair still reports it (its own default handlers, rclpy's and rclcpp's)."""
         kwargs.setdefault("event_callbacks", PublisherEventCallbacks(use_default_callbacks=False))
         return super().create_publisher(*args, **kwargs)

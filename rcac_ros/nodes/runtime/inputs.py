@@ -45,7 +45,7 @@ class SideInput:
     The subscription lives on a helper node that no executor spins; a
     :class:`~rcac_ros.nodes.runtime.rawtake.RawReader` waits and takes in its own thread through
     ``rcl`` with the lock released, checks the size on the taken bytes, and deserialises only
-    a message within the cap (doc/failsafe.md, "Where the time of a flood goes").
+    a message within the cap (doc/failsafe.md, "Oversized inputs").
 
     Parameters
     ----------

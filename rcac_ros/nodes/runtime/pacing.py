@@ -8,8 +8,8 @@ from rcac_ros.errors import ConfigError
 class DeadlineLoop:
     """A fixed-rate loop on absolute deadlines of the steady clock, driving an executor.
 
-    ``rclpy`` timers skip the ticks they miss instead of catching up: at 500 Hz on a 2-core
-    machine they averaged 492 Hz idle and 451 Hz loaded (doc/nodes.md, "Timing"). Here the
+    ``rclpy`` timers skip the ticks they miss instead of catching up, so a loaded machine
+    loses rate (doc/nodes.md, "Timing"). Here the
     deadlines are ``start + k period``: :meth:`spin_once` serves the executor
     (``spin_once(timeout = deadline - now)``) until the next deadline has passed, then calls
     ``tick``, and the next deadline is one period later, so a late tick is followed by an early

@@ -1,8 +1,8 @@
 """Take serialised messages without holding the interpreter lock (doc/failsafe.md).
 
 rclpy's take (``Subscription.take_message``, also with ``raw=True``) copies the sample out of
-DDS while it holds the interpreter lock: a 24 MB JointState stalled every other thread of the
-process for 80-110 ms (doc/failsafe.md, "Where the time of a flood goes"). Fast DDS cannot
+DDS while it holds the interpreter lock: a 24 MB JointState stalls every other thread of the
+process for the length of the copy (doc/failsafe.md, "Oversized inputs"). Fast DDS cannot
 drop such a sample by size for a type with unbounded sequences (its reader limit is the
 type's bound). :class:`RawReader` therefore waits and takes through ``rcl`` with
 :mod:`ctypes`, which releases the lock for the length of each foreign call: the copy out of
@@ -17,7 +17,7 @@ valid samples queued behind it wait; after a larger sample the buffer is replace
 its initial size, so between takes the reader holds at most that bound. The initial size is
 ``KEEP`` bytes, or the bound with ``prefault`` (the controller's state input): then the
 pages are touched at once, 32 MiB resident from the start, and the first large sample is
-not slower than the later ones (doc/failsafe.md, "The fault bench's flood, corrected"). The
+not slower than the later ones (doc/failsafe.md, "Oversized inputs"). The
 new buffer is allocated before the large one is freed: if that allocation fails (a machine
 short of memory), the failure is counted, the reader keeps the large buffer and takes into
 it, and tries again after the next take or wait (at most 50 ms later); it is never left

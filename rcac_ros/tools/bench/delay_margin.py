@@ -1,6 +1,6 @@
 """The stable range of K_D against a delayed effort, offline (``rcac bench delay-margin``).
 
-Timer mode answers a state up to a period old (doc/failsafe.md, "Measured"). This runs a
+Timer mode answers a state up to a period old (doc/failsafe.md, "Starved machine"). This runs a
 closed loop without ROS (core simulator + controller) with the effort applied ``d`` periods
 late, ``d`` = 0 (lockstep), 1, 2 by default, for a grid of gains, and reports the tracking
 RMS over the second half of the run (``inf``: diverged, NaN or |qd| > 100 rad/s). With

@@ -49,6 +49,7 @@ from rcac_ros.tools import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.closed_loop import closed_loop
 from rcac_ros.core.law_options import P_FRICTION as P_FRICTION_DEFAULT
+from rcac_ros.tools.demos.compare_report import COLUMNS, markdown, side_by_side  # noqa: F401
 from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.scenarios import controller, FIXED_P
 
@@ -97,7 +98,7 @@ LAWS = {
     "paper_natural": ("rcac", dict(geometry="natural", natural_metric="log_det")),
     "all_natural": ("rcac", dict(channels="all", geometry="natural", natural_metric="log_det")),
     # the barrier-plus-quadratic metric of the natural geometry (doc/design.md §8), the
-    # default since stop 28: run on request only (not in DEFAULT_LAWS)
+    # default of geometry="natural": run on request only (not in DEFAULT_LAWS)
     "paper_barrier": ("rcac", dict(geometry="natural", natural_metric="barrier")),
     "all_barrier": ("rcac", dict(channels="all", geometry="natural", natural_metric="barrier")),
     # with the joint terms: on a plant with dry friction the rigid-body natural law's J_hat
@@ -141,12 +142,6 @@ JOINT_PLANTS = {
 #: Names that stand for several scenarios: the rows of doc/tools.md's joint-friction table.
 GROUPS = {"joint_table": ("panda_rigid", "panda_damping", "panda_friction", "panda_armature",
                           "panda_joints")}
-
-COLUMNS = (("rms", "RMS (rad)"), ("rms_last_5s", "RMS last 5 s"), ("max_error", "max err"),
-           ("theta_error_end", "‖θ̃‖ end"), ("max_abs_E", "max |E|"),
-           ("us_per_step", "µs/step"), ("identifiable", "ident."), ("consistent", "consist."),
-           ("consistent_steps", "consist. all steps"), ("lambda_min", "min λ_min(Ĵ)"),
-           ("payload_mass_error", "payload |m̃|"), ("payload_first_moment_error", "payload ‖h̃‖"))
 
 
 class Scenario:
@@ -341,52 +336,6 @@ def compare(scenarios=("paper", "payload"), laws=None, duration=20.0, progress=T
             report[name][law] = metrics(run, scenario)
             series[name][law] = run
     return report, series
-
-
-def _cell(v, key):
-    if v is None or (isinstance(v, float) and not np.isfinite(v)):
-        return "—"
-    if key in ("identifiable", "consistent"):
-        return str(v)
-    if key == "us_per_step":
-        return f"{v:.1f}"
-    if key == "consistent_steps":
-        return f"{100 * v:.4g} %"
-    return f"{v:.3g}"
-
-
-def side_by_side(report):
-    """The RMS tracking error (rad) of every law (columns) on every scenario (rows)."""
-    laws = []
-    for rows in report.values():
-        laws += [law for law in rows if law not in laws]
-    lines = ["| scenario | " + " | ".join(laws) + " |", "|---|" + "---:|" * len(laws)]
-    for name, rows in report.items():
-        cells = []
-        for law in laws:
-            m = rows.get(law)
-            cells.append("" if m is None else "diverged" if m["diverged_at"] is not None
-                         else _cell(m["rms"], "rms"))
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def markdown(report, n_links=None):
-    """The table, one section per scenario (with several, first their RMS side by side)."""
-    lines = []
-    if len(report) > 1:
-        lines += ["### RMS tracking error (rad)\n", side_by_side(report)]
-    for name, rows in report.items():
-        lines.append(f"### {name}\n")
-        lines.append("| law | " + " | ".join(h for _, h in COLUMNS) + " |")
-        lines.append("|---|" + "---:|" * len(COLUMNS))
-        for law, m in rows.items():
-            cells = [_cell(m.get(k), k) for k, _ in COLUMNS]
-            if m["diverged_at"] is not None:
-                cells[0] = f"diverged at {m['diverged_at']:.3f} s"
-            lines.append(f"| {law} | " + " | ".join(cells) + " |")
-        lines.append("")
-    return "\n".join(lines)
 
 
 def plot(series, report, out_dir):

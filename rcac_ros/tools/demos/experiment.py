@@ -21,7 +21,7 @@ from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, t
 
 
 def metrics(run, theta_true, last_seconds=LAST_WINDOW):
-    """The figures of ``metrics.json`` for one run (defined in :mod:`rcac_ros.tools.metrics`)."""
+    """The figures of ``metrics.json`` for one run (:mod:`rcac_ros.tools.metrics`)."""
     return {**tracking(run["t"], run["q"] - run["q_d"], last_seconds),
             **estimates(run["theta_hat"], theta_true),
             **prediction(run["E"]), **torque(run["tau"])}

@@ -43,7 +43,7 @@ def window_rms(run, start, stop):
 
 
 def metrics(run, jump, theta_before, theta_after, window=1.0, effort_limit=None):
-    """The figures of ``metrics.json`` for one law (README: payload demo)."""
+    """The figures of ``metrics.json`` for one law (doc/results.md, "An unknown payload")."""
     t_end = run["t"][-1]
     e = np.linalg.norm(run["q"] - run["q_d"], axis=1)
     after = run["t"] >= jump

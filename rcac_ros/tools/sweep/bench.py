@@ -1,5 +1,5 @@
 """``rcac sweep --bench``: runs/s on 1 and 2 LocalCluster workers, scaling efficiency,
-overhead per run (doc/campaigns.md, "Measured speed")."""
+overhead per run (doc/campaigns.md, "Speed of the engine")."""
 
 import json
 import os

@@ -48,6 +48,8 @@ def add_arguments(parser, argv=()):
         rep.add_argument("--worst", type=positive_int, default=10,
                          help="worst runs listed (default 10)")
         rep.add_argument("--plot", default=None, help="PNG (default RESULTS_DIR/report.png)")
+        rep.add_argument("--json", default=None, metavar="FILE",
+                         help="also write the summary as JSON")
         rer = sub.add_parser("rerun", help="rerun one run alone and compare with its row")
         rer.add_argument("results", help="a results directory or its results.parquet")
         rer.add_argument("index", type=non_negative_int, help="the run's index")
@@ -80,7 +82,7 @@ def run(args):
     kernel is imported."""
     if args.action == "report":
         from rcac_ros.tools.sweep.report import report
-        return report(args.results, worst=args.worst, plot=args.plot)
+        return report(args.results, worst=args.worst, plot=args.plot, json_path=args.json)
     if args.action == "rerun":
         from rcac_ros.tools.sweep.report import rerun
         return rerun(args.results, args.index, plot=args.plot)

@@ -1,6 +1,7 @@
 """``rcac sweep report`` and ``rcac sweep rerun``: a campaign's summary, tables and figure,
 and one run again, alone (doc/campaigns.md)."""
 
+import json
 import os
 
 import numpy as np
@@ -27,8 +28,10 @@ def sensitivity(df, inputs, metric="rms_tracking_error"):
     return {c: float(corr[c]) for c in numeric}
 
 
-def report(path, worst=10, plot=None):
-    """Print the campaign's summary and write its figure."""
+def report(path, worst=10, plot=None, json_path=None):
+    """Print the campaign's summary and write its figure (``json_path``: and the summary as
+    JSON: runs and divergences per law, each metric's distribution per law, the Spearman
+    correlations)."""
     df, meta, store = load_table(path)
     import pandas as pd
     varied = meta["varied"]
@@ -41,6 +44,11 @@ def report(path, worst=10, plot=None):
         channels = df["channels"].fillna("").astype(str)
         df["law"] = np.where(channels != "", df["law"] + " " + channels, df["law"])
     laws = sorted(df["law"].unique())
+    summary = {"campaign": meta["campaign"]["name"], "runs": n, "expected": expected,
+               "diverged": int(div.sum()),
+               "per_law": {law: {"runs": int((df["law"] == law).sum()),
+                                 "diverged": int(div[df["law"] == law].sum())}
+                           for law in laws}}
     w = max(11, *(len(law) for law in laws))
     print("\nfailure rate per law:")
     for law in laws:
@@ -54,6 +62,9 @@ def report(path, worst=10, plot=None):
             v = df.loc[(df["law"] == law) & ~div, m]
             if len(v):
                 q = v.quantile([0.5, 0.05, 0.95])
+                summary["per_law"][law][m] = {"median": float(q.iloc[0]),
+                                              "p5": float(q.iloc[1]),
+                                              "p95": float(q.iloc[2]), "max": float(v.max())}
                 print(f"  {m:27s} {law:{w}s} {q.iloc[0]:11.4g} [{q.iloc[1]:10.4g}, "
                       f"{q.iloc[2]:10.4g}] {v.max():10.4g}")
     cols = ["run", "law", "status", "t_end", "rms_tracking_error", "max_tracking_error"] + [
@@ -86,6 +97,11 @@ def report(path, worst=10, plot=None):
         medians = ok.groupby(c)["rms_tracking_error"].median()
         print(f"  {c}: median RMS per value: " + ", ".join(
             f"{k or '-'}: {v:.4g}" for k, v in medians.items()))
+    summary["sensitivity"] = {k: {c: float(v) for c, v in s.items()} for k, s in sens.items()}
+    if json_path:
+        with open(json_path, "w", encoding="utf-8") as f:
+            json.dump(summary, f, indent=1)
+        print(f"wrote {json_path}")
     plot = plot or os.path.join(store.out, "report.png")
     plot_report(df, div, laws, sens["all"], plot)
     print(f"\nwrote {plot}")

@@ -1,20 +1,22 @@
-"""doc/compare/consistency/campaign_summary.json from the results of campaigns/consistency.yaml
-(doc/design.md §8, "Measured"). Run from the repository root::
+"""The summary of a run of ``campaigns/consistency.yaml`` (doc/design.md §8), as JSON.
 
-    rcac sweep campaigns/consistency.yaml --workers 1 --out results/consistency
-    PYTHONPATH=$PWD python doc/compare/consistency/campaign_summary.py results/consistency
+Run from the repository root::
 
-(a second argument: another target file). Per geometry: runs, consistency and RMS figures.
-The campaign is paired (``paired: true``, doc/campaigns.md): runs ``3 s`` to ``3 s + 2`` are
-sample ``s`` with the three geometries on the same start and payload, so each natural law's
-RMS is also compared run by run (the ratio natural / Euclidean per sample).
+    rcac sweep campaigns/consistency.yaml --out results/consistency
+    python -m rcac_ros.tools.sweep.consistency results/consistency summary.json
+    python -m rcac_ros.tools.results record consistency_campaign --from summary.json \
+        --command "..." --date ... --revision ...
+
+Per geometry: runs, consistency and RMS figures. The campaign is paired (``paired: true``,
+doc/campaigns.md): runs ``3 s`` to ``3 s + 2`` are sample ``s`` with the three geometries
+on the same start and payload, so each natural law's RMS is also compared run by run (the
+ratio natural / Euclidean per sample).
 """
 import json
 import os
 import sys
 
 import numpy as np
-import pyarrow.parquet as pq
 
 from rcac_ros.tools.sweep import campaign as cp
 
@@ -45,6 +47,8 @@ def paired_ratio(frame, cells, geometry="natural"):
 
 
 def summary(out_dir):
+    """The JSON of a results directory (``rcac sweep``'s ``--out``)."""
+    import pyarrow.parquet as pq
     with open(os.path.join(out_dir, "campaign.json"), encoding="utf-8") as f:
         campaign = json.load(f)
     frame = pq.read_table(os.path.join(out_dir, "results.parquet")).to_pandas()
@@ -58,8 +62,7 @@ def summary(out_dir):
     return data
 
 
-def main(out_dir, target=os.path.join("doc", "compare", "consistency",
-                                      "campaign_summary.json")):
+def main(out_dir, target="campaign_summary.json"):
     data = summary(out_dir)
     with open(target, "w", encoding="utf-8") as f:
         json.dump(data, f, indent=2)

@@ -1,0 +1,5 @@
+import sys
+
+from rcac_ros.tools.results.page import main
+
+sys.exit(main())
