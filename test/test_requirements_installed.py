@@ -10,7 +10,7 @@ import importlib
 
 import pytest
 
-from rcac_ros.tools.scenarios import find_panda_urdf
+from rcac_ros.tools.runs.scenarios import find_panda_urdf
 
 
 @pytest.mark.parametrize("module", [

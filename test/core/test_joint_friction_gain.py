@@ -41,7 +41,7 @@ def test_the_gain_is_beta_times_the_joint_feedback_at_the_first_state():
 def test_the_feedback_of_link_inertias_is_the_mass_matrix():
     """``sum_j J_j^T M_j J_j = M(q)`` (the rigid arm's kinetic energy): ``K_Dj = M_j``
     gives the diagonal of the composite-rigid-body mass matrix."""
-    from rcac_ros.tools.scenarios import spatial_inertia
+    from rcac_ros.tools.runs.scenarios import spatial_inertia
     model = css_arm((0.0, 0.0, -9.81))
     M = np.array([spatial_inertia(model.mass[i], model.com[i], model.inertia[i])
                   for i in range(model.n)])

@@ -21,8 +21,8 @@ from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.nodes.controller.starvation import delay_margin, feedback_gains, modal_margin
 from rcac_ros.tools.bench.delay_margin import check_margins, CHECKS, closed_loop
-from rcac_ros.tools.robots import example_robot_urdf
-from rcac_ros.tools.scenarios import spatial_inertia
+from rcac_ros.tools.runs.robots import example_robot_urdf
+from rcac_ros.tools.runs.scenarios import spatial_inertia
 
 H = 0.002
 

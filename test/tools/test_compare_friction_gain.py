@@ -8,7 +8,7 @@ import numpy as np
 from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.joint_friction import BETA_FRICTION, TERM_WEIGHTS
 from rcac_ros.tools.demos import compare as C
-from rcac_ros.tools.scenarios import GAINS
+from rcac_ros.tools.runs.scenarios import GAINS
 
 
 def rms(scenario, law, **override):

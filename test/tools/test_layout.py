@@ -280,7 +280,8 @@ def loaded_after_import(module):
                                     "rcac_ros.tools.bench.commands", "rcac_ros.tools.extras",
                                     "rcac_ros.errors", "rcac_ros.topics", "rcac_ros.tools.cli",
                                     "rcac_ros.params", "rcac_ros.core.law_options",
-                                    "rcac_ros.tools.scenarios", "rcac_ros.tools.sweep.campaign"])
+                                    "rcac_ros.tools.runs.scenarios",
+                                    "rcac_ros.tools.sweep.campaign"])
 def test_light_modules_do_not_load_numba(module):
     assert "numba" not in loaded_after_import(module)
 

@@ -75,8 +75,8 @@ def closed_loop(model_name, gain, adapt=True):
         ctrl = RecursiveCompositeController(model, K_D=gain, theta_hat0=model.theta(), **gains)
         traj = SinusoidTrajectory(q0, *UR5_MOTION)
     else:
-        from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS as PANDA, gains_for,
-                                              load_panda, READY)
+        from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS as PANDA, gains_for,
+                                                   load_panda, READY)
         model = load_panda()
         q0 = np.array(READY)
         ctrl = RecursiveCompositeController(model, **gains_for(model, **dict(PANDA,
@@ -90,7 +90,7 @@ def load_ur5():
     """example-robot-data's UR5 (``ur5_robot.urdf``, base to ``tool0``), gravity on."""
     from rcac_ros.core.urdf import model_from_urdf
     from rcac_ros.errors import ConfigError
-    from rcac_ros.tools.robots import example_robot_urdf
+    from rcac_ros.tools.runs.robots import example_robot_urdf
     path = example_robot_urdf("ur_description/urdf/ur5_robot.urdf")
     if path is None:
         raise ConfigError("example-robot-data's ur5_robot.urdf not found (the 'robots' extra: "

@@ -13,7 +13,7 @@ Figures (:func:`figures`, the same for the release): the RMS tracking error over
 the event until the RMS over the trailing :data:`WINDOW` s stays within :data:`FACTOR` times
 the pre-event RMS); the last link's mass and first-moment estimate errors at the end of the
 phase; the largest effort against the preset's limits (where and when a limit is first
-reached). The same run offline (:func:`rcac_ros.tools.closed_loop.closed_loop`, capture at
+reached). The same run offline (:func:`rcac_ros.tools.runs.closed_loop.closed_loop`, capture at
 the time the ROS run had it) for the direct, composite, ``channels="all"`` and Slotine-Li
 laws. ``--mass-table`` runs the default law offline over :data:`TABLE_MASSES`, the paper's
 motion slowed by :func:`slowdown` for each mass. Everything goes into ``capture.json``.
@@ -212,7 +212,7 @@ def offline_run(law, arm, events, duration, scale=1.0, progress=None):
     """One law of :data:`LAWS` on the arm, the plant changing at ``events`` ((t, model)...);
     the series of :func:`figures` (``track``, ``effort``, ``estimates``)."""
     from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory
-    from rcac_ros.tools.closed_loop import closed_loop
+    from rcac_ros.tools.runs.closed_loop import closed_loop
     from rcac_ros.tools.demos.compare import make_controller, Scenario
     q0 = np.array(PAPER_Q0)
     base = PaperTrajectory(q0)

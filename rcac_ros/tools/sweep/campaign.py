@@ -40,9 +40,9 @@ from rcac_ros.core import PAPER_Q0, PaperTrajectory, SinusoidTrajectory, css_arm
 from rcac_ros.core.model import theta_from_inertia
 from rcac_ros.errors import ConfigError
 from rcac_ros.plants import ENGINES
-from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
-                                        run_metrics)
-from rcac_ros.tools.scenarios import controller, gains_for, load_panda
+from rcac_ros.tools.runs.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
+                                             run_metrics)
+from rcac_ros.tools.runs.scenarios import controller, gains_for, load_panda
 
 from rcac_ros.tools.sweep.schema import (DISTRIBUTIONS, GEOMETRIES, LAWS, load,  # noqa: F401
                                          MODEL_DEFAULTS, MODELS, PAIRED, POSTURES, QUANTITIES,
@@ -144,7 +144,7 @@ def nominal_model(name):
         return css_arm()
     if name in URDFS:
         from rcac_ros.core.urdf import model_from_urdf
-        from rcac_ros.tools.robots import example_robot_urdf
+        from rcac_ros.tools.runs.robots import example_robot_urdf
         path = example_robot_urdf(URDFS[name])
         if path is None:
             raise ConfigError(f"scenario.model: {name}: example-robot-data's {URDFS[name]} "

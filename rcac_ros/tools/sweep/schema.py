@@ -14,8 +14,8 @@ from rcac_ros.core import PAPER_GAINS
 from rcac_ros.core.law_options import BARRIER_C
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.plants import check_engine, ENGINES
-from rcac_ros.tools.scenarios import AMPLITUDE, FREQUENCY, READY
-from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
+from rcac_ros.tools.runs.scenarios import AMPLITUDE, FREQUENCY, READY
+from rcac_ros.tools.runs.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 #: the law's geometry (doc/design.md §8): "natural" is the natural geometry with its default
@@ -72,7 +72,7 @@ MODEL_DEFAULTS = {
                   trajectory=dict(type="sinusoid")),
 }
 #: The other URDF arms of example-robot-data: the Panda's gains at their scale
-#: (:func:`~rcac_ros.tools.scenarios.gains_for`, last link adapting from the URDF's), no
+#: (:func:`~rcac_ros.tools.runs.scenarios.gains_for`, last link adapting from the URDF's), no
 #: tool; the sinusoids of the Panda's motion about each arm's posture (:data:`POSTURES`).
 for _arm in ("ur5", "xarm7"):
     MODEL_DEFAULTS[_arm] = dict(MODEL_DEFAULTS["panda"], tool=(0.0, 0.0, 0.0))
