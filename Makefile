@@ -39,11 +39,11 @@ results:
 
 # time `make demo` and `make test` in a fresh clone of HEAD (doc/results/timings.json)
 readme-timings:
-	$(PYTHON) -m rcac_ros.tools.readme_timings --clean
+	$(PYTHON) -m rcac_ros.tools.results.timings --clean
 
 # run rcac bench ros in each controller mode (doc/results/bench_ros_modes.json)
 readme-bench: $(VENV)/.runtime
-	$(BIN)/python -m rcac_ros.tools.readme_bench
+	$(BIN)/python -m rcac_ros.tools.results.ros_modes
 
 $(VENV)/.runtime: requirements.txt setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)

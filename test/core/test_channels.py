@@ -13,7 +13,7 @@ Q0 = np.array(PAPER_Q0)
 
 
 def panda():
-    from rcac_ros.tools.scenarios import find_panda_urdf, load_panda
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf, load_panda
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data not installed")
     return load_panda()
@@ -56,7 +56,7 @@ def test_all_channels_equal_slotine_li_on_the_css_arm(update):
 
 @pytest.mark.parametrize("update", ["implicit", "explicit"])
 def test_all_channels_equal_slotine_li_on_the_panda_with_gravity(update):
-    from rcac_ros.tools.scenarios import AMPLITUDE, FREQUENCY, GAINS, READY, gains_for
+    from rcac_ros.tools.runs.scenarios import AMPLITUDE, FREQUENCY, GAINS, READY, gains_for
     model = panda()
     # the explicit step diverges at the demo's rho = 30 (as Slotine-Li's does): rho = 0.3
     gains = gains_for(model, adapt_all=True,

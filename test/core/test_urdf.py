@@ -9,7 +9,7 @@ from rcac_ros.core import ConfigError, ModelError
 from rcac_ros.core.model import rot_x
 from rcac_ros.core.rnea import inverse_dynamics
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.tools.robots import example_robots_dir
+from rcac_ros.tools.runs.robots import example_robots_dir
 
 pin = pytest.importorskip("pinocchio")
 

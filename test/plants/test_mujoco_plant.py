@@ -21,7 +21,7 @@ from rcac_ros.core import (InputError, ModelError, RobotModel, Simulator, css_ar
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, DependencyError
 from rcac_ros.plants import ENGINES, check_engine, make_plant
-from rcac_ros.tools.robots import example_robot_urdf
+from rcac_ros.tools.runs.robots import example_robot_urdf
 
 from rcac_ros.plants.mujoco_plant import MujocoPlant, mjcf
 

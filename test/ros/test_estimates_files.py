@@ -105,7 +105,7 @@ def test_natural_geometry_exports_every_link_and_pinocchio_accepts_them(tmp_path
     pin = pytest.importorskip("pinocchio")
     from rcac_ros.core import RecursiveCompositeController
     from rcac_ros.tools.demos.compare import payload_scenario, run_law
-    from rcac_ros.tools.scenarios import find_panda_urdf
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf
     urdf = find_panda_urdf()
     if urdf is None:
         pytest.skip("example-robot-data's panda.urdf not found")

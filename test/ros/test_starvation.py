@@ -13,7 +13,7 @@ from rcac_ros.core.model import PAPER_GAINS, PAPER_Q0
 from rcac_ros.nodes.controller.starvation import feedback_margin
 from rcac_ros.nodes.safety.delay_guard import DelayGuard, default_margin, TAU
 from rcac_ros.tools.bench.delay_margin import closed_loop, tracking_rms
-from rcac_ros.tools.scenarios import find_panda_urdf
+from rcac_ros.tools.runs.scenarios import find_panda_urdf
 
 H = PAPER_GAINS["h"]
 NS = 1_000_000_000

@@ -22,7 +22,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 #: imported by the package, not pip-installable: control_msgs is apt-only (doc/install.md)
 #: imported, but no PyPI wheel provides the module: control_msgs (built for the tests), and
 #: example_robot_data (the apt/robotpkg module; PyPI's example-robot-data ships only the URDFs
-#: under its cmeel prefix, which tools/robots.py finds without it: the ``robots`` extra)
+#: under its cmeel prefix, which tools/runs/robots.py finds without it: the ``robots`` extra)
 NOT_ON_PYPI = {"control_msgs", "example_robot_data"}
 
 

@@ -18,8 +18,8 @@ from chains import needs_mujoco
 
 from rcac_ros.core import PAPER_Q0, RecursiveCompositeController, SinusoidTrajectory, css_arm
 from rcac_ros.tools import cli
-from rcac_ros.tools.closed_loop import closed_loop
-from rcac_ros.tools.scenarios import find_panda_urdf, gains_for, with_payload
+from rcac_ros.tools.runs.closed_loop import closed_loop
+from rcac_ros.tools.runs.scenarios import find_panda_urdf, gains_for, with_payload
 from rcac_ros.tools.sweep import campaign as cp
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from rcac_ros.tools import scenarios
+from rcac_ros.tools.runs import scenarios
 from rcac_ros.tools.demos import payload as demo
 
 pin = pytest.importorskip("pinocchio")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rcac_ros.tools import readme_bench as rb
+from rcac_ros.tools.results import ros_modes as rb
 from rcac_ros.tools.bench.ros import analyse
 from rcac_ros.tools.results.page import read_source
 from rcac_ros.tools.results.sources import render_bench_ros_modes

@@ -2,7 +2,7 @@
 
 import os
 
-from rcac_ros.tools import readme_timings as rt
+from rcac_ros.tools.results import timings as rt
 from rcac_ros.tools.results.sources import render_timings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

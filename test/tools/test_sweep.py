@@ -16,7 +16,7 @@ from rcac_ros.tools import cli
 from rcac_ros.core import PAPER_Q0, PaperTrajectory, RcacError, RecursiveCompositeController, \
     Simulator, SinusoidTrajectory, css_arm
 from rcac_ros.tools.sweep import campaign as cp
-from rcac_ros.tools.closed_loop import attach_payload, closed_loop, run_metrics
+from rcac_ros.tools.runs.closed_loop import attach_payload, closed_loop, run_metrics
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -95,7 +95,7 @@ def test_experiment_runs_the_reference_loop():
 
 def test_payload_grasp_is_the_reference_loops():
     """closed_loop's plant event is the grasp of the reference loop, state carried over."""
-    from rcac_ros.tools.scenarios import gains_for, with_payload
+    from rcac_ros.tools.runs.scenarios import gains_for, with_payload
     model = css_arm(gravity=(0.0, 0.0, -9.81))
     loaded = with_payload(model, 50.0, (0.1, -0.2, 0.3), 0.2)
     traj = SinusoidTrajectory(np.array(PAPER_Q0), 0.1, 0.3)
@@ -117,8 +117,8 @@ def test_payload_grasp_is_the_reference_loops():
 def test_payload_demo_runs_the_reference_loop():
     """rcac payload-demo's run (closed_loop with the grasp event) is the reference loop's."""
     from rcac_ros.tools.demos.payload import run_demo
-    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, find_panda_urdf, GAINS,
-                                          gains_for, READY)
+    from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, find_panda_urdf, GAINS,
+                                               gains_for, READY)
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data's panda.urdf not installed")
     model, loaded, runs, _ = run_demo(0.4, 0.2, progress=False, laws=("composite",))
@@ -132,7 +132,7 @@ def test_payload_demo_runs_the_reference_loop():
 
 def test_attach_payload_matches_parallel_axis():
     """Parameter additivity (attach_payload) against payload-demo's parallel-axis sums."""
-    from rcac_ros.tools.scenarios import FLANGE, with_payload
+    from rcac_ros.tools.runs.scenarios import FLANGE, with_payload
     model = css_arm()
     for mass, com, radius in ((2.0, (0.03, -0.02, 0.08), 0.05), (80.0, (1.0, 0.5, -0.3), 0.4)):
         ref = with_payload(model, mass, com, radius)
@@ -252,7 +252,7 @@ def test_shipped_campaigns_validate_and_build():
         c = cp.load(os.path.join(ROOT, "campaigns", f"{name}.yaml"))
         assert c["scenario"]["model"] == model and cp.run_count(c) == runs
         if model == "panda":
-            from rcac_ros.tools.scenarios import find_panda_urdf
+            from rcac_ros.tools.runs.scenarios import find_panda_urdf
             if find_panda_urdf() is None:
                 pytest.skip("example-robot-data's panda.urdf not installed")
         inputs, ctrl, kw = cp.setup(c, 0)
@@ -455,7 +455,7 @@ def test_paired_campaign_gives_every_grid_cell_the_same_draws():
     assert u0 == a and u1["payload_mass"] != u0["payload_mass"]
     with pytest.raises(RcacError, match="^paired: expected true or false"):
         cp.validate(dict(doc, paired="yes"))
-    from rcac_ros.tools.scenarios import find_panda_urdf
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data's panda.urdf not installed")
     (_, ctrl_a, kw_a), (_, ctrl_b, kw_b) = cp.setup(paired, 0), cp.setup(paired, 1)
@@ -471,7 +471,7 @@ def test_the_natural_geometries_build_their_metric():
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     three = cp.load(os.path.join(root, "campaigns", "consistency.yaml"))
     runs = [cp.sample(three, k) for k in range(3)]
-    from rcac_ros.tools.scenarios import find_panda_urdf
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data's panda.urdf not installed")
     _, ctrl, _ = cp.setup(three, 1)

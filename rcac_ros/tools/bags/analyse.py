@@ -16,7 +16,7 @@ import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import BagError, ConfigError
-from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.runs import metrics as measure
 from rcac_ros.tools.bags.read import TopicData
 
 

@@ -266,7 +266,7 @@ def bench_model(model, label, baseline=True, budget_s=0.3):
 def urdf_models():
     """The panda (to panda_link8) and the ur5 from example-robot-data, if both are installed."""
     from rcac_ros.core.urdf import model_from_urdf
-    from rcac_ros.tools.robots import example_robot_urdf
+    from rcac_ros.tools.runs.robots import example_robot_urdf
     out = []
     for label, rel, tip in (("panda", "panda_description/urdf/panda.urdf", "panda_link8"),
                             ("ur5", "ur_description/urdf/ur5_robot.urdf", None)):

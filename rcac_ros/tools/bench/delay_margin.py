@@ -42,8 +42,8 @@ def closed_loop(model_name, gain, adapt=True):
         ctrl = RecursiveCompositeController(model, K_D=gain, **gains)
         traj = PaperTrajectory(q0)
     else:
-        from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS as PANDA, gains_for,
-                                              load_panda, READY)
+        from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS as PANDA, gains_for,
+                                                   load_panda, READY)
         model = load_panda()
         q0 = np.array(READY)
         ctrl = RecursiveCompositeController(model, **gains_for(model, **dict(PANDA,

@@ -36,7 +36,7 @@ from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
     shut_down, StopFlag
-from rcac_ros.tools.metrics import percentiles
+from rcac_ros.tools.runs.metrics import percentiles
 from rcac_ros.tools.warm import warm_once
 
 #: controller parameters of the benchmark. The paper's K_D = 1e4 is tuned for lockstep (no

@@ -48,12 +48,12 @@ from rcac_ros.core.identifiability import Excitation, summary
 from rcac_ros.core.pseudo_inertia import default_start, lambda_min
 from rcac_ros.errors import RcacError
 from rcac_ros.plants import with_joint_terms
-from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.runs import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
-from rcac_ros.tools.closed_loop import closed_loop
+from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.tools.demos.compare_report import COLUMNS, markdown, side_by_side  # noqa: F401
 from rcac_ros.tools.demos.friction import P_FRICTION
-from rcac_ros.tools.scenarios import controller, FIXED_P
+from rcac_ros.tools.runs.scenarios import controller, FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
 LS_FORGETTING = 1.0
@@ -174,8 +174,8 @@ def paper_scenario():
 
 
 def payload_scenario():
-    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                          load_panda, with_payload)
+    from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                               load_panda, with_payload)
     model = load_panda()
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
     q0, qd0, _ = traj(0.0)
@@ -185,8 +185,8 @@ def payload_scenario():
 
 def joint_scenario(name):
     """The panda on MuJoCo with the joint terms of :data:`JOINT_PLANTS` ``[name]``."""
-    from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
-                                          load_panda)
+    from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS, READY, gains_for,
+                                               load_panda)
     model = load_panda()
     damping, friction, armature = JOINT_PLANTS[name]
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
@@ -234,7 +234,7 @@ def make_controller(scenario, law, laws=None):
 
 
 def run_law(scenario, controller, duration, progress=None, engine=None):
-    """Close the loop (:func:`~rcac_ros.tools.closed_loop.closed_loop`) on the scenario.
+    """Close the loop (:func:`~rcac_ros.tools.runs.closed_loop.closed_loop`) on the scenario.
 
     The run stops at the first period whose estimates or prediction errors are not finite
     (``check_estimates``). Returns the time series of the table and the figure, one row

@@ -16,12 +16,12 @@ from rcac_ros.core import (PAPER_GAINS, PAPER_Q0, PaperTrajectory, RecursiveComp
                            css_arm)
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, positive_float,
                                  positive_int)
-from rcac_ros.tools.closed_loop import closed_loop
-from rcac_ros.tools.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
+from rcac_ros.tools.runs.closed_loop import closed_loop
+from rcac_ros.tools.runs.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 
 
 def metrics(run, theta_true, last_seconds=LAST_WINDOW):
-    """The figures of ``metrics.json`` for one run (:mod:`rcac_ros.tools.metrics`)."""
+    """The figures of ``metrics.json`` for one run (:mod:`rcac_ros.tools.runs.metrics`)."""
     return {**tracking(run["t"], run["q"] - run["q_d"], last_seconds),
             **estimates(run["theta_hat"], theta_true),
             **prediction(run["E"]), **torque(run["tau"])}

@@ -23,7 +23,7 @@ import numpy as np
 
 from rcac_ros.core import RecursiveCompositeController, Simulator, SinusoidTrajectory
 from rcac_ros.tools.args import positive_float
-from rcac_ros.tools.scenarios import GAINS, READY, gains_for, load_panda
+from rcac_ros.tools.runs.scenarios import GAINS, READY, gains_for, load_panda
 
 #: The true joint terms of every joint: armature kg m^2, damping N m s/rad, friction N m.
 TRUTH = (0.1, 0.5, 0.5)

@@ -29,12 +29,12 @@ import time
 import numpy as np
 
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SinusoidTrajectory
-from rcac_ros.tools import metrics as measure
+from rcac_ros.tools.runs import metrics as measure
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, finite_float,
                                  non_negative_float, positive_float)
-from rcac_ros.tools.closed_loop import closed_loop
-from rcac_ros.tools.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
-                                      READY, with_payload)
+from rcac_ros.tools.runs.closed_loop import closed_loop
+from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
+                                           READY, with_payload)
 
 
 def window_rms(run, start, stop):

@@ -333,7 +333,7 @@ SOURCES = {
         "The paper's experiment",
         "Section 4 on the CSS arm for the direct (gamma = 0) and the composite law: the "
         "paper's gains, the velocity reading of the desired motion, `theta_hat(0) = 0` "
-        "(doc/design.md §5). Figures of merit of `rcac_ros/tools/metrics.py`.",
+        "(doc/design.md §5). Figures of merit of `rcac_ros/tools/runs/metrics.py`.",
         render_experiment, ["rcac", "experiment", "--quiet", "--out", "{out}"], "metrics.json"),
     "bench_core": Source(
         "Speed of one step",

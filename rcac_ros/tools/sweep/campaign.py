@@ -42,9 +42,9 @@ from rcac_ros.core.model import theta_from_inertia
 from rcac_ros.core.pseudo_inertia import lambda_min
 from rcac_ros.errors import ConfigError
 from rcac_ros.plants import ENGINES
-from rcac_ros.tools.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
-                                        run_metrics)
-from rcac_ros.tools.scenarios import controller, gains_for, load_panda
+from rcac_ros.tools.runs.closed_loop import (attach_payload, closed_loop, perturbed_estimates,
+                                             run_metrics)
+from rcac_ros.tools.runs.scenarios import controller, gains_for, load_panda
 
 from rcac_ros.tools.sweep.schema import (DISTRIBUTIONS, GEOMETRIES, LAWS, load,  # noqa: F401
                                          MODEL_DEFAULTS, MODELS, PAIRED, QUANTITIES,

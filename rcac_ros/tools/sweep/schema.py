@@ -14,8 +14,8 @@ from rcac_ros.core import PAPER_GAINS
 from rcac_ros.core.pseudo_inertia import BARRIER_C
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.plants import check_engine, ENGINES
-from rcac_ros.tools.scenarios import AMPLITUDE, FREQUENCY, READY
-from rcac_ros.tools.scenarios import GAINS as PANDA_GAINS
+from rcac_ros.tools.runs.scenarios import AMPLITUDE, FREQUENCY, READY
+from rcac_ros.tools.runs.scenarios import GAINS as PANDA_GAINS
 
 LAWS = ("direct", "composite", "slotine_li", "composite_friction")
 #: the law's geometry (doc/design.md §8): "natural" is the natural geometry with its default

@@ -15,7 +15,7 @@ import numpy as np
 
 from rcac_ros.core import ConfigError, RecursiveCompositeController, SlotineLiCompositeController
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.tools.robots import example_robot_urdf
+from rcac_ros.tools.runs.robots import example_robot_urdf
 
 #: The Panda's "ready" posture (rad), the centre of the desired motion.
 READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)

@@ -1,6 +1,6 @@
 """Time ``make demo`` and ``make test`` as a new user runs them, for doc/results.md.
 
-``python -m rcac_ros.tools.readme_timings --clean`` (``make readme-timings``) clones the
+``python -m rcac_ros.tools.results.timings --clean`` (``make readme-timings``) clones the
 committed HEAD into a temporary folder and runs both targets there, as a new user would on a
 fresh machine (the venv created and installed, numba's one-time compile, the demo, the whole
 test suite). Without ``--clean`` it runs them in this checkout, with its venv as it is. It
@@ -107,7 +107,7 @@ def main(argv=None):
     load0, t0 = os.getloadavg()[0], time.monotonic()
     fields = measure(page.ROOT, args.clean)
     record = page.provenance("make readme-timings" if args.clean else
-                             "python -m rcac_ros.tools.readme_timings", started,
+                             "python -m rcac_ros.tools.results.timings", started,
                              time.monotonic() - t0, load0, os.getloadavg()[0], rev=rev)
     print(TEMPLATE.format(**fields))
     if not args.dry_run:

@@ -32,7 +32,7 @@ import numpy as np
 
 from rcac_ros.core import RcacError, theta_from_inertia
 from rcac_ros.plants import make_plant
-from rcac_ros.tools import metrics
+from rcac_ros.tools.runs import metrics
 
 #: Divergence is checked every this many control periods.
 CHECK_EVERY = 25
@@ -245,7 +245,7 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
 def run_metrics(run, theta_true=None):
     """The summary of one run: the figures a campaign's results table holds.
 
-    The figures of :mod:`rcac_ros.tools.metrics` (same names, same meaning as in
+    The figures of :mod:`rcac_ros.tools.runs.metrics` (same names, same meaning as in
     ``rcac experiment``), and what a campaign adds.
 
     Parameters
