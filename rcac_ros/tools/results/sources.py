@@ -178,6 +178,34 @@ PAYLOAD_KEYS = ("rms_error_before_jump", "rms_error_first_window_after_jump",
                 "max_torque_over_effort_limit", "wall_time_s")
 
 
+def render_startup(d):
+    r = d["results"]
+
+    def sec(x, key="seconds"):
+        return "-" if x is None or x.get(key) is None else f"{x[key]:.2f} s"
+    rows = []
+    for name in ("import rcac_ros.core", "import the recursive law (compiles nothing)",
+                 "bad argument (rcac experiment --duration -5)",
+                 "warm-up (python -m rcac_ros.tools.warm)"):
+        if name in r:
+            cold = r[name]["cold"]
+            rows.append([name, sec(cold), sec(r[name]["warm"]),
+                         "-" if cold is None else f"{cold['cpu_seconds']:.1f} s"])
+    for key, v in r.items():
+        if key.startswith("controller_"):
+            law = key[len("controller_"):]
+            rows.append([f"controller ({law}): first answer of `~/get_state`",
+                         sec(v["cold"], "first_answer_s"), sec(v["warm"], "first_answer_s"),
+                         "-"])
+            rows.append([f"controller ({law}): first effort", sec(v["cold"], "first_effort_s"),
+                         sec(v["warm"], "first_effort_s"), "-"])
+    said = [f"`{v['cold']['state_then']}`, \"{v['cold']['diagnostics_then']}\""
+            for k, v in r.items() if k.startswith("controller_") and v["cold"]["state_then"]]
+    return (table(["", "cold (empty cache)", "warm", "CPU, cold"], rows)
+            + f"\n\n{d['cpus']} CPUs, load average {fmt(d['load_average'][0])} at the end. "
+            + ("At its first answer the controller said " + said[0] + "." if said else ""))
+
+
 def render_payload(d):
     laws = [k for k in ("composite", "direct", "fixed") if k in d]
     s = d.get("settings", {})
@@ -351,6 +379,15 @@ SOURCES = {
         "run: effort period p99 over state period p99 (goal <= 1.1) and state→effort latency "
         "p50 over the ping's one-way p50 (doc/nodes.md, \"Timing\").",
         render_bench_ros_modes, shown="make readme-bench"),
+    "startup": Source(
+        "Start-up, with and without the compiled kernels",
+        "Each figure a fresh process with a numba cache of its own, empty (cold: a fresh "
+        "install before `rcac warm`) or filled by the cold run (warm): the imports, a bad "
+        "argument, the controller node's first answer and first effort for the default law "
+        "and the general kernel (`channels: [\"all\"]`), the whole warm-up (doc/tools.md, "
+        "`rcac bench startup`).",
+        render_startup, ["rcac", "bench", "startup", "--laws", "default,all", "--json",
+                         "{out}/startup.json"], "startup.json"),
     "timings": Source(
         "The two make targets",
         "`make demo` and `make test` timed on a fresh clone, as a new user runs them (venv, "
