@@ -303,7 +303,7 @@ def watchdog_during_run(data):
     answer to a state: its start-up safe efforts (no state yet) and those after the
     simulator's end are not trips of the run."""
     from rcac_ros import topics
-    from rcac_ros.tools.bags.inspect import effort_tags
+    from rcac_ros.tools.bags.analyse import effort_tags
     eff = data.get("/" + topics.EFFORT_COMMANDS)
     if eff is None or not eff.count:
         return None
