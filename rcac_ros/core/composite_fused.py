@@ -15,9 +15,9 @@ All read and write the packed arrays of :mod:`rcac_ros.core._packing`; the contr
 import math
 
 import numpy as np
-from ._jit import kernel
+from ._jit import kernel, njit
 
-from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
+from ._blocks import RCAC_SIGNATURE, packed_views, reference_motion, rejects_input
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
@@ -55,22 +55,18 @@ def is_paper_natural_law(chan, scal):
     return paper_options(chan, scal) and scal[I_NATURAL] != 0.0
 
 
-#: paper_law's: the entries pass data, filt as jdata, jfilt without the joint terms
-PAPER_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
-                   f"float64[:, :, ::1], boolean, boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
-
-
-@kernel(PAPER_SIGNATURE)
+@njit(inline="always")
 def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`paper_step`, :func:`paper_friction_step` and
     :func:`paper_natural_step`: the paper's law (:func:`paper_options`) fused in one loop,
     with joint i's terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true,
     else without them (``jdata``, ``jfilt`` unread), and in the natural geometry of
     doc/design.md §8 when ``natural`` is true (the gain ``P_eff(theta_hat_i)`` of either
-    metric in eq 24's step 1, then the retraction; ``joint`` is then false). Compiled once,
-    with ``joint`` and ``natural`` run-time flags, and called, not inlined, by the three
-    entries (one compile of the body instead of three; the flags' branches cost nothing
-    measurable per step).
+    metric in eq 24's step 1, then the retraction; ``joint`` is then false). Inlined into
+    each entry, which passes ``joint`` and ``natural`` as constants: numba prunes the
+    branches they rule out before typing, so each entry compiles only its own law (the
+    default law's kernel compiles without the joint terms' and the natural geometry's code)
+    and runs without a call.
 
     The same equations, in the same floating-point order, as the general kernels with
     ``channels=[1]``: joint 1's axis ``a_j`` travels in registers, and each link's blocks
@@ -251,14 +247,14 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     return tau
 
 
-@kernel(RCAC_SIGNATURE, calls=(paper_law,))
+@kernel(RCAC_SIGNATURE)
 def paper_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law (:func:`is_paper_law`): :func:`paper_law`
     without the joint terms, bit for bit the general kernel's results."""
     return paper_law(data, filt, data, filt, False, False, q, qd, q_d, qd_d, qdd_d)
 
 
-@kernel(RCAC_SIGNATURE, calls=(paper_law,))
+@kernel(RCAC_SIGNATURE)
 def paper_natural_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     """:func:`rcac_step_kernel` for the paper's law in the natural geometry
     (:func:`is_paper_natural_law`, doc/design.md §8): :func:`paper_law` with the natural
@@ -266,7 +262,7 @@ def paper_natural_step(data, filt, q, qd, q_d, qd_d, qdd_d):
     return paper_law(data, filt, data, filt, False, True, q, qd, q_d, qd_d, qdd_d)
 
 
-@kernel(FRICTION_SIGNATURE, calls=(paper_law,))
+@kernel(FRICTION_SIGNATURE)
 def paper_friction_step(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     """:func:`friction_step_kernel` for the paper's law
     (:func:`is_paper_law`): :func:`paper_law` with the joint terms (doc/design.md §7)."""

@@ -81,8 +81,9 @@ def test_the_key_covers_every_compiled_source_and_numba():
 
 def test_building_a_law_compiles_nothing_until_it_is_compiled(tmp_path):
     """Building the controller (checks, packing, choosing its kernel) compiles nothing; its
-    compile() compiles the law's kernel and the kernels that kernel calls, nothing else
-    (numba's compile events, in a process with an empty cache)."""
+    compile() compiles the law's kernel and the kernels that kernel calls, nothing else: not
+    the general kernel, not Slotine-Li's, and not the natural geometry's steps, whose branch
+    the paper's law's entry rules out (numba's compile events, with an empty cache)."""
     code = """
 import numpy as np
 from numba.core import event
@@ -100,6 +101,7 @@ print(len(built.buffer), names)
     assert out.returncode == 0, out.stderr
     count, names = out.stdout.strip().splitlines()[-1].split(" ", 1)
     assert count == "0"
-    assert "paper_step" in names and "paper_law" in names
+    assert "paper_step" in names
     assert "rcac_step_kernel" not in names and "general_law" not in names
     assert "slotine_li_step_kernel" not in names
+    assert "natural_gain_rows" not in names and "retract_links" not in names   # pruned
