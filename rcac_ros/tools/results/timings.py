@@ -65,8 +65,11 @@ def timed(command, cwd, env):
 def measure(root, clean):
     """Run ``make demo`` then ``make test`` (in a clone of HEAD if ``clean``); their fields."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("PYTHONPATH", "VIRTUAL_ENV", "ROS_DOMAIN_ID")}
+           if k not in ("PYTHONPATH", "VIRTUAL_ENV", "ROS_DOMAIN_ID", "NUMBA_CACHE_DIR",
+                        "RCAC_CACHE_DIR")}
     work = tempfile.mkdtemp(prefix="rcac_timings_") if clean else None
+    if clean:   # the compiled kernels too start empty, as on a fresh machine
+        env["RCAC_CACHE_DIR"] = os.path.join(work, "kernels")
     try:
         where = root
         if clean:
