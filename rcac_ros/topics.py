@@ -31,8 +31,9 @@ TRACKING_ERROR = "~/tracking_error"
 DESIRED_STATE = "~/desired_state"
 #: geometry_msgs/InertiaStamped, published by the simulator at start-up and at each change of
 #: its payload parameters: the payload held by the last link (mass 0: none), stamped with the
-#: sim time of the first step that carries it; reliable, transient local (a late reader gets
-#: the current one)
+#: sim time of the first step that carries it, ``frame_id`` the last joint's name (the frame
+#: of the link it moves); reliable, transient local, depth 10 (a late reader gets the last
+#: ten, the current one last)
 PAYLOAD = "~/payload"
 #: diagnostic_msgs/DiagnosticArray
 DIAGNOSTICS = "/diagnostics"

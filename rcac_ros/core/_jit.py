@@ -4,9 +4,9 @@ Every compiled function of the package is declared with :func:`njit` (numba's, w
 package's cache) and every entry kernel of a control law with :func:`kernel` (one signature,
 compiled when first needed, never at import). Two rules follow:
 
-- **Compile only what runs.** Importing a module compiles nothing; a controller compiles
-  (or loads from the cache) the kernels of its own law when it is built or prepared
-  (:func:`ready`), and nothing else.
+- **Compile only what runs.** Importing a module or building a controller compiles
+  nothing; a controller compiles (or loads from the cache) the kernels of its own law at
+  its ``compile()`` or first step (:func:`ready`), and nothing else.
 - **Never stale.** numba keys its cache on the one source file that defines a function,
   so a change in an inlined helper of another file, or an upgrade in place, could load an
   old kernel. Here every kernel's cache entry is keyed on :data:`SOURCE_KEY`, a digest of

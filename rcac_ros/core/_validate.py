@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rcac_ros.errors import InputError
+from rcac_ros.errors import GainError, InputError
 
 
 def as_array(value, shape, name, exc=InputError):
@@ -98,3 +98,39 @@ def positive_vector(value, n, name, exc):
 def joint_vectors(n, **vectors):
     """Validate named joint-space vectors of length ``n`` (entry-point checks)."""
     return [as_array(v, (n,), k) for k, v in vectors.items()]
+
+
+def projection_bounds(theta_bounds, n):
+    """``(theta_min, theta_max)`` (n, 13) of the projection option ``theta_bounds``: None
+    (none: ``(None, None)``), ``"mass"`` or a pair of bounds (each a scalar, (13,) or
+    (n, 13)); every mass >= 0 in either case. Raises :class:`GainError` naming the field."""
+    if theta_bounds is None:
+        return None, None
+    if isinstance(theta_bounds, str):
+        if theta_bounds != "mass":
+            raise GainError(f"theta_bounds: expected None, 'mass' or (theta_min, "
+                            f"theta_max), got {theta_bounds!r}")
+        lo, hi = np.full((n, 13), -np.inf), np.full((n, 13), np.inf)
+    else:
+        try:
+            lo, hi = theta_bounds
+        except (TypeError, ValueError):
+            raise GainError("theta_bounds: expected None, 'mass' or (theta_min, "
+                            "theta_max)") from None
+        lo, hi = _bound(lo, "theta_min", n), _bound(hi, "theta_max", n)
+        if np.any(lo > hi):
+            raise GainError("theta_bounds: theta_min > theta_max somewhere")
+    lo[:, 0] = np.maximum(lo[:, 0], 0.0)          # mass >= 0
+    if np.any(hi[:, 0] < 0.0):
+        raise GainError("theta_bounds: theta_max of a mass is < 0")
+    return lo, hi
+
+
+def _bound(value, name, n):
+    try:
+        arr = np.broadcast_to(np.asarray(value, dtype=float), (n, 13)).copy()
+    except (TypeError, ValueError):
+        raise GainError(f"{name}: expected a scalar, (13,) or ({n}, 13) values") from None
+    if np.any(np.isnan(arr)):
+        raise GainError(f"{name}: contains NaN")
+    return arr

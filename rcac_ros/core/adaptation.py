@@ -134,9 +134,10 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     Natural geometry (doc/design.md §8): the fixed ``P_i`` becomes ``P_eff(theta_hat_i)``
     (``M4``: four 4x4 scratch matrices), and ``theta_hat_i`` is kept for the retraction;
     with least squares the gain is ``(H(theta_hat_i) / k_i + Gamma_i)^-1``
-    (:func:`natural_ls_factor`); with the metric ``"barrier"`` (``scal[I_BARRIER_C] = c >
-    0``) it is ``P_mix = (H(theta_hat_i) / (c k_i) + P_i^-1)^-1``, factored on J's 10
-    entries with nu eliminated (:func:`barrier_factor`).
+    (:func:`~rcac_ros.core.natural_step.natural_ls_factor`); with the metric ``"barrier"``
+    (``scal[I_BARRIER_C] = c > 0``) it is ``P_mix = (H(theta_hat_i) / (c k_i) + P_i^-1)^-1``,
+    factored on J's 10 entries with nu eliminated
+    (:func:`~rcac_ros.core.natural_step.barrier_factor`).
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0

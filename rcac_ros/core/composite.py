@@ -38,7 +38,7 @@ from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR
                        I_K, I_LEAK, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0,
                        NAT_K, NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
                        block, new_data)
-from ._validate import as_array, joint_values, scalar
+from ._validate import as_array, joint_values, projection_bounds, scalar
 from .channels import channel_codes, parse_channels
 from ._jit import is_ready, ready
 from .composite_kernels import friction_step_kernel, rcac_step_kernel
@@ -46,8 +46,8 @@ from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction
                               paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, friction_natural_gain, feedback_scaled_gain,
-                             natural_friction_start, start_posture)
+                             feedback_scaled_gain, friction_gain, friction_natural_gain,
+                             gains_at_start, natural_friction_start)
 from .least_squares import initial_factor
 from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
                              is_body, lambda_min, matched_gain, natural_metric_option, nu_gain)
@@ -281,26 +281,28 @@ class RecursiveCompositeController:
             self._entry = paper_natural_step
         else:
             self._entry = paper_step if fused else rcac_step_kernel
-        self._kernel = self._bind(self._entry) if is_ready(self._entry) else self._compile_step
+        self._kernel = self._ready_kernel()
         if self.joint_friction and self._gain_at_start:
             self._kernel = self._friction_gain_at_start
 
+    def _ready_kernel(self):
+        return self._bind(self._entry) if is_ready(self._entry) else self._compile_step
+
     def _friction_gain_at_start(self, data, buf, q, *rest):
         """The first step with ``P_friction="feedback"``: the gain
-        :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at the measured ``q``
-        (doc/design.md §7), then the step."""
-        q0 = start_posture(q, self.n)
-        if q0 is not None:
-            self.P_friction = feedback_scaled_gain(self.model, self.K_D, q0)
+        :func:`~rcac_ros.core.joint_friction.gains_at_start` at the measured ``q`` and the
+        current estimates (doc/design.md §7), then the step."""
+        got = gains_at_start(self.model, self.K_D, q, self._jdata[:, F_HAT:F_HAT + 3],
+                             self.geometry == "natural")
+        if got is not None:
+            self.P_friction, k_f = got
             self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
-            if self.geometry == "natural":
-                self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
-                                                                    self.friction_hat0)
+            if k_f is not None:
+                self._jdata[:, F_K:F_K + 3] = k_f
                 self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
             self._gain_at_start = False
             self._choose_kernel()
-        return (self._bind(self._entry) if is_ready(self._entry) else self._compile_step)(
-            data, buf, q, *rest)
+        return self._ready_kernel()(data, buf, q, *rest)
 
     def _bind(self, kernel):
         if not self.joint_friction:
@@ -319,12 +321,11 @@ class RecursiveCompositeController:
         Building the controller compiles nothing; the first :meth:`step` calls this. Every
         path the law can then take runs the same kernel: freezing and resuming the
         adaptation (:meth:`set_adaptation`), scaling ``K_D``, resetting the estimates. With
-        an empty cache the first call takes seconds (the paper's law) to a minute (the
-        general kernel) on 2 cores (doc/results.md).
+        an empty cache the general kernel takes several times the paper law's fused one.
         """
-        self._kernel = self._bind(ready(self._entry))
-        if self.joint_friction and self._gain_at_start:     # the gain waits for the first q
-            self._kernel = self._friction_gain_at_start
+        ready(self._entry)
+        if self._kernel == self._compile_step:     # (a first step may have chosen already)
+            self._kernel = self._bind(self._entry)
         return self
 
     def use_fused_kernel(self, fused):
@@ -350,45 +351,11 @@ class RecursiveCompositeController:
             scalar(P_max, "P_max", GainError, minimum=0.0, strict=True)
         scal[I_DZ_S] = scalar(dead_zone_s, "dead_zone_s", GainError, minimum=0.0)
         scal[I_DZ_E] = scalar(dead_zone_E, "dead_zone_E", GainError, minimum=0.0)
-        self.theta_min, self.theta_max = self._bounds(theta_bounds)
+        self.theta_min, self.theta_max = projection_bounds(theta_bounds, self.n)
         if self.theta_min is not None:
             self._const[:, block("theta_lo")] = self.theta_min
             self._const[:, block("theta_hi")] = self.theta_max
             scal[I_PROJECT] = 1.0
-
-    def _bounds(self, theta_bounds):
-        n = self.n
-        if theta_bounds is None:
-            return None, None
-        if isinstance(theta_bounds, str):
-            if theta_bounds != "mass":
-                raise GainError(f"theta_bounds: expected None, 'mass' or (theta_min, "
-                                f"theta_max), got {theta_bounds!r}")
-            lo, hi = np.full((n, 13), -np.inf), np.full((n, 13), np.inf)
-        else:
-            try:
-                lo, hi = theta_bounds
-            except (TypeError, ValueError):
-                raise GainError("theta_bounds: expected None, 'mass' or (theta_min, "
-                                "theta_max)") from None
-            lo = self._bound(lo, "theta_min")
-            hi = self._bound(hi, "theta_max")
-            if np.any(lo > hi):
-                raise GainError("theta_bounds: theta_min > theta_max somewhere")
-        lo[:, 0] = np.maximum(lo[:, 0], 0.0)          # mass >= 0
-        if np.any(hi[:, 0] < 0.0):
-            raise GainError("theta_bounds: theta_max of a mass is < 0")
-        return lo, hi
-
-    def _bound(self, value, name):
-        try:
-            arr = np.broadcast_to(np.asarray(value, dtype=float), (self.n, 13)).copy()
-        except (TypeError, ValueError):
-            raise GainError(f"{name}: expected a scalar, (13,) or ({self.n}, 13) values") \
-                from None
-        if np.any(np.isnan(arr)):
-            raise GainError(f"{name}: contains NaN")
-        return arr
 
     @property
     def n(self):

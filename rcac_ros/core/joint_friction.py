@@ -327,6 +327,18 @@ def start_posture(q, n):
     return q if q.shape == (n,) and np.all(np.isfinite(q)) else None
 
 
+def gains_at_start(model, K_D, q, estimate, natural):
+    """With ``P_friction="feedback"``, at the first state: ``(P_friction, k_f)``, the gain
+    :func:`feedback_scaled_gain` at the measured ``q`` and, in the natural geometry, its
+    natural gain :func:`friction_natural_gain` at the current ``estimate`` (else None); None
+    if ``q`` is not a posture (the step reports it, and the gain waits for the next)."""
+    q0 = start_posture(q, model.n)
+    if q0 is None:
+        return None
+    P = feedback_scaled_gain(model, K_D, q0)
+    return P, (friction_natural_gain(P, estimate) if natural else None)
+
+
 def friction_gain(value, n):
     """``P_friction`` as (n, 3) positive diagonal gains: a scalar, a (3,) or an (n, 3).
     ``"feedback"`` (:data:`P_FRICTION`) gives None: the caller scales it from the joint's

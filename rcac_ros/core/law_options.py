@@ -19,7 +19,7 @@ from rcac_ros.errors import GainError
 #: default c of the metric "barrier" (doc/design.md §8, "Choice of c": the paired campaign's
 #: best median with its worst sample under 2x, of 100, 300, 1e3, 3e3, 1e4)
 BARRIER_C = 1000.0
-#: smallest c: below, H / (c k_i) overflowed (c = 1e-300 divided by zero in the kernel)
+#: smallest c: far below it, H / (c k_i) overflows to Inf in the kernel
 BARRIER_C_MIN = 1e-6
 
 #: default ``P_friction``: the joint terms' gain scaled from each joint's feedback at the

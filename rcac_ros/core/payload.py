@@ -90,6 +90,13 @@ class Payload:
                 f"inertia={inertia_values(self.inertia).tolist()!r})")
 
 
+def _numbers(value, name):
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name}: expected numbers, got {value!r}") from None
+
+
 def check_payload(mass, com, inertia, reach=None):
     """``(mass, com (3,), inertia (3, 3))`` checked (see :class:`Payload`), or
     :class:`ConfigError` in one line naming the field."""
@@ -101,7 +108,7 @@ def check_payload(mass, com, inertia, reach=None):
         raise ConfigError(f"payload.mass: must be finite, got {mass!r}")
     if m < 0.0:
         raise ConfigError(f"payload.mass: must be >= 0 kg (0 releases the payload), got {m:g}")
-    c = np.array(com, dtype=float).ravel()
+    c = _numbers(com, "payload.com").ravel()
     if c.shape != (3,):
         raise ConfigError(f"payload.com: expected 3 values (x y z, m), got {c.size}")
     if not np.all(np.isfinite(c)):
@@ -109,7 +116,7 @@ def check_payload(mass, com, inertia, reach=None):
     if reach is not None and np.linalg.norm(c) > reach:
         raise ConfigError(f"payload.com: {np.linalg.norm(c):.6g} m from the last link's frame, "
                           f"beyond the arm's reach of {reach:.6g} m")
-    arr = np.array(inertia, dtype=float)
+    arr = _numbers(inertia, "payload.inertia")
     if arr.shape == (3, 3):
         I = arr
     elif arr.size == 6 and arr.ndim == 1:

@@ -43,7 +43,7 @@ from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lam
                              pseudo_inertia)
 from .retraction import retract_rows
 from .joint_friction import (FOLLOW_TIME, P_FRICTION, friction_gain, friction_natural_gain,
-                             feedback_scaled_gain, start_posture,
+                             feedback_scaled_gain, gains_at_start,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
@@ -348,7 +348,11 @@ class SlotineLiCompositeController:
             ready(slotine_li_step_kernel)
             self._compiled = True
             z = np.zeros(self.n)
-            copy.deepcopy(self).step(z, z, z, z, z)    # the geometry's helpers, on a copy
+            try:
+                copy.deepcopy(self).step(z, z, z, z, z)    # the geometry's helpers, on a copy
+            except BaseException:
+                self._compiled = False
+                raise
         return self
 
     def step(self, q, qd, q_d, qd_d, qdd_d):
@@ -356,13 +360,14 @@ class SlotineLiCompositeController:
         if not self._compiled:
             self.compile()
         if self.joint_friction and self._gain_at_start:     # doc/design.md §7
-            q0 = start_posture(q, self.n)
-            if q0 is not None:
-                self.P_friction = feedback_scaled_gain(self.model, self.K_D, q0)
+            got = gains_at_start(self.model, self.K_D, q,
+                                 self._theta[13 * self.n:].reshape(self.n, 3),
+                                 self.geometry == "natural")
+            if got is not None:
+                self.P_friction, k_f = got
                 self._joint[:, :3] = self.P_friction
-                if self.geometry == "natural":
-                    self._friction_k = friction_natural_gain(self.P_friction,
-                                                             self.friction_hat0)
+                if k_f is not None:
+                    self._friction_k = k_f
                 self._gain_at_start = False
         if self.geometry == "natural":                      # doc/design.md §8
             th = self._theta[:13 * self.n].reshape(self.n, 13)

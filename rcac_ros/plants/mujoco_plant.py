@@ -244,6 +244,9 @@ class MujocoPlant:
         self.mj_model.body_mass[body] = loaded.mass[n - 1]
         self.mj_model.body_ipos[body] = loaded.com[n - 1]
         self._set_inertia(body, loaded.inertia[n - 1])
+        # the compiler's shortcuts for an inertial frame on the body's: they may hold no more
+        self.mj_model.body_sameframe[body] = 0
+        self.mj_model.body_simple[body] = 0
         data = self.mj_data
         qpos, qvel, act, time = data.qpos.copy(), data.qvel.copy(), data.act.copy(), data.time
         mujoco.mj_setConst(self.mj_model, data)

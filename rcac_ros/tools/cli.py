@@ -18,7 +18,8 @@ import importlib
 import inspect
 import sys
 
-#: subcommand -> (module, one-line help, what it needs: extras of setup.py, or "ros")
+#: subcommand -> (module, one-line help, what it needs: extras of setup.py or "ros", or a
+#: function of the parsed arguments that gives them)
 SUBCOMMANDS = {
     "experiment": ("rcac_ros.tools.demos.experiment",
                    "run the paper's Section 4 experiment (both laws)", ()),
@@ -32,14 +33,14 @@ SUBCOMMANDS = {
              "simulator + controller over ROS 2, bag, summary and plots", ("bags", "ros")),
     "capture-demo": ("rcac_ros.tools.demos.capture",
                      "CSS arm grasps an unknown payload over ROS 2: bag, figures, laws, masses",
-                     ("bags", "ros")),
+                     lambda args: () if args.no_ros else ("bags", "ros")),
     "payload-demo": ("rcac_ros.tools.demos.payload",
                      "panda with an unknown 2 kg payload attached", ()),
     "friction-demo": ("rcac_ros.tools.demos.friction",
                       "panda learning its joints' armature, viscous and Coulomb friction", ()),
     "friction-ros": ("rcac_ros.tools.demos.friction_ros",
                      "over ROS 2 on a MuJoCo plant with joint friction: blind and aware, bags, "
-                     "plots", ("bags", "ros")),
+                     "plots", ("bags", "ros", "mujoco")),
     "sweep": ("rcac_ros.tools.sweep.commands", "Monte Carlo campaigns of closed-loop runs on Dask",
               ("sweep",)),
     "warm": ("rcac_ros.tools.warm",
@@ -87,7 +88,7 @@ def main(argv=None):
     from rcac_ros.tools.extras import require
     module, _, needs = SUBCOMMANDS[args.command]
     try:
-        require(*needs)
+        require(*(needs(args) if callable(needs) else needs))
         return importlib.import_module(module).run(args) or 0
     except RcacError as err:
         print(f"rcac {args.command}: error: {err}", file=sys.stderr)

@@ -13,7 +13,7 @@ from rcac_ros.errors import DependencyError
 #: extra of setup.py -> the top-level modules it provides (test_dependencies.py checks them
 #: against the installed distributions). The ``robots`` extra is not here: example-robot-data
 #: installs no importable module (its URDFs sit under its cmeel prefix), and the commands
-#: that read them name the extra themselves (``tools/scenarios.load_panda``).
+#: that read them name the extra themselves (``tools/runs/scenarios.load_panda``).
 EXTRAS = {
     "bags": ("rosbags", "mcap", "mcap_ros2"),
     "sweep": ("dask", "distributed", "bokeh", "pyarrow", "pandas", "tqdm", "psutil"),

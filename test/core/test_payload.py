@@ -184,7 +184,6 @@ def test_the_mujoco_plant_holds_the_same_payload_as_the_builtin_simulator():
     for tau in taus:
         c.step(tau)
     assert np.abs(c.q - a.q).max() > 1e-3
-    print("gap", gap, "travel", travel)
     assert travel > 0.1
     assert gap < 1e-6                  # the open-loop tolerance of test_mujoco_plant.py
     assert b.mj_model.body_mass[-1] == model.mass[-1]        # released

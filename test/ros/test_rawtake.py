@@ -1,5 +1,5 @@
-"""The lock-free take of the side inputs (``nodes/runtime/rawtake.py``, doc/failsafe.md "Where the
-time of a flood goes"): what ``rcl`` hands over is the message as published, a sample above
+"""The lock-free take of the side inputs (``nodes/runtime/rawtake.py``, doc/failsafe.md "Oversized
+inputs"): what ``rcl`` hands over is the message as published, a sample above
 the cap never reaches the callback, the buffer does not keep a large sample's size (and a
 failed re-allocation of it leaves the reader a valid buffer), errors are counted and logged
 once without stopping the thread, and the thread stops cleanly."""

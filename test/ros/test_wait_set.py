@@ -1,5 +1,5 @@
-"""The nodes' publishers carry no event handlers of rclpy's (doc/failsafe.md, "Where a tick's
-time goes"): the executor's wait set, rebuilt at every spin, holds the subscriptions' handlers
+"""The nodes' publishers carry no event handlers of rclpy's (doc/failsafe.md, "Real-time
+options"): the executor's wait set, rebuilt at every spin, holds the subscriptions' handlers
 only; an incompatible subscriber is still told, on its side."""
 
 import time

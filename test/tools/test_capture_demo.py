@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from rcac_ros.tools.cli import main
-from rcac_ros.tools.demos.capture import (EFFORT_SHARE, cube_inertia, effort_figures,
-                                          recovery_time, slowdown, truth)
+from rcac_ros.tools.demos.capture import EFFORT_SHARE, cube_inertia, slowdown, truth
+from rcac_ros.tools.demos.capture_figures import effort_figures, recovery_time
 
 
 def test_recovery_time_of_a_burst_is_its_closed_form():

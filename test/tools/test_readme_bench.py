@@ -6,7 +6,7 @@ import pytest
 from rcac_ros.tools.results import ros_modes as rb
 from rcac_ros.tools.bench.ros import analyse
 from rcac_ros.tools.results.page import read_source
-from rcac_ros.tools.results.sources import render_bench_ros_modes
+from rcac_ros.tools.results.blocks import render_bench_ros_modes
 
 
 class FakeProbe:

@@ -3,7 +3,7 @@
 import os
 
 from rcac_ros.tools.results import timings as rt
-from rcac_ros.tools.results.sources import render_timings
+from rcac_ros.tools.results.blocks import render_timings
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 FIELDS = dict(where="this checkout", date="2031-01-02", cores=8, python="3.12.1", demo_min=0.52,

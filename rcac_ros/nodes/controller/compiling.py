@@ -5,8 +5,10 @@ compiles), builds the law, then :class:`KernelWarmup` compiles (or loads from th
 :mod:`rcac_ros.core._jit`) what the active loop can run: the law's kernel (the same one
 adapting, frozen by ``~/set_adaptation`` or the starvation guard, or with ``K_D`` scaled)
 and the command limiter's. Meanwhile the node spins: its lifecycle services answer
-and its diagnostics say ``compiling``. Activation waits for the warm-up (autostart activates
-when it ends).
+and its diagnostics say ``compiling``. Autostart activates when the warm-up ends; an
+activate requested before waits for it (and the node's services wait with it). A cleanup
+or a shutdown waits for the kernel being compiled (numba cannot be interrupted) and skips
+the rest.
 
 After activation nothing may compile: :class:`CompileWatch` counts numba's compilations
 from then on (``compiles_after_activate`` in the diagnostics, an ERROR line at the first).
@@ -39,6 +41,7 @@ class KernelWarmup:
         self.done = threading.Event()
         self.error = None                   # the exception's one line, if the warm-up failed
         self.seconds = None
+        self._closed = threading.Event()
         self._args = ctrl, limiter, after
         self._log = log
         self._t0 = time.monotonic()
@@ -48,10 +51,11 @@ class KernelWarmup:
     def _run(self):
         ctrl, limiter, after = self._args
         try:
-            ctrl.compile()
-            limiter.warm()
-            for prepare in after:
-                prepare()
+            for part in (ctrl.compile, limiter.warm, *after):
+                if self._closed.is_set():
+                    self.error = "the node was cleaned up while compiling"
+                    return
+                part()
         except Exception as exc:  # reported by status and at activate; the thread ends
             self.error = f"{type(exc).__name__}: {exc}"
             self._log.error(f"compiling the kernels failed:\n{traceback.format_exc()}")
@@ -61,6 +65,11 @@ class KernelWarmup:
             self.done.set()
         if self.error is None:
             self._log.info(f"kernels ready in {self.seconds:.1f} s")
+
+    def close(self):
+        """Skip what is left and wait for the kernel being compiled (configure's cleanup)."""
+        self._closed.set()
+        self._thread.join()
 
     @property
     def status(self):

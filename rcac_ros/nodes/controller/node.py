@@ -78,9 +78,9 @@ class ControllerNode(ControlStep, ManagedNode):
             values, ctrl=self.ctrl, adaptation=self.adaptation, h=cfg.h, q0=cfg.paper_q0,
             state_received=lambda: self.states.received, log=log) \
             if cfg.mode == "timer" and values["starvation.delay_margin"] != 0.0 else None
-        self.kernels = KernelWarmup(        # beside the spinning node
+        self.kernels = self.keep(KernelWarmup.close, KernelWarmup(     # beside the spinning node
             self.ctrl, self.failsafe.limiter, log, after=[
-                part.prepare for part in (self._starvation, self._lookahead) if part])
+                part.prepare for part in (self._starvation, self._lookahead) if part]))
         self.compile_watch = self.keep(CompileWatch.close, CompileWatch(self, log))
         self.phase_error_ns = 0
         self._outputs = self.keep(ControllerOutputs.destroy, ControllerOutputs(

@@ -138,6 +138,8 @@ class Starvation:
     def prepare(self):
         """The delay margin (derived: it steps the law, so the controller's warm-up thread
         calls this after compiling), its guard, and the log line that reports it."""
+        if self.guard is not None:          # (an explicit margin: done at construction)
+            return
         values, h, q0, ctrl, log = self._values, self._h, self._q0, self.ctrl, self.log
         margin = values["starvation.delay_margin"]
         if margin is None:                  # at the motion's start, or the zero position

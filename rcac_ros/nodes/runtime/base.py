@@ -215,19 +215,29 @@ def _realtime(node):
 SHUTDOWN_LINGER = 0.5
 
 
+def _fatal(node, prog):
+    """An exception no part of the node caught (being handled): its traceback in the node's
+    log, then what an interrupt does (the controller's zero effort: the arm must not keep
+    the last effort); returns the exit code, 1."""
+    text = traceback.format_exc().rstrip()
+    print(f"{prog}: fatal: {text}", file=sys.stderr, flush=True)
+    if node is not None:
+        node.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
+        try:
+            node.on_interrupt()
+        except Exception:               # noqa: BLE001 -- already failing: exit regardless
+            pass
+    return 1
+
+
 def run(node_factory, prog, args=None):
     """Run one node until it finishes, SIGINT/SIGTERM, or an external shutdown.
 
     A node with a ``loop`` attribute (a :class:`DeadlineLoop`) is paced by it; otherwise
     the executor is spun. The node's ``on_interrupt()`` runs after an interrupt (the
     controller publishes a zero effort there), and after an exception that no part of the
-    node caught (logged with its traceback; exit code 1). A :class:`RcacError` at start-up (a bad
-    parameter) prints one line naming the parameter and returns 2.
-
-    Returns
-    -------
-    int
-        The process exit code.
+    node caught (logged with its traceback; exit code 1). A :class:`RcacError` at start-up (a
+    bad parameter) prints one line naming the parameter and returns 2. Returns the exit code.
     """
     # rclpy's own SIGINT handler would shut the context down before we could publish the
     # final zero effort: handle both signals in Python instead.
@@ -241,13 +251,14 @@ def run(node_factory, prog, args=None):
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)
     node = rt = executor = None
-    code = 0
+    code, spinning = 0, False
     try:
         node = node_factory()
         gcwatch.WATCH.install()             # the collector's pauses, in the diagnostics
         rt = _realtime(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        spinning = True
         while rclpy.ok() and not node.finished:
             spin_node_once(executor, node)
         if node.finished:
@@ -259,25 +270,18 @@ def run(node_factory, prog, args=None):
                 executor.spin_once(timeout_sec=0.05)
         code = node.exit_code
     except RcacError as err:
-        print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
-        code = 2
+        if spinning:                    # not at start-up: a fault, as below
+            code = _fatal(node, prog)
+        else:                           # a bad parameter: one line
+            print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
+            code = 2
     except KeyboardInterrupt:
         if node is not None:
             node.on_interrupt()
     except ExternalShutdownException:
         pass
     except Exception:                   # noqa: BLE001 -- a fault no part of the node caught
-        # its traceback in the node's log, then what an interrupt does (the controller's
-        # zero effort: the arm must not keep the last effort), then exit 1
-        text = traceback.format_exc().rstrip()
-        print(f"{prog}: fatal: {text}", file=sys.stderr, flush=True)
-        code = 1
-        if node is not None:
-            node.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
-            try:
-                node.on_interrupt()
-            except Exception:           # noqa: BLE001 -- already failing: exit regardless
-                pass
+        code = _fatal(node, prog)
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -92,11 +92,12 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
 
         def activate_when_ready():
             if self._ready_to_activate():
-                self.destroy_timer(timer)
-                if lifecycle_state(self) == "inactive":
-                    self.trigger_activate()
-        timer = self.create_timer(0.05, activate_when_ready,
-                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
+                timer.cancel()              # (destroyed with configure's entities)
+                if lifecycle_state(self) == "inactive" and self.trigger_activate() != SUCCESS:
+                    self.get_logger().fatal("autostart: activate failed; the node stops")
+                    self.exit_code, self.finished = 1, True
+        timer = self.keep(self.destroy_timer, self.create_timer(
+            0.05, activate_when_ready, clock=Clock(clock_type=ClockType.STEADY_TIME)))
         return True
 
     def _ready_to_activate(self):
@@ -149,8 +150,8 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
                                   f"{self.description_topic} yet")
             values, self.model, self.joints = declare_parameters(self, self.PARAMETERS,
                                                                  self._description)
-            self._configure(values)
             self._check_unknown_parameters(values["strict_parameters"])
+            self._configure(values)
         except RcacError as err:
             self.config_error = str(err)
             if not self._at_start:          # (at start-up, run() prints the one line)

@@ -24,10 +24,8 @@ from rcac_ros.errors import ConfigError
 from rcac_ros.tools.args import positive_int
 from rcac_ros.tools.bags.recover import default_recovered_path, format_recovery, recover
 from rcac_ros.tools.bags.verify import bag_info, find_bag, Report
-from rcac_ros.tools.bags.analyse import (analyse, joint_names, load_truth,  # noqa: F401
-                                         loop_timing, notes, Timeline)
-from rcac_ros.tools.bags.read import (format_summary, read_bag, summary,  # noqa: F401
-                                      TopicData)
+from rcac_ros.tools.bags.analyse import analyse, joint_names, load_truth, notes
+from rcac_ros.tools.bags.read import format_summary, read_bag, summary
 
 
 def plot_timing(timing, path):

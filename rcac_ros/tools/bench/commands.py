@@ -22,6 +22,7 @@ Only the chosen benchmark's module is imported, when it runs; the ROS ones need 
 """
 
 import argparse
+import sys
 
 from rcac_ros.tools.args import non_negative_float, positive_float
 from rcac_ros.tools.extras import require
@@ -193,14 +194,19 @@ def add_startup(p):
 
 
 def startup_laws(text):
-    """``--laws``: comma-separated names of :data:`rcac_ros.tools.bench.startup.LAWS`."""
-    return tuple(_choices(text, ",", ("default", "all", "joint_friction")))
+    """``--laws``: comma-separated names of :data:`rcac_ros.tools.bench.startup.LAWS`, each
+    once."""
+    from rcac_ros.tools.bench.startup import LAWS
+    return tuple(dict.fromkeys(_choices(text, ",", tuple(LAWS))))
 
 
 def run_startup(args):
-    from rcac_ros.tools.bench.startup import run_startup_bench
-    run_startup_bench(laws=args.laws or ("default",), json_path=args.json)
-    return 0
+    from rcac_ros.tools.bench.startup import failures, run_startup_bench
+    report = run_startup_bench(laws=args.laws or ("default",), json_path=args.json)
+    bad = failures(report)
+    for line in bad:
+        print(f"rcac bench startup: {line}", file=sys.stderr)
+    return 1 if bad else 0
 
 
 def run_core(args):

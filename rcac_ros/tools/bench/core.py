@@ -169,7 +169,7 @@ def natural_cost(sizes=(7, 14, 28), runs=3, budget_s=1.0):
 
 
 def goal_ratios(budget_s=1.0):
-    """The cost goals of doc/tools.md ("The channels, least squares and the cost goals"),
+    """The cost goals of doc/results.md ("Speed of one step"),
     each measured side by side (:func:`interleaved_ratio`)."""
     rng = np.random.default_rng(0)
     out = {}

@@ -1,4 +1,4 @@
-"""The fault benchmark behind ``rcac bench faults`` (doc/failsafe.md, "Measured").
+"""The fault benchmark behind ``rcac bench faults`` (doc/failsafe.md, "How to check a machine").
 
 The simulator (``mode: realtime``) and the controller (``mode: timer``) run as two
 processes over DDS, as on a real arm. The simulator's joint states and ``/clock`` go
@@ -719,7 +719,7 @@ def run_faults(duration=120.0, cases=CASES, controller=None, json_path=None, plo
     ``LOCALHOST`` (the default: no traffic off the machine) rmw_fastrtps gives each
     participant its own shared-memory transport with Fast DDS's default health check, which
     can hold every writer of a participant up to 1/3 s when another participant starts
-    (doc/failsafe.md, "A node joining the graph"); ``SUBNET`` is ROS's default.
+    (doc/failsafe.md, "Known limitations and deployment advice"); ``SUBNET`` is ROS's default.
     """
     if not duration > 3.0:
         raise ConfigError(f"duration: must be > 3 s, got {duration}")

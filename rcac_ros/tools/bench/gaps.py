@@ -11,8 +11,8 @@ stamps, so the DDS transport is not in it), it looks at the same instant (+-2 pe
 * neither: a cause inside the controller's process.
 
 It prints the counts, the controller's own diagnostics (garbage collections and their
-longest pause, compute time, late ticks) and the load average (doc/failsafe.md, "Gaps
-between efforts"). ``--rt`` gives both nodes their real-time options (``rcac bench ros --rt``):
+longest pause, compute time, late ticks) and the load average (doc/failsafe.md, "How to
+check a machine"). ``--rt`` gives both nodes their real-time options (``rcac bench ros --rt``):
 what remains then is what a busy machine does not explain.
 """
 

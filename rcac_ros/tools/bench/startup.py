@@ -162,3 +162,18 @@ def run_startup_bench(laws=("default",), json_path=None, log=print):
         with open(json_path, "w") as f:
             json.dump(report, f, indent=1)
     return report
+
+
+def failures(report):
+    """What went wrong in a :func:`run_startup_bench` report, one line each (none: [])."""
+    out = []
+    for name, r in report["results"].items():
+        if name.startswith("controller_"):
+            out += [f"{name} ({which}): no effort" for which in ("cold", "warm")
+                    if r[which]["first_effort_s"] is None]
+        else:
+            expect = 2 if name.startswith("bad argument") else 0
+            out += [f"{name} ({which}): exit {r[which]['exit_code']}, expected {expect}"
+                    for which in ("cold", "warm")
+                    if r[which] is not None and r[which]["exit_code"] != expect]
+    return out

@@ -21,7 +21,8 @@ Euclidean paper and ``"all"`` laws from the same start (``paper_nat_start``,
   ``panda_rigid``, ``panda_damping``, ``panda_friction``, ``panda_armature``,
   ``panda_damping_armature``), the payload demo's motion and gains, every link adapting
   from the URDF's nominal parameters (no payload): a plant outside the laws' rigid-body
-  model class. ``--scenarios joint_table`` runs the five rows of doc/tools.md's table.
+  model class. ``--scenarios joint_table`` runs the five rows of the joint-friction blocks
+  of doc/results.md.
 
 Every law gets the scenario's gains; a law only changes the channels, the update or the
 adaptation gain. Each scenario has its default laws (``--laws`` overrides them all) and
@@ -49,7 +50,7 @@ from rcac_ros.tools.runs import metrics as measure
 from rcac_ros.tools.args import add_engine_argument, positive_float
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.core.law_options import P_FRICTION as P_FRICTION_DEFAULT
-from rcac_ros.tools.demos.compare_report import COLUMNS, markdown, side_by_side  # noqa: F401
+from rcac_ros.tools.demos.compare_report import markdown
 from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.runs.scenarios import controller, FIXED_P
 
@@ -123,8 +124,8 @@ LAWS = {
 DEFAULT_LAWS = tuple(law for law in LAWS if law != "fixed"
                      and not law.endswith(("_friction", "_barrier")))
 
-#: The laws of the joint-friction scenarios (the rows of doc/tools.md's table); a law added
-#: to :data:`LAWS` and to this list joins the table.
+#: The laws of the joint-friction scenarios (the rows of doc/results.md's joint-friction
+#: blocks); a law added to :data:`LAWS` and to this list joins the table.
 JOINT_LAWS = ["fixed", "direct", "paper", "all", "direct_friction", "paper_friction",
               "all_friction"]
 
@@ -139,7 +140,7 @@ JOINT_PLANTS = {
     "panda_damping_armature": (0.5, 0.0, 0.1),
 }
 
-#: Names that stand for several scenarios: the rows of doc/tools.md's joint-friction table.
+#: Names that stand for several scenarios: the rows of doc/results.md's joint-friction blocks.
 GROUPS = {"joint_table": ("panda_rigid", "panda_damping", "panda_friction", "panda_armature",
                           "panda_joints")}
 

@@ -57,12 +57,12 @@ def demo_overrides(duration, dt):
 def warm_kernels(log, prog="rcac demo"):
     """Load (on the first run: compile) the numba kernels, once, before the nodes start.
 
-    numba caches them next to the sources, so the nodes started next load them in seconds;
-    without this both would compile them at the same time at their start (over 2 min on a
-    2-core machine), longer than the wait for their topics. Compiles in two processes at a
-    time (:mod:`rcac_ros.tools.warm`) and says how long it took."""
+    They are cached in the user's cache directory (:mod:`rcac_ros.core._jit`), so the nodes
+    started next load them in a second; without this both nodes would compile at the same
+    time at their start, longer than the wait for their topics. Compiles in two processes at
+    a time (:mod:`rcac_ros.tools.warm`) and says how long it took."""
     from rcac_ros.tools.warm import warm
-    log(f"{prog}: loading the kernels (the first run compiles them once: about 2 min on "
+    log(f"{prog}: loading the kernels (the first run compiles them once: under a minute on "
         "2 cores)")
     t0 = time.monotonic()
     warm(log=lambda text: log(f"{prog}: {text}") if " failed " in text else None)
@@ -236,9 +236,9 @@ def run(args):
     except NodeFailed as err:
         print(f"rcac demo: error: {err}", file=sys.stderr)
         return 1
-    # imported here, not first: it imports the core, whose first import compiles the kernels
-    # (warm_kernels says so before)
-    from rcac_ros.tools.bags.inspect import format_metrics, format_summary, inspect
+    # imported here, not first: reading a bag needs neither on a bad argument
+    from rcac_ros.tools.bags.inspect import format_metrics, inspect
+    from rcac_ros.tools.bags.read import format_summary
     result = inspect(bag, plots_dir=out)
     print(format_summary(bag, result["summary"]))
     start = result["metrics"].get("sim_time_start_s")

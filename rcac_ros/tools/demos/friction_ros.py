@@ -15,6 +15,7 @@ figure spreads those messages evenly over the run's simulated time.
 
 import json
 import os
+import sys
 
 import numpy as np
 
@@ -40,7 +41,8 @@ def plant_model_file(path):
 
 def bag_series(bag):
     """``(tracking errors (k, n), joint estimates (k, n, 3) or None)`` of a bag."""
-    from rcac_ros.tools.bags.inspect import find_bag, read_bag
+    from rcac_ros.tools.bags.read import read_bag
+    from rcac_ros.tools.bags.verify import find_bag
     data = read_bag(find_bag(bag))
 
     def values(name):
@@ -101,7 +103,7 @@ def run(args):
             bags[label] = run_demo(args.duration, os.path.join(out, label),
                                    controller_overrides=ctrl, simulator_overrides=sim)
         except NodeFailed as err:
-            print(f"rcac friction-ros: error ({label}): {err}")
+            print(f"rcac friction-ros: error ({label}): {err}", file=sys.stderr)
             return 1
         runs[label] = bag_series(bags[label])
     report = {"duration_s": args.duration, "plant_joint_terms": dict(zip(NAMES, TRUTH)),

@@ -19,7 +19,7 @@ import sys
 import time
 
 from rcac_ros.tools.bench.commands import RT_OPTIONS, SIM_RT_OPTIONS
-from rcac_ros.tools.results.sources import BENCH_ROS_ROWS as ROWS  # noqa: F401
+from rcac_ros.tools.results.blocks import BENCH_ROS_ROWS as ROWS  # noqa: F401
 
 #: column -> (controller mode of the bench, controller overrides, simulator overrides)
 MODES = {
@@ -52,7 +52,8 @@ def measure(duration, rate=500.0):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog="readme_bench", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m rcac_ros.tools.results.ros_modes",
+                                     description=__doc__.split("\n")[0])
     parser.add_argument("--duration", type=float, default=20.0,
                         help="seconds measured per mode (default 20)")
     parser.add_argument("--dry-run", action="store_true", help="print the figures, write nothing")

@@ -22,7 +22,7 @@ import sys
 import tempfile
 import time
 
-from rcac_ros.tools.results.sources import TIMINGS_TEMPLATE as TEMPLATE
+from rcac_ros.tools.results.blocks import TIMINGS_TEMPLATE as TEMPLATE
 
 DEMO_WALL = re.compile(r"rcac demo: ([\d.]+) s simulated in ([\d.]+) s wall")
 PYTEST_SUMMARY = re.compile(r"^=*\s*(\d+ passed[^=]*?) in [\d.]+s", re.MULTILINE)
@@ -100,7 +100,8 @@ def measure(root, clean):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog="readme_timings", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m rcac_ros.tools.results.timings",
+                                     description=__doc__.split("\n")[0])
     parser.add_argument("--clean", action="store_true",
                         help="run in a fresh clone of HEAD (install included), as a new user")
     parser.add_argument("--dry-run", action="store_true", help="print the figures, write nothing")

@@ -1,6 +1,6 @@
 """Paired ratios of a law grid: each plant's friction-aware RMS over its friction-blind RMS.
 
-The campaigns ``campaigns/friction_{panda,ur5,xarm7}.yaml`` (doc/tools.md, "Unseen plants")
+The campaigns ``campaigns/friction_{panda,ur5,xarm7}.yaml`` (doc/campaigns.md, "Unseen plants")
 run, on the same drawn plant (``paired: true``), the friction-blind recursive composite law
 and the one with the joint terms at their default gain. This reads their results and writes
 the distribution of ``rms(composite_friction) / rms(composite)`` per arm and pooled: a JSON
@@ -25,7 +25,8 @@ GOALS = {"median": 0.05, "worst": 0.2}
 
 
 def ratios(path):
-    """``(name, ratio per plant, diverged aware, diverged blind)`` of one results directory."""
+    """``(name, ratio per plant, diverged aware, diverged blind, median blind RMS)`` of one
+    results directory."""
     df, meta, _ = load_table(path)
     cells = len(set(df["law"]))
     df = df.assign(plant=df["run"] // cells)
