@@ -355,10 +355,10 @@ def render_capture(d):
         label: run for label, run in d["offline"].items() if run.get("status") == "ok"})
     phases = ["capture"] + (["release"] if settings.get("release_s") is not None else [])
     payload = settings["payload"]
-    head = (f"Payload {payload['mass']:g} kg at its centre of mass {payload['com']} m, "
-            f"captured at {settings['at_s']:g} s"
-            + (f", released at {settings['release_s']:g} s" if settings.get("release_s")
-               else "") + f", {settings['duration_s']:g} s; the paper's motion "
+    head = (f"Payload {payload['mass']:g} kg, centre of mass {payload['com']} m in the last "
+            f"link's frame, captured at {settings['at_s']:g} s"
+            + (f" and released at {settings['release_s']:g} s" if settings.get("release_s")
+               else "") + f" of a {settings['duration_s']:g} s run; the paper's motion "
             + ("at full speed" if settings["slowdown"] == 1.0 else
                f"{settings['slowdown']:.2f} times slower") + ". Offline columns: the effort "
             "the law asked for (the plant applies it clipped to the preset's limits, as the "
@@ -387,3 +387,22 @@ def render_delay_margin(d):
             f"{d['duration_s']:g} s per delay; the derivation holds if the loop settles at "
             f"{d['within']:g} margin late and not at {d['beyond']:g} margin late.\n\n"
             + table(header, rows))
+
+
+def render_faults(runs):
+    """Per case: tracking against the reference (whole run, and in the faulty window), the
+    longest gap between efforts, safe efforts, the guard's spells, late ticks."""
+    rows = []
+    for r in runs:
+        rows.append([r["case"], fmt(r["tracking_rms"]), fmt(r["tracking_ratio"]),
+                     fmt(r.get("window_ratio")), fmt(r["longest_gap_ms"]),
+                     fmt(r.get("plain_loop_gap_ms")), r["watchdog_efforts"],
+                     r["controller_starved_spells"], r["controller_delay_worst_ms"],
+                     f"{r['controller_late_ticks']}/{r['controller_skipped_ticks']}",
+                     "yes" if r["theta_bounded"] else "no", "yes" if r["recovered"] else "no"])
+    header = ["case", "tracking RMS (rad)", "x reference", "x reference, loaded third",
+              "longest gap (ms)", "plain loop's longest gap (ms)", "safe efforts",
+              "starved spells", "worst delay (ms)", "late/skipped ticks", "estimates bounded",
+              "recovered"]
+    return ("Goal: the starved case tracks within 10x the reference while loaded, estimates "
+            "bounded, control recovered (the last fifth within 3x).\n\n" + table(header, rows))

@@ -190,6 +190,20 @@ def render(check=False, results_dir=RESULTS_DIR, page=PAGE, readme=README):
     return stale
 
 
+def store(name, data, record, prog):
+    """:func:`write_source`, then :func:`render`; the exit code: 0, or 1 (one line on
+    stderr) if the page could not be rendered."""
+    write_source(name, data, record)
+    try:
+        render()
+    except SourceError as err:
+        print(f"{prog}: stored the source, but doc/results.md was not rendered: {err}",
+              file=sys.stderr)
+        return 1
+    print(f"{prog}: wrote {os.path.relpath(source_path(name), ROOT)}, doc/results.md")
+    return 0
+
+
 def run_source(name):
     """Run a source's command in a temporary folder: ``(data, record)``."""
     src = SOURCES[name]
@@ -209,6 +223,8 @@ def run_source(name):
         seconds, load1 = time.monotonic() - t0, os.getloadavg()[0]
         with open(os.path.join(tmp, src.output), encoding="utf-8") as f:
             data = json.load(f)
+        if src.keep is not None:
+            data = src.keep(data)
     return data, provenance(src.shown, started, seconds, load0, load1, rev=rev)
 
 

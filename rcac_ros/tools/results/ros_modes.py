@@ -69,14 +69,7 @@ def main(argv=None):
                              os.getloadavg()[0], rev=rev)
     print(json.dumps(data, indent=1))
     if not args.dry_run:
-        page.write_source("bench_ros_modes", data, record)
-        try:
-            page.render()
-        except page.SourceError as err:
-            print(f"readme-bench: stored the source, but doc/results.md was not rendered: {err}",
-                  file=sys.stderr)
-            return 1
-        print("readme-bench: wrote doc/results/bench_ros_modes.json, doc/results.md")
+        return page.store("bench_ros_modes", data, record, "readme-bench")
     return 0
 
 

@@ -11,7 +11,8 @@ import re
 from rcac_ros.tools.results.blocks import (
     render_bench_core, render_bench_ros_modes, render_campaign, render_capture, render_compare,
     render_compare_consistency, render_compare_rms, render_consistency_campaign,
-    render_delay_margin, render_experiment, render_friction, render_friction_unseen,
+    render_delay_margin, render_experiment, render_faults, render_friction,
+    render_friction_unseen,
     render_noise, render_noise_sources, render_payload, render_startup, render_timings)
 
 
@@ -26,10 +27,12 @@ def campaign_commands(name):
 class Source:
     """One block of doc/results.md. ``command``: the argv (or a list of argvs, run in turn)
     that writes ``output`` into ``{out}`` (``rcac`` is the venv's); None when a maintenance
-    tool writes the JSON itself (``shown`` names it)."""
+    tool writes the JSON itself (``shown`` names it). ``keep``: what of the output is stored
+    (default all of it)."""
 
-    def __init__(self, title, about, render, command=None, output=None, shown=None):
-        self.title, self.about, self.render = title, about, render
+    def __init__(self, title, about, render, command=None, output=None, shown=None,
+                 keep=None):
+        self.title, self.about, self.render, self.keep = title, about, render, keep
         self.command, self.output = command, output
         self.commands = [] if command is None else \
             command if isinstance(command[0], list) else [command]
@@ -189,6 +192,15 @@ SOURCES = {
         "As above with the motion slowed for the payload and `payload.mass: 0` set later.",
         render_capture, ["rcac", "capture-demo", "--quiet", "--slow", "--release", "20",
                          "--out", "{out}"], "capture.json"),
+    "faults_starved": Source(
+        "A starved machine",
+        "`rcac bench faults`' nominal case and its starved case (two busy processes per core "
+        "beside the nodes for the middle third of the run), the controller in timer mode at "
+        "the paper's K_D (doc/failsafe.md \"Starved machine\", \"How to check a machine\").",
+        render_faults, ["rcac", "bench", "faults", "--cases", "nominal,starved", "--duration",
+                        "60", "--K_D", "10000", "--json", "{out}/faults.json"], "faults.json",
+        keep=lambda runs: [{k: v for k, v in r.items() if not isinstance(v, list)}
+                           for r in runs]),
     "delay_margin": Source(
         "Delay margin per arm",
         "The margin the starvation guard derives at configure from the model and gains "

@@ -115,14 +115,7 @@ def main(argv=None):
                              time.monotonic() - t0, load0, os.getloadavg()[0], rev=rev)
     print(TEMPLATE.format(**fields))
     if not args.dry_run:
-        page.write_source("timings", fields, record)
-        try:
-            page.render()
-        except page.SourceError as err:
-            print(f"readme-timings: stored the source, but doc/results.md was not rendered: {err}",
-                  file=sys.stderr)
-            return 1
-        print("readme-timings: wrote doc/results/timings.json, doc/results.md")
+        return page.store("timings", fields, record, "readme-timings")
     return 0
 
 
