@@ -3,22 +3,15 @@
 Each :class:`Param` row gives a parameter's name, type, default, range, whether it can be
 changed at run time, and its description. The table drives:
 
-* the declaration (:func:`rcac_ros.nodes.runtime.base.declare_parameters` builds each
-  ``ParameterDescriptor`` from its row);
-* the validation, at start-up and in the controller's on-set callback (:func:`check`: one
-  line naming the parameter);
-* the check of a parameters file (:func:`check_file_params`, run on the shipped
-  ``config/*.yaml`` by the tests);
-* the parameter tables of ``doc/parameters.md`` (:func:`markdown`, ``python -m
-  rcac_ros.params``; a test keeps the file equal to the output).
-
-To add a parameter, add a row here and read it in the node. This module imports neither
-rclpy nor numba's kernels at run time beyond the core model (for the paper's gains).
+the declaration (:func:`rcac_ros.nodes.runtime.base.declare_parameters`); the validation
+at start-up and in the on-set callbacks (:func:`check`: one line naming the parameter); the
+check of a parameters file (:func:`~rcac_ros.nodes.runtime.paramcheck.check_file_params`);
+``doc/parameters.md`` (``python -m rcac_ros.params_doc``).
+To add a parameter, add a row here and read it in the node. No rclpy, no compiled kernels.
 """
 
 from dataclasses import dataclass
 import math
-import sys
 
 import numpy as np
 
@@ -27,8 +20,7 @@ from rcac_ros.errors import ConfigError
 from rcac_ros.plants import ENGINES
 
 #: the ROS parameter types a row may have
-TYPES = ("bool", "integer", "double", "string", "double_array", "string_array",
-         "integer_array")
+TYPES = ("bool", "integer", "double", "string", "double_array", "string_array", "integer_array")
 
 #: upper bound of the "any positive number" ranges
 BIG = 1e12
@@ -40,10 +32,8 @@ class Param:
 
     Parameters
     ----------
-    name : str
-        The ROS name (``paper.period`` is ``paper: {period: ...}`` in a YAML file).
-    type : str
-        One of :data:`TYPES`.
+    name, type : str
+        The ROS name (``paper.period`` is ``paper: {period: ...}`` in YAML); :data:`TYPES`.
     default : object
         The value when the user gives none; ``None``: unset (the node then derives one,
         as said in the description).
@@ -51,10 +41,8 @@ class Param:
         One line, with the unit.
     lo, hi : float, optional
         Inclusive range (declared in the descriptor; every entry of an array).
-    strict : bool
-        The value must also be ``> lo`` (a period, a gain).
-    choices : tuple of str
-        The values a string may take.
+    strict, choices : bool, tuple of str
+        The value must also be ``> lo`` (a period, a gain); the values a string may take.
     read_only : bool
         False: may be changed at run time (``ros2 param set``).
     per_joint : bool
@@ -62,8 +50,8 @@ class Param:
     size : int, optional
         The exact length of an array.
     syntax : callable, optional
-        A further check of the value, ``syntax(name, value)``, raising :class:`ConfigError`
-        (e.g. the syntax of ``channels``; what needs the robot is checked at configure).
+        ``syntax(name, value)`` raises :class:`ConfigError` (``channels``' syntax; what
+        needs the robot is checked at configure).
     """
 
     name: str
@@ -487,29 +475,6 @@ def per_joint(name, value, n, default):
     return arr
 
 
-def check_file_params(node, params):
-    """Check the ``{name: value}`` of one node's section of a parameters file.
-
-    Nested mappings are flattened (``paper: {period: 20.0}`` is ``paper.period``).
-    ``use_sim_time`` and the other parameters rclpy declares itself are allowed.
-
-    Raises
-    ------
-    ConfigError
-        Naming the first unknown parameter or invalid value.
-    """
-    known = {p.name: p for p in TABLE[node]}
-    for name, value in flatten(params):
-        if name in ("use_sim_time", "start_type_description_service"):
-            continue
-        if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
-            check(gain_override(name), value)       # the joint is checked at start-up
-            continue
-        if name not in known:
-            raise ConfigError(f"{name}: the {node} declares no such parameter")
-        check(known[name], value)
-
-
 def flatten(params, prefix=""):
     """``(dotted name, value)`` of every leaf of a nested ``ros__parameters`` mapping."""
     for key, value in params.items():
@@ -517,62 +482,3 @@ def flatten(params, prefix=""):
             yield from flatten(value, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}", value
-
-
-def _cell(value):
-    if value is None:
-        return "unset"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f"`{value!r}`" if value == "" else f"`{value}`"
-    return repr(value)      # doubles keep their decimal point
-
-
-def _range(p):
-    if p.choices:
-        return " \\| ".join(f"`{c}`" for c in p.choices)
-    if p.lo is None:
-        return ""
-    left = "(" if p.strict else "["
-    number = str if p.type == "integer" else (lambda x: f"{x:g}")
-    hi = "inf" if p.hi is None or p.hi == math.inf else number(p.hi)
-    text = f"{left}{number(p.lo)}, {hi}]"
-    return text + (" each" if p.type.endswith("_array") else "")
-
-
-def markdown(node):
-    """The Markdown table of ``node``'s parameters."""
-    lines = ["| name | type | default | range | settable | description |",
-             "| --- | --- | --- | --- | --- | --- |"]
-    for p in TABLE[node]:
-        kind = p.type + (" (1 or n)" if p.per_joint else "")
-        lines.append(f"| `{p.name}` | {kind} | {_cell(p.default)} | {_range(p)} | "
-                     f"{'' if p.read_only else 'yes'} | {p.description} |")
-    return "\n".join(lines)
-
-
-def document():
-    """The whole of ``doc/parameters.md``."""
-    parts = ["# Node parameters", "",
-             "Generated from `rcac_ros/params.py` by `python -m rcac_ros.params > "
-             "doc/parameters.md`; do not edit by hand (a test compares the two).",
-             "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
-             "decimal point in a YAML file. Settable parameters can be changed with "
-             "`ros2 param set` while the node runs; the others are read once at start-up (the "
-             "managed controller: at each configure). The controller also takes per-joint "
-             "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
-    for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
-        parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
-                  markdown(node)]
-    return "\n".join(parts) + "\n"
-
-
-def main():
-    """Print ``doc/parameters.md``."""
-    sys.stdout.write(document())
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

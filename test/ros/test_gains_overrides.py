@@ -35,7 +35,7 @@ def test_bad_overrides_are_rejected_in_one_line_naming_them(name, value, text):
 
 
 def test_a_parameters_file_may_hold_gains_overrides():
-    from rcac_ros.params import check_file_params
+    from rcac_ros.nodes.runtime.paramcheck import check_file_params
     check_file_params("controller", {"gains": {"joint7": {"K_D": 2.0e3, "P": 10.0}}})
     with pytest.raises(ConfigError) as err:
         check_file_params("controller", {"gains": {"joint7": {"K_D": -1.0}}})

@@ -1,6 +1,7 @@
 """The controller node in-process: bad input, watchdog, parameters, trajectories, velocities."""
 
 import math
+import threading
 import types
 
 import numpy as np
@@ -126,6 +127,61 @@ def test_unknown_extra_joints_and_order_are_handled():
                          velocity=[math.nan] + [0.0] * 7)
         assert send(ex, lambda: probe.pub_state.publish(msg), lambda: answered(probe, 0))
         np.testing.assert_allclose(probe.efforts[-1][1], ref, rtol=1e-12, atol=1e-9)
+
+
+def test_nothing_compiles_while_active():
+    """Every path of the active loop runs a kernel compiled before activation: adapting,
+    frozen (``~/set_adaptation``, the starvation guard), ``K_D`` scaled (the guard), a
+    trajectory through the command limiter, adapting again. numba's compiler never runs
+    while the node is active (the node's own count of numba's compile events)."""
+    with ros_context() as (ctx, ex):
+        node, probe = make(ctx, ex, trajectory="topic")
+        pub = probe.create_publisher(JointTrajectory, "/rcac_controller/joint_trajectory", 10)
+        assert spin_until(ex, lambda: pub.get_subscription_count() > 0)
+        k = feed(ex, probe, 0, 5)
+        node.adaptation.freeze(node.adaptation.USER, True)
+        k = feed(ex, probe, k, 5)
+        node.ctrl.scale_K_D(0.5)
+        node.adaptation.freeze(node.adaptation.STARVED, True)
+        k = feed(ex, probe, k, 5)
+        msg = _trajectory(JOINTS, [0.1, 0.3], [PAPER_Q0 + 0.1, PAPER_Q0 - 0.05])
+        assert send(ex, lambda: pub.publish(msg), lambda: node.motion.active is not None)
+        k = feed(ex, probe, k, 20)
+        node.ctrl.scale_K_D(1.0)
+        for reason in (node.adaptation.USER, node.adaptation.STARVED):
+            node.adaptation.freeze(reason, False)
+        k = feed(ex, probe, k, 5)
+        assert node.running and node.compile_watch.count == 0
+        assert node.diagnostics().values  # diagnostics still build
+
+
+def test_a_failed_compile_under_autostart_ends_the_node(monkeypatch):
+    """The law's kernel fails to compile: activation is refused and the autostarted node
+    finishes with exit code 1 (``run()`` ends the process), instead of idling inactive."""
+    def fail(self):
+        raise RuntimeError("no compiler here")
+    monkeypatch.setattr(RecursiveCompositeController, "compile", fail)
+    with ros_context() as (ctx, ex):
+        node = ControllerNode(context=ctx)
+        ex.add_node(node)
+        assert spin_until(ex, lambda: node.finished)
+        assert node.exit_code == 1 and not node.running
+        assert node.kernels.status == "failed" and "no compiler here" in node.kernels.error
+
+
+def test_a_cleanup_while_compiling_skips_what_is_left():
+    """``KernelWarmup.close`` (configure's cleanup) waits for the part being compiled and
+    runs none of the rest."""
+    from rcac_ros.nodes.controller.compiling import KernelWarmup
+    started, release, ran = threading.Event(), threading.Event(), []
+    ctrl = types.SimpleNamespace(compile=lambda: (started.set(), release.wait(10.0)))
+    limiter = types.SimpleNamespace(warm=lambda: ran.append("limiter"))
+    log = types.SimpleNamespace(info=ran.append, error=ran.append)
+    warmup = KernelWarmup(ctrl, limiter, log, after=[lambda: ran.append("after")])
+    assert started.wait(10.0)
+    threading.Timer(0.2, release.set).start()
+    warmup.close()
+    assert ran == [] and warmup.status == "failed" and "cleaned up" in warmup.error
 
 
 def test_watchdog_publishes_safe_effort_and_recovers():

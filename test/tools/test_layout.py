@@ -16,7 +16,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 PACKAGE = os.path.join(ROOT, "rcac_ros")
 
 #: rank of each part of the package: a module may import its own rank or a lower one
-RANKS = {"errors": 0, "topics": 0, "core": 1, "params": 2, "plants": 2, "nodes": 3, "tools": 4}
+RANKS = {"errors": 0, "topics": 0, "core": 1, "params": 2, "params_doc": 2, "plants": 2,
+         "nodes": 3, "tools": 4}
 
 
 def modules():

@@ -5,7 +5,8 @@ import os
 import pytest
 import yaml
 
-from rcac_ros import params
+from rcac_ros import params, params_doc
+from rcac_ros.nodes.runtime import paramcheck
 from rcac_ros.errors import ConfigError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -19,7 +20,7 @@ def shipped(node):
 
 @pytest.mark.parametrize("node", sorted(SECTIONS))
 def test_shipped_parameter_files_pass_the_check(node):
-    params.check_file_params(node, shipped(node))
+    paramcheck.check_file_params(node, shipped(node))
 
 
 @pytest.mark.parametrize("node", sorted(SECTIONS))
@@ -48,7 +49,7 @@ def test_a_bad_entry_is_refused_naming_it(node, name, value, words):
     section = dict(shipped(node))
     section[name] = value
     with pytest.raises(ConfigError) as err:
-        params.check_file_params(node, section)
+        paramcheck.check_file_params(node, section)
     assert str(err.value).startswith(name + ":"), str(err.value)
     assert words in str(err.value)
 
@@ -57,7 +58,7 @@ def test_nested_names_are_checked():
     section = dict(shipped("controller"))
     section["paper"] = dict(section["paper"], period=0.0)
     with pytest.raises(ConfigError, match=r"^paper\.period: must be > 0"):
-        params.check_file_params("controller", section)
+        paramcheck.check_file_params("controller", section)
 
 
 def test_every_default_passes_its_own_check():
@@ -79,5 +80,5 @@ def test_per_joint_broadcasts_one_value_and_refuses_a_wrong_count():
 
 def test_doc_table_is_the_generated_one():
     with open(os.path.join(ROOT, "doc", "parameters.md"), encoding="utf-8") as f:
-        assert f.read() == params.document(), \
-            "doc/parameters.md is stale: python -m rcac_ros.params > doc/parameters.md"
+        assert f.read() == params_doc.document(), \
+            "doc/parameters.md is stale: python -m rcac_ros.params_doc > doc/parameters.md"

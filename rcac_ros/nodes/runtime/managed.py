@@ -84,18 +84,24 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
 
     def _start(self):
         """Configure and activate (once :meth:`_ready_to_activate`: a steady timer polls it
-        while the node spins); ``False`` if configure failed."""
+        while the node spins); ``False`` if configure failed. A failed activation ends the
+        node (``finished``, exit code 1)."""
         if self.trigger_configure() != SUCCESS:
             return False
+
+        def activate():
+            if lifecycle_state(self) == "inactive" and self.trigger_activate() != SUCCESS:
+                self.get_logger().fatal("autostart: activate failed; the node stops")
+                self.exit_code, self.finished = 1, True
+
         if self._ready_to_activate():
-            return self.trigger_activate() == SUCCESS
+            activate()
+            return True
 
         def activate_when_ready():
             if self._ready_to_activate():
                 timer.cancel()              # (destroyed with configure's entities)
-                if lifecycle_state(self) == "inactive" and self.trigger_activate() != SUCCESS:
-                    self.get_logger().fatal("autostart: activate failed; the node stops")
-                    self.exit_code, self.finished = 1, True
+                activate()
         timer = self.keep(self.destroy_timer, self.create_timer(
             0.05, activate_when_ready, clock=Clock(clock_type=ClockType.STEADY_TIME)))
         return True

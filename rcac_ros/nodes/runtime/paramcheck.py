@@ -3,6 +3,8 @@
 * :func:`check_params_files` reads every ``--params-file`` of the command line before
   ``rclpy.init`` does, so that a malformed file gives one line naming it (and the CLI
   exit code 2) instead of an RCLError traceback.
+* :func:`check_file_params` checks one node's section of a parameters file against the
+  table (the tests run it on the shipped ``config/*.yaml``).
 * :func:`unknown_parameters` names each given key that no parameter declares, with the
   nearest declared name; :func:`foreign_sections` names the sections of those files
   that address no node of the package.
@@ -11,7 +13,7 @@
 import difflib
 
 from rcac_ros.errors import ConfigError, read_yaml
-from rcac_ros.params import flatten
+from rcac_ros.params import GAINS_PREFIX, TABLE, check, flatten, gain_override
 
 #: parameters every rclpy node declares itself
 BUILTIN = frozenset({"use_sim_time", "start_type_description_service"})
@@ -50,6 +52,29 @@ def load_params_file(path):
 def check_params_files(argv):
     """Load every ``--params-file`` of ``argv``; return ``{path: {node: params}}``."""
     return {path: load_params_file(path) for path in params_files(argv)}
+
+
+def check_file_params(node, params):
+    """Check the ``{name: value}`` of one node's section of a parameters file.
+
+    Nested mappings are flattened (``paper: {period: 20.0}`` is ``paper.period``).
+    ``use_sim_time`` and the other parameters rclpy declares itself are allowed.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first unknown parameter or invalid value.
+    """
+    known = {p.name: p for p in TABLE[node]}
+    for name, value in flatten(params):
+        if name in ("use_sim_time", "start_type_description_service"):
+            continue
+        if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
+            check(gain_override(name), value)       # the joint is checked at start-up
+            continue
+        if name not in known:
+            raise ConfigError(f"{name}: the {node} declares no such parameter")
+        check(known[name], value)
 
 
 def nearest(name, candidates):
