@@ -224,10 +224,10 @@ COMPARE_KEYS = ("rms", "rms_last_5s", "theta_error_end", "us_per_step", "identif
 
 
 def render_compare(d):
-    """RMS side by side, then per scenario the figures of :data:`COMPARE_KEYS`."""
+    """Per scenario the figures of :data:`COMPARE_KEYS` for every law."""
     report = {k: v for k, v in d.items() if k != "settings"}
     heads = dict(COLUMNS)
-    out = ["RMS tracking error (rad):", "", side_by_side(report).rstrip()]
+    out = []
     for name, rows in report.items():
         keys = [k for k in COMPARE_KEYS if any(m.get(k) is not None for m in rows.values())]
         body = []
@@ -237,7 +237,7 @@ def render_compare(d):
                 cells[0] = f"diverged at {m['diverged_at']:.3f} s"
             body.append([law, *cells])
         out += ["", f"`{name}`:", "", table(["law", *(heads[k] for k in keys)], body)]
-    return "\n".join(out)
+    return "\n".join(out[1:])
 
 
 def render_compare_consistency(d):

@@ -9,6 +9,7 @@ stores a JSON made elsewhere, with the provenance given.
 """
 
 import argparse
+import collections
 import datetime
 import json
 import os
@@ -129,8 +130,12 @@ def read_source(name, results_dir=RESULTS_DIR):
     return doc
 
 
-def provenance_line(record):
-    parts = [f"`{record['command']}`", record["date"], record["machine"]]
+def provenance_line(record, machine=None):
+    """``*Measured by*`` command, date, machine (unless it is ``machine``, the page's), load,
+    revision, wall time, note."""
+    parts = [f"`{record['command']}`", record["date"]]
+    if record["machine"] != machine:
+        parts.append(record["machine"])
     if "load_average" in record:
         parts.append(f"load average {record['load_average']}")
     parts.append(f"revision {record['revision']}")
@@ -146,11 +151,14 @@ def render_page(results_dir=RESULTS_DIR):
     """The text of doc/results.md from the sources' JSON."""
     docs = {name: read_source(name, results_dir) for name in SOURCES}
     links = "; ".join(f"[{src.title}](#{src.anchor})" for src in SOURCES.values())
-    out = [HEADER, f"Blocks: {links}."]
+    machines = collections.Counter(doc["record"]["machine"] for doc in docs.values())
+    usual = machines.most_common(1)[0][0]
+    out = [HEADER, f"Measured on {usual}, unless a block names another machine.", "",
+           f"Blocks: {links}."]
     for name, src in SOURCES.items():
         doc = docs[name]
         out += ["", f"## {src.title}", "", src.about.strip(), "",
-                provenance_line(doc["record"]) + f" · `doc/results/{name}.json`", "",
+                provenance_line(doc["record"], usual) + f" · `doc/results/{name}.json`", "",
                 src.render(doc["data"]).rstrip()]
     return "\n".join(out) + "\n"
 
