@@ -17,11 +17,14 @@ compiled when first needed, never at import). Two rules follow:
 
 The cache directory is ``$NUMBA_CACHE_DIR/rcac_ros/<key>`` when ``NUMBA_CACHE_DIR`` is set,
 else ``$RCAC_CACHE_DIR/<key>``, else ``$XDG_CACHE_HOME/rcac_ros/numba/<key>`` (default
-``~/.cache``). Where it cannot be written, numba's own locations are used.
+``~/.cache``). Where it cannot be written, a keyed directory under the system's temporary
+directory is used; where neither can, the kernels compile without a cache. numba's own
+locations (keyed on one file) are never used.
 """
 
 import hashlib
 import os
+import tempfile
 import threading
 
 import numba
@@ -87,12 +90,22 @@ class _KeyedLocator(caching._CacheLocator):
         try:
             self.ensure_cache_path()
         except OSError:
-            return None                     # numba's own locations then
+            self._cache_path = os.path.join(_fallback_dir(), os.path.basename(self._cache_path))
+            try:
+                self.ensure_cache_path()
+            except OSError:
+                return None                 # no cache at all (see njit)
         return self
 
 
+def _fallback_dir():
+    """:func:`cache_dir`'s stand-in where it cannot be written: still keyed, per user."""
+    user = str(os.getuid()) if hasattr(os, "getuid") else "user"
+    return os.path.join(tempfile.gettempdir(), f"rcac_ros-{user}", SOURCE_KEY)
+
+
 class _KeyedImpl(caching.CompileResultCacheImpl):
-    _locator_classes = [_KeyedLocator] + list(caching.CompileResultCacheImpl._locator_classes)
+    _locator_classes = [_KeyedLocator]      # never numba's own, keyed on one file
 
 
 class _KeyedCache(caching.FunctionCache):
@@ -107,7 +120,10 @@ def njit(*args, **kwargs):
     def decorate(func):
         dispatcher = numba.njit(**kwargs)(func)
         if cache and _compilable(dispatcher):      # (not under NUMBA_DISABLE_JIT)
-            dispatcher._cache = _KeyedCache(dispatcher.py_func)
+            try:
+                dispatcher._cache = _KeyedCache(dispatcher.py_func)
+            except RuntimeError:                  # no writable keyed directory:
+                pass                              # compiled each process, never stale
         return dispatcher
     if args and callable(args[0]):
         return decorate(args[0])

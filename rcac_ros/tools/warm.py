@@ -24,6 +24,7 @@ import argparse
 import functools
 import subprocess
 import sys
+import tempfile
 import time
 
 from rcac_ros.errors import ConfigError
@@ -108,14 +109,17 @@ def warm(groups=GROUPS, jobs=2, log=None):
     while pending or running:
         while pending and len(running) < jobs:
             name = pending.pop(0)
-            running[name] = (time.monotonic(), subprocess.Popen(
+            output = tempfile.TemporaryFile(mode="w+")     # never a pipe nobody reads yet
+            running[name] = (time.monotonic(), output, subprocess.Popen(
                 [sys.executable, "-m", "rcac_ros.tools.warm", "--child", name],
-                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True))
+                stdout=output, stderr=subprocess.STDOUT, text=True))
         time.sleep(0.1)
-        for name, (start, proc) in list(running.items()):
+        for name, (start, output, proc) in list(running.items()):
             if proc.poll() is None:
                 continue
-            out = proc.stdout.read().strip().splitlines()
+            output.seek(0)
+            out = output.read().strip().splitlines()
+            output.close()
             del running[name]
             seconds = time.monotonic() - start
             if proc.returncode == 0:

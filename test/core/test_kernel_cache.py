@@ -66,6 +66,25 @@ def test_without_numba_cache_dir_the_cache_is_the_users(tmp_path):
     assert out.stdout.strip() == str(tmp_path / "rcac_ros" / "numba" / _jit.SOURCE_KEY)
 
 
+def test_an_unwritable_cache_falls_back_to_a_keyed_temporary_one(tmp_path):
+    """Where the cache directory cannot be made (here NUMBA_CACHE_DIR is a file), the
+    kernels go to a keyed directory of the system's temporary directory, never to numba's
+    own locations, which key a kernel on its one file and could load a stale one."""
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(blocked), TMPDIR=str(temp))
+    out = subprocess.run([sys.executable, "-c", RNEA], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    keyed = temp / f"rcac_ros-{os.getuid()}" / _jit.SOURCE_KEY
+    cached = [f for _, _, files in os.walk(keyed) for f in files if f.endswith(".nbi")]
+    assert cached, f"nothing cached under {keyed}"
+    beside = [f for _, _, files in os.walk(PACKAGE) for f in files if f.endswith((".nbi", ".nbc"))]
+    assert not beside, beside
+
+
 def test_the_key_covers_every_compiled_source_and_numba():
     """Every file of the package that holds compiled code is in the key."""
     compiled = set()

@@ -35,6 +35,15 @@ def test_effort_figures_find_the_first_step_at_a_limit():
         "limit_first_reached_s"] is None
 
 
+def test_effort_figures_of_a_phase_without_efforts_say_so():
+    """A phase with no effort sample (a run cut short) gives no maximum and no limit
+    reached, rather than an error."""
+    t, tau = np.arange(10) * 0.1, np.ones((10, 2))
+    fig = effort_figures((t, tau), np.array([4.0, 20.0]), 5.0, 6.0)
+    assert np.isnan(fig["max_effort_nm"]) and fig["limit_first_reached_s"] is None
+    assert fig["steps_at_limit"] == 0
+
+
 @pytest.mark.parametrize("mass", [1000.0, 20000.0])
 def test_the_slowed_motion_needs_the_stated_share_of_the_limits(mass):
     """The paper's motion slowed by s (amplitude A / s, period 20 s * s): the inverse dynamics
@@ -59,7 +68,8 @@ def test_the_slowed_motion_needs_the_stated_share_of_the_limits(mass):
     (["--at", "40"], "rcac capture-demo: error: --at: the capture must come before the end"),
     (["--release", "5"], "rcac capture-demo: error: --release: must be after --at"),
     (["--inertia", "1", "1", "5", "0", "0", "0"],
-     "rcac capture-demo: error: payload.inertia: not a body"),
+     "rcac capture-demo: error: --inertia: not a body"),
+    (["--com", "100", "0", "0"], "rcac capture-demo: error: --com: 100 m from the last link"),
     (["--bag", "/nonexistent/bag"], "rcac capture-demo: error: --bag: no such directory"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(argv, start, capsys):

@@ -67,8 +67,11 @@ class KernelWarmup:
             self._log.info(f"kernels ready in {self.seconds:.1f} s")
 
     def close(self):
-        """Skip what is left and wait for the kernel being compiled (configure's cleanup)."""
+        """Skip what is left and wait for the kernel being compiled (configure's cleanup),
+        saying so when it must wait."""
         self._closed.set()
+        if not self.done.is_set():
+            self._log.info("cleanup: waiting for the kernel being compiled to finish")
         self._thread.join()
 
     @property

@@ -226,7 +226,8 @@ def _fatal(node, prog):
         try:
             node.on_interrupt()
         except Exception:               # noqa: BLE001 -- already failing: exit regardless
-            pass
+            print(f"{prog}: the stop after the fault failed too: "
+                  f"{traceback.format_exc().rstrip()}", file=sys.stderr, flush=True)
     return 1
 
 

@@ -67,7 +67,7 @@ def check_file_params(node, params):
     """
     known = {p.name: p for p in TABLE[node]}
     for name, value in flatten(params):
-        if name in ("use_sim_time", "start_type_description_service"):
+        if name in BUILTIN:
             continue
         if node == "controller" and name.startswith(GAINS_PREFIX) and name not in known:
             check(gain_override(name), value)       # the joint is checked at start-up

@@ -196,6 +196,7 @@ def watchdog_during_run(data):
 def capture_hook(at, release, payload, log):
     """The :func:`~rcac_ros.tools.demos.demo.run_demo` hook that sets the payload at ``at`` s
     and releases it at ``release`` s of sim time; ``hook.futures`` gets each request.
+    The hook returns what closes its node when the run ends.
 
     Its node reads ``/clock`` (keep-last 1) and sends the requests from a thread of its own:
     the recorder's executor may run behind the simulator (it takes every message of every
@@ -239,11 +240,20 @@ def capture_hook(at, release, payload, log):
                     own.spin_once(timeout_sec=0.05)
                     if not plan and all(f.done() for f in futures):
                         done.set()
-            except Exception:  # noqa: BLE001 - the run ended and shut the context down
-                pass
+            except Exception as exc:  # noqa: BLE001 - reported; the run's checks go on
+                if ctx.ok() and not done.is_set():
+                    log(f"rcac capture-demo: the payload requests stopped: "
+                        f"{type(exc).__name__}: {exc}")
 
-        threading.Thread(target=spin, name="capture-requests", daemon=True).start()
-        return None
+        thread = threading.Thread(target=spin, name="capture-requests", daemon=True)
+        thread.start()
+
+        def close():
+            done.set()
+            thread.join(timeout=1.0)
+            own.shutdown()
+            node.destroy_node()
+        return close
 
     hook.futures = futures
     return hook
@@ -337,8 +347,12 @@ def check_arguments(args):
     if args.bag is not None and args.no_ros:
         raise ConfigError("--bag: reads a ROS run; --no-ros asks for none")
     inertia = args.inertia if args.inertia is not None else cube_inertia(args.mass)
-    from rcac_ros.core.payload import check_payload   # numpy only, no kernels
-    check_payload(args.mass, args.com, inertia, reach=None)
+    from rcac_ros.core.model import css_arm_preset    # numpy only, no kernels
+    from rcac_ros.core.payload import arm_reach, check_payload
+    try:
+        check_payload(args.mass, args.com, inertia, reach=arm_reach(css_arm_preset()))
+    except ConfigError as exc:          # named as the command line names it
+        raise ConfigError(str(exc).replace("payload.", "--")) from None
     return inertia
 
 

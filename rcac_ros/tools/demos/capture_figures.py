@@ -79,13 +79,18 @@ def figures(track, effort, estimates, t_event, t_end, truth, effort_limit):
     est = th[last[-1]] if last.size else th[-1]
     out["mass_true_kg"] = float(truth[0])
     out["mass_estimate_end_kg"] = float(est[0])
-    out["mass_relative_error_end"] = float(abs(est[0] - truth[0]) / truth[0])
+    out["mass_relative_error_end"] = _relative(abs(est[0] - truth[0]), abs(truth[0]))
     out["first_moment_true_kg_m"] = truth[1:4].tolist()
     out["first_moment_estimate_end_kg_m"] = est[1:4].tolist()
-    out["first_moment_relative_error_end"] = float(np.linalg.norm(est[1:4] - truth[1:4])
-                                                   / np.linalg.norm(truth[1:4]))
+    out["first_moment_relative_error_end"] = _relative(np.linalg.norm(est[1:4] - truth[1:4]),
+                                                       np.linalg.norm(truth[1:4]))
     out.update(effort_figures(effort, effort_limit, t_event, t_end))
     return out
+
+
+def _relative(error, truth):
+    """``error / truth``; NaN where the truth is zero (no relative error is defined)."""
+    return float(error / truth) if truth > 0.0 else math.nan
 
 
 def effort_figures(effort, effort_limit, start, stop):
@@ -93,6 +98,11 @@ def effort_figures(effort, effort_limit, start, stop):
     first reached (``None`` if never)."""
     t, tau = (np.asarray(a, dtype=float) for a in effort)
     sel = (t >= start) & (t < stop)
+    if not sel.any():                   # no effort in the phase (a run cut short)
+        return {"max_effort_nm": math.nan, "max_effort_over_limit": math.nan,
+                "max_effort_joint": None, "max_effort_time_s": None,
+                "limit_first_reached_s": None, "limit_first_reached_joint": None,
+                "steps_at_limit": 0}
     ratio = np.abs(tau[sel]) / effort_limit
     k, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
     at = np.nonzero(np.any(ratio >= 1.0 - 1e-9, axis=1))[0]

@@ -76,9 +76,9 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
 
     ``controller_overrides`` and ``simulator_overrides`` (name -> value) add to the
     lockstep parameters of :func:`demo_overrides` (e.g. the plant's model and engine);
-    ``hook``: ``hook(context, executor)`` once the recorder runs, returning a callable called
-    with the simulated time (s, None before the first /clock) while the run goes (what
-    ``rcac capture-demo`` changes at run time); ``prog`` prefixes the log lines.
+    ``hook``: ``hook(context, executor)`` once the recorder runs (what ``rcac capture-demo``
+    changes at run time), returning None or a callable that closes what it made, called when
+    the run ends, before the context shuts down; ``prog`` prefixes the log lines.
 
     Raises
     ------
@@ -98,7 +98,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     ctrl_over, sim_over = demo_overrides(duration, dt)
     ctrl_over.update(controller_overrides or {})
     sim_over.update(simulator_overrides or {})
-    tick = None
+    close_hook = None
     stop = StopFlag()
     children = []
     recorder = None
@@ -114,7 +114,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             recorder = BagRecorder(bag, ctx, storage=storage, log=log)
             executor.add_node(recorder.node)
             if hook is not None:
-                tick = hook(ctx, executor)
+                close_hook = hook(ctx, executor)
             log(f"{prog}: ROS_DOMAIN_ID={domain}, {duration:g} s of simulated time in "
                 f"lockstep (dt {dt * 1e3:g} ms); bag {bag}")
 
@@ -154,8 +154,6 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             sim_child = children[1]
             while sim_child.alive():   # the simulator exits 0 after `duration` of sim time
                 executor.spin_once(timeout_sec=0.02)
-                if tick is not None:
-                    tick(recorder.sim_time)
                 now = time.monotonic()
                 if stop:
                     raise KeyboardInterrupt
@@ -189,6 +187,8 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             codes = {}
             for c in reversed(children):  # the simulator first: no new states
                 codes[c.name] = c.stop()
+            if close_hook is not None:
+                close_hook()
             if recorder is not None:
                 recorder.close()
             if executor is not None:

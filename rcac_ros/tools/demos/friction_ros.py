@@ -54,13 +54,16 @@ def bag_series(bag):
 
 
 def rms(err):
-    return float(np.sqrt(np.mean(np.square(err))))
+    """RMS of the tracking errors; None where the bag holds none."""
+    return None if err is None else float(np.sqrt(np.mean(np.square(err))))
 
 
 def plot(duration, runs, path):
     from rcac_ros.tools.plots import plt
     fig, axes = plt.subplots(1, 4, figsize=(18, 4.2))
     for label, (err, _) in runs.items():
+        if err is None:
+            continue
         t = np.linspace(0.0, duration, len(err))
         axes[0].semilogy(t, np.linalg.norm(err, axis=1) + 1e-12, lw=0.8, label=label)
     axes[0].set_title("|q - q_d| (rad)")
@@ -101,7 +104,12 @@ def run(args):
     for label, ctrl in (("blind", {}), ("aware", {"joint_friction": True})):
         try:
             bags[label] = run_demo(args.duration, os.path.join(out, label),
-                                   controller_overrides=ctrl, simulator_overrides=sim)
+                                   controller_overrides=ctrl, simulator_overrides=sim,
+                                   prog=f"rcac friction-ros ({label})")
+        except KeyboardInterrupt:
+            print(f"rcac friction-ros: interrupted; both nodes stopped; the {label} run's bag "
+                  f"is closed in {os.path.join(out, label, 'bag')}", file=sys.stderr)
+            return 130
         except NodeFailed as err:
             print(f"rcac friction-ros: error ({label}): {err}", file=sys.stderr)
             return 1
