@@ -82,3 +82,37 @@ def test_rendering_loads_neither_numba_nor_rclpy():
                          cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
     assert not {"numba", "rclpy"} & set(out.stdout.split())
+
+
+def test_every_figure_in_doc_figures_is_a_recorded_source_plot():
+    """doc/figures holds the plots that `record` kept from a source's run and nothing copied
+    by hand: each file is named by its source's record, and each named file is there."""
+    named = set()
+    for name in SOURCES:
+        for figure in page.read_source(name)["record"].get("figures", []):
+            assert os.path.isfile(os.path.join(ROOT, "doc", figure)), (name, figure)
+            named.add(os.path.normpath(figure))
+    present = {os.path.join("figures", f) for f in os.listdir(page.FIGURES_DIR)} \
+        if os.path.isdir(page.FIGURES_DIR) else set()
+    assert present <= named, sorted(present - named)
+
+
+def test_a_run_keeps_its_plots_under_the_source_name_and_drops_the_older_ones(tmp_path):
+    run, figures = tmp_path / "run", tmp_path / "doc" / "figures"
+    run.mkdir()
+    figures.mkdir(parents=True)
+    for f in ("compare_paper.png", "compare_payload.png", "other.txt"):
+        (run / f).write_bytes(f.encode())
+    (figures / "compare_compare_old.png").write_bytes(b"old")
+    (figures / "payload_x.png").write_bytes(b"another source's")
+    kept = page.keep_figures("compare", SOURCES["compare"], str(run), str(figures))
+    assert kept == ["figures/compare_compare_paper.png", "figures/compare_compare_payload.png"]
+    assert sorted(os.listdir(figures)) == ["compare_compare_paper.png",
+                                           "compare_compare_payload.png", "payload_x.png"]
+    assert (figures / "compare_compare_paper.png").read_bytes() == b"compare_paper.png"
+    # and the page shows them under the block
+    results, _ = copy_sources(tmp_path)
+    doc = page.read_source("compare", results)
+    doc["record"]["figures"] = kept
+    page.write_source("compare", doc["data"], doc["record"], results)
+    assert "](figures/compare_compare_paper.png)" in page.render_page(results)

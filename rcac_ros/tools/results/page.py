@@ -11,10 +11,12 @@ stores a JSON made elsewhere, with the provenance given.
 import argparse
 import collections
 import datetime
+import glob
 import json
 import os
 import platform
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -25,6 +27,8 @@ from rcac_ros.tools.results.sources import SOURCES, headlines
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
     os.path.abspath(__file__)))))
 RESULTS_DIR = os.path.join(ROOT, "doc", "results")
+#: the plots of the sources (a record names its own: ``figures``, relative to doc/)
+FIGURES_DIR = os.path.join(ROOT, "doc", "figures")
 PAGE = os.path.join(ROOT, "doc", "results.md")
 README = os.path.join(ROOT, "README.md")
 
@@ -160,6 +164,10 @@ def render_page(results_dir=RESULTS_DIR):
         out += ["", f"## {src.title}", "", src.about.strip(), "",
                 provenance_line(doc["record"], usual) + f" · `doc/results/{name}.json`", "",
                 src.render(doc["data"]).rstrip()]
+        figures = doc["record"].get("figures", [])
+        if figures:
+            out += ["", " ".join(f"![{src.title}: {os.path.basename(f)}]({f})"
+                                 for f in figures)]
     return "\n".join(out) + "\n"
 
 
@@ -212,8 +220,25 @@ def store(name, data, record, prog):
     return 0
 
 
+def keep_figures(name, src, folder, figures_dir=FIGURES_DIR):
+    """Copy the plots of ``src`` that its run drew in ``folder`` to ``figures_dir`` as
+    ``NAME_<file>`` (the source's older ones removed); their paths relative to doc/."""
+    found = sorted({path for pattern in src.plots
+                    for path in glob.glob(os.path.join(folder, pattern))})
+    os.makedirs(figures_dir, exist_ok=True)
+    for old in glob.glob(os.path.join(figures_dir, f"{name}_*")):
+        os.remove(old)
+    kept = []
+    for path in found:
+        target = os.path.join(figures_dir, f"{name}_{os.path.basename(path)}")
+        shutil.copyfile(path, target)
+        kept.append(os.path.relpath(target, os.path.dirname(figures_dir)))
+    return kept
+
+
 def run_source(name):
-    """Run a source's command in a temporary folder: ``(data, record)``."""
+    """Run a source's command in a temporary folder: ``(data, record)``; its plots are kept
+    (:func:`keep_figures`) and named in the record."""
     src = SOURCES[name]
     if src.command is None:
         raise SourceError(f"{name}: written by `{src.shown}`, not by record")
@@ -233,7 +258,10 @@ def run_source(name):
             data = json.load(f)
         if src.keep is not None:
             data = src.keep(data)
-    return data, provenance(src.shown, started, seconds, load0, load1, rev=rev)
+        record = provenance(src.shown, started, seconds, load0, load1, rev=rev)
+        if src.plots:
+            record["figures"] = keep_figures(name, src, tmp)
+    return data, record
 
 
 def main(argv=None):

@@ -2,7 +2,8 @@
 
 To add a source: write a ``render(data) -> str`` (markdown, :mod:`.blocks`) for the tool's
 JSON, add a :class:`Source` to :data:`SOURCES` (its command, the JSON file the command
-writes inside ``{out}``, a title and a paragraph on what it measures), run ``python -m
+writes inside ``{out}``, the plots it writes there, a title and a paragraph on what it
+measures), run ``python -m
 rcac_ros.tools.results record NAME`` and ``make results``, and commit the JSON with the page.
 """
 
@@ -14,6 +15,10 @@ from rcac_ros.tools.results.blocks import (
     render_delay_margin, render_experiment, render_faults, render_friction,
     render_friction_unseen,
     render_noise, render_noise_sources, render_payload, render_startup, render_timings)
+
+
+#: the plot of a campaign's report (:func:`campaign_commands`)
+CAMPAIGN_PLOTS = ("report.png",)
 
 
 def campaign_commands(name):
@@ -28,11 +33,13 @@ class Source:
     """One block of doc/results.md. ``command``: the argv (or a list of argvs, run in turn)
     that writes ``output`` into ``{out}`` (``rcac`` is the venv's); None when a maintenance
     tool writes the JSON itself (``shown`` names it). ``keep``: what of the output is stored
-    (default all of it)."""
+    (default all of it). ``plots``: glob patterns, in ``{out}``, of the figures the command
+    draws (kept beside the JSON, in doc/figures, and shown under the block)."""
 
     def __init__(self, title, about, render, command=None, output=None, shown=None,
-                 keep=None):
+                 keep=None, plots=()):
         self.title, self.about, self.render, self.keep = title, about, render, keep
+        self.plots = tuple(plots)
         self.command, self.output = command, output
         self.commands = [] if command is None else \
             command if isinstance(command[0], list) else [command]
@@ -47,7 +54,8 @@ SOURCES = {
         "Section 4 on the CSS arm for the direct (gamma = 0) and the composite law: the "
         "paper's gains, the velocity reading of the desired motion, `theta_hat(0) = 0` "
         "(doc/design.md §5). Figures of merit of `rcac_ros/tools/runs/metrics.py`.",
-        render_experiment, ["rcac", "experiment", "--quiet", "--out", "{out}"], "metrics.json"),
+        render_experiment, ["rcac", "experiment", "--quiet", "--out", "{out}"], "metrics.json",
+        plots=("tracking_errors.png", "parameter_estimates.png")),
     "bench_core": Source(
         "Speed of one step",
         "The controller step against Pinocchio's `pin.rnea` on the same chain, the "
@@ -84,19 +92,21 @@ SOURCES = {
         "2 kg payload attached in the simulator at 5 s. The composite law, the direct law "
         "(gamma = 0) and a fixed-parameter computed-torque law with the same feedback "
         "(doc/tools.md, `rcac payload-demo`).",
-        render_payload, ["rcac", "payload-demo", "--quiet", "--out", "{out}"], "metrics.json"),
+        render_payload, ["rcac", "payload-demo", "--quiet", "--out", "{out}"], "metrics.json",
+        plots=("payload_summary.png", "link7_estimates.png")),
     "friction": Source(
         "Joint friction and rotor inertia learnt, links known",
         "The Panda on the built-in simulator with armature 0.1 kg m^2, damping 0.5 N m s/rad "
         "and tanh friction 0.5 N m on every joint, the law `channels=\"all\"` with "
         "`joint_friction=True` from zero joint estimates (doc/tools.md, "
         "`rcac friction-demo`).",
-        render_friction, ["rcac", "friction-demo", "--out", "{out}"], "metrics.json"),
+        render_friction, ["rcac", "friction-demo", "--out", "{out}"], "metrics.json",
+        plots=("friction_estimates.png",)),
     "friction_adapt_links": Source(
         "Joint friction and rotor inertia learnt, links adapting",
         "As above, every link adapting too from the URDF's nominal parameters.",
         render_friction, ["rcac", "friction-demo", "--adapt-links", "--out", "{out}"],
-        "metrics.json"),
+        "metrics.json", plots=("friction_estimates.png",)),
     "compare": Source(
         "Every adaptive law compared",
         "Every law of `rcac compare` on the paper's experiment (`paper`) and the payload run "
@@ -105,38 +115,42 @@ SOURCES = {
         "physical body; µs/step is the in-loop time (a noisy figure: the cost ratios are "
         "those of \"Speed of one step\").",
         render_compare, ["rcac", "compare", "--duration", "20", "--out", "{out}"],
-        "compare.json"),
+        "compare.json", plots=("compare_*.png",)),
     "compare_joints": Source(
         "Joint friction and rotor inertia: the Panda on MuJoCo",
         "The `panda_*` scenarios of `rcac compare` on MuJoCo (damping, dry friction as "
         "MuJoCo's friction loss, armature; doc/tools.md, `rcac compare`): friction-blind "
         "laws against the laws with the joint terms (`*_friction`).",
         render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
-                             "panda_damping_armature", "--out", "{out}"], "compare.json"),
+                             "panda_damping_armature", "--out", "{out}"], "compare.json",
+        plots=("compare_*.png",)),
     "compare_joints_builtin": Source(
         "Joint friction and rotor inertia: the same plants on the built-in simulator",
         "As above with `--engine builtin`: the package's own dynamics, whose dry friction is "
         "the model's tanh law (inside the laws' model class).",
         render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
                              "panda_damping_armature", "--engine", "builtin", "--out",
-                             "{out}"], "compare.json"),
+                             "{out}"], "compare.json", plots=("compare_*.png",)),
     "channels_paper": Source(
         "Channel sets out of sample: the paper arm",
         "`campaigns/channels_paper.yaml`: the paper arm with the motion scaled 0.5-1.5x, K_D "
         "and P spread; the paper's channel `[1]`, the linear-cost set `4..7` (picked on the "
         "`rcac compare` scenarios) and `\"all\"` (= Slotine-Li), each run drawn anew.",
-        render_campaign, campaign_commands("channels_paper"), "summary.json"),
+        render_campaign, campaign_commands("channels_paper"), "summary.json",
+        plots=CAMPAIGN_PLOTS),
     "channels_payload": Source(
         "Channel sets out of sample: Panda payloads",
         "`campaigns/channels_payload.yaml`: random Panda payloads (mass 0.2-3 kg, centre of "
         "mass, inertia, motion scale), the same channel sets.",
-        render_campaign, campaign_commands("channels_payload"), "summary.json"),
+        render_campaign, campaign_commands("channels_payload"), "summary.json",
+        plots=CAMPAIGN_PLOTS),
     "friction_campaign": Source(
         "Joint friction and rotor inertia over a campaign",
         "`campaigns/friction.yaml`: the Panda on MuJoCo with damping, dry friction and "
         "armature drawn per joint over a decade; the friction-blind `composite` law against "
         "`composite_friction`, paired (the same joint terms for both laws).",
-        render_campaign, campaign_commands("friction"), "summary.json"),
+        render_campaign, campaign_commands("friction"), "summary.json",
+        plots=CAMPAIGN_PLOTS),
     "friction_unseen": Source(
         "Joint terms on unseen plants",
         "`campaigns/friction_{panda,ur5,xarm7}.yaml`: 70 MuJoCo plants per arm, armature, "
@@ -148,7 +162,7 @@ SOURCES = {
         [["rcac", "sweep", f"campaigns/friction_{arm}.yaml", "--out", f"{{out}}/{arm}",
           "--quiet"] for arm in ("panda", "ur5", "xarm7")]
         + [["python", "-m", "rcac_ros.tools.sweep.paired", "{out}/panda", "{out}/ur5",
-            "{out}/xarm7", "--out", "{out}"]], "ratios.json"),
+            "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
     "compare_consistency": Source(
         "Physically consistent estimates compared",
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
@@ -157,7 +171,7 @@ SOURCES = {
         render_compare_consistency,
         ["rcac", "compare", "--quiet", "--duration", "20", "--laws", "paper", "paper_nat_start",
          "paper_natural", "all", "all_nat_start", "all_natural", "slotine_li",
-         "slotine_li_natural", "--out", "{out}"], "compare.json"),
+         "slotine_li_natural", "--out", "{out}"], "compare.json", plots=("compare_*.png",)),
     "consistency_campaign": Source(
         "Physically consistent estimates over a campaign",
         "`campaigns/consistency.yaml`: the Euclidean law, the natural geometry with its "
@@ -186,12 +200,13 @@ SOURCES = {
         "not told (doc/tools.md, `rcac capture-demo`). The same capture offline for four "
         "laws, and the default law over payload masses.",
         render_capture, ["rcac", "capture-demo", "--quiet", "--mass-table", "--out", "{out}"],
-        "capture.json"),
+        "capture.json", plots=("capture_ros.png", "capture_laws.png")),
     "capture_release": Source(
         "A payload captured and released, the motion slowed",
         "As above with the motion slowed for the payload and `payload.mass: 0` set later.",
         render_capture, ["rcac", "capture-demo", "--quiet", "--slow", "--release", "20",
-                         "--out", "{out}"], "capture.json"),
+                         "--out", "{out}"], "capture.json",
+        plots=("capture_ros.png", "capture_laws.png")),
     "faults_starved": Source(
         "A starved machine",
         "`rcac bench faults`' nominal case and its starved case (two busy processes per core "
