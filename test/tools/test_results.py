@@ -104,11 +104,14 @@ def test_a_run_keeps_its_plots_under_the_source_name_and_drops_the_older_ones(tm
     for f in ("compare_paper.png", "compare_payload.png", "other.txt"):
         (run / f).write_bytes(f.encode())
     (figures / "compare_compare_old.png").write_bytes(b"old")
-    (figures / "payload_x.png").write_bytes(b"another source's")
-    kept = page.keep_figures("compare", SOURCES["compare"], str(run), str(figures))
+    # another source's, whose name starts like this one's
+    (figures / "compare_joints_compare_x.png").write_bytes(b"another source's")
+    kept = page.keep_figures("compare", SOURCES["compare"], str(run),
+                             ["figures/compare_compare_old.png"], str(figures))
     assert kept == ["figures/compare_compare_paper.png", "figures/compare_compare_payload.png"]
     assert sorted(os.listdir(figures)) == ["compare_compare_paper.png",
-                                           "compare_compare_payload.png", "payload_x.png"]
+                                           "compare_compare_payload.png",
+                                           "compare_joints_compare_x.png"]
     assert (figures / "compare_compare_paper.png").read_bytes() == b"compare_paper.png"
     # and the page shows them under the block
     results, _ = copy_sources(tmp_path)

@@ -220,14 +220,17 @@ def store(name, data, record, prog):
     return 0
 
 
-def keep_figures(name, src, folder, figures_dir=FIGURES_DIR):
+def keep_figures(name, src, folder, old=(), figures_dir=FIGURES_DIR):
     """Copy the plots of ``src`` that its run drew in ``folder`` to ``figures_dir`` as
-    ``NAME_<file>`` (the source's older ones removed); their paths relative to doc/."""
+    ``NAME_<file>``, after removing ``old`` (the figures its previous record named, relative
+    to doc/); their paths relative to doc/."""
     found = sorted({path for pattern in src.plots
                     for path in glob.glob(os.path.join(folder, pattern))})
     os.makedirs(figures_dir, exist_ok=True)
-    for old in glob.glob(os.path.join(figures_dir, f"{name}_*")):
-        os.remove(old)
+    for figure in old:
+        path = os.path.join(os.path.dirname(figures_dir), figure)
+        if os.path.isfile(path):
+            os.remove(path)
     kept = []
     for path in found:
         target = os.path.join(figures_dir, f"{name}_{os.path.basename(path)}")
@@ -260,7 +263,11 @@ def run_source(name):
             data = src.keep(data)
         record = provenance(src.shown, started, seconds, load0, load1, rev=rev)
         if src.plots:
-            record["figures"] = keep_figures(name, src, tmp)
+            try:
+                previous = read_source(name)["record"].get("figures", [])
+            except SourceError:             # a source recorded for the first time
+                previous = []
+            record["figures"] = keep_figures(name, src, tmp, previous)
     return data, record
 
 
