@@ -154,11 +154,9 @@ def provenance_line(record, machine=None):
 def render_page(results_dir=RESULTS_DIR):
     """The text of doc/results.md from the sources' JSON."""
     docs = {name: read_source(name, results_dir) for name in SOURCES}
-    links = "; ".join(f"[{src.title}](#{src.anchor})" for src in SOURCES.values())
     machines = collections.Counter(doc["record"]["machine"] for doc in docs.values())
     usual = machines.most_common(1)[0][0]
-    out = [HEADER, f"Measured on {usual}, unless a block names another machine.", "",
-           f"Blocks: {links}."]
+    out = [HEADER, f"Measured on {usual}, unless a block names another machine."]
     for name, src in SOURCES.items():
         doc = docs[name]
         out += ["", f"## {src.title}", "", src.about.strip(), "",
@@ -166,7 +164,7 @@ def render_page(results_dir=RESULTS_DIR):
                 src.render(doc["data"]).rstrip()]
         figures = doc["record"].get("figures", [])
         if figures:
-            out += ["", " ".join(f"![{src.title}: {os.path.basename(f)}]({f})"
+            out += ["", " ".join(f"![{os.path.splitext(os.path.basename(f))[0]}]({f})"
                                  for f in figures)]
     return "\n".join(out) + "\n"
 
