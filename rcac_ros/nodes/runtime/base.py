@@ -225,9 +225,8 @@ def _fatal(node, prog):
         node.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
         try:
             node.on_interrupt()
-        except Exception:               # noqa: BLE001 -- already failing: exit regardless
-            print(f"{prog}: the stop after the fault failed too: "
-                  f"{traceback.format_exc().rstrip()}", file=sys.stderr, flush=True)
+        except Exception:               # noqa: BLE001 -- already failing: report, exit
+            print(f"{prog}: the stop failed too: {traceback.format_exc()}", file=sys.stderr)
     return 1
 
 
