@@ -1,5 +1,7 @@
 """The fault bench's verdicts (``rcac bench faults``): each case against its reference."""
 
+import pytest
+
 from rcac_ros.tools.bench.faults import CASES, format_table, judge
 
 
@@ -38,3 +40,32 @@ def test_a_flood_case_holds_its_start_and_has_no_tracking_verdict():
     assert flood["window_ok"]                           # 10 <= 9 + 2 periods (4 ms)
     line = format_table(results, 0.002).splitlines()[3]
     assert line.split()[:3] == ["hostile_flood", "0", "-"] and " - " in line
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_a_loaded_soak_keeps_its_busy_processes_for_the_run_and_stops_them(monkeypatch, fails):
+    """``rcac bench soak --busy N``: N busy processes run while the soak runs and are gone
+    after it, also when the soak fails."""
+    import types
+
+    from rcac_ros.tools.bench import commands
+    from rcac_ros.tools.bench import fault_cases
+    started = []
+    real_start = fault_cases.start_busy
+    monkeypatch.setattr(fault_cases, "start_busy",
+                        lambda n: started.extend(real_start(n)) or started)
+
+    def soak(args, cases=None, soak_minutes=None):
+        assert cases == ("direct",) and soak_minutes == 0.5
+        assert len(started) == 3 and all(p.poll() is None for p in started)   # running
+        if fails:
+            raise RuntimeError("the soak failed")
+        return 0
+    monkeypatch.setattr(commands, "run_faults", soak)
+    args = types.SimpleNamespace(busy=3, minutes=0.5)
+    if fails:
+        with pytest.raises(RuntimeError):
+            commands.run_soak(args)
+    else:
+        assert commands.run_soak(args) == 0
+    assert len(started) == 3 and all(p.poll() is not None for p in started)   # stopped

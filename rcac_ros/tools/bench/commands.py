@@ -24,7 +24,7 @@ Only the chosen benchmark's module is imported, when it runs; the ROS ones need 
 import argparse
 import sys
 
-from rcac_ros.tools.args import non_negative_float, positive_float
+from rcac_ros.tools.args import non_negative_float, non_negative_int, positive_float
 from rcac_ros.tools.extras import require
 
 
@@ -109,6 +109,9 @@ def add_soak(p):
     p.add_argument("minutes", type=positive_float, metavar="MINUTES",
                    help="minutes of the direct case (no fault, no relay)")
     p.add_argument("--plot", metavar="FILE", help="the tracking error (PNG)")
+    p.add_argument("--busy", type=non_negative_int, default=0, metavar="N",
+                   help="N busy processes beside the nodes for the whole soak, start-up "
+                        "included (a starved machine; default 0)")
     _add_discovery_range(p)
     add_controller(p)
 
@@ -236,7 +239,14 @@ def run_faults(args, cases=None, soak_minutes=None):
 
 
 def run_soak(args):
-    return run_faults(args, cases=("direct",), soak_minutes=args.minutes)
+    from rcac_ros.tools.bench.fault_cases import start_busy, stop_busy
+    if args.busy:
+        print(f"soak: {args.busy} busy processes beside the nodes until the end", flush=True)
+    busy = start_busy(args.busy)
+    try:
+        return run_faults(args, cases=("direct",), soak_minutes=args.minutes)
+    finally:
+        stop_busy(busy)
 
 
 def run_delay_margin(args):

@@ -30,15 +30,23 @@ def _thaw_clock(run):
     run.relay.freeze_clock = False
 
 
+def start_busy(count):
+    """``count`` busy processes (:data:`BUSY`): a starved machine."""
+    return [subprocess.Popen([sys.executable, "-c", BUSY]) for _ in range(count)]
+
+
+def stop_busy(processes):
+    for p in processes:
+        p.kill()
+        p.wait()
+
+
 def _starve(run):
-    run.busy = [subprocess.Popen([sys.executable, "-c", BUSY])
-                for _ in range(2 * (os.cpu_count() or 1))]
+    run.busy = start_busy(2 * (os.cpu_count() or 1))
 
 
 def _stop_busy(run):
-    for p in run.busy:
-        p.kill()
-        p.wait()
+    stop_busy(run.busy)
     run.busy = []
 
 

@@ -392,6 +392,21 @@ def render_delay_margin(d):
             + table(header, rows))
 
 
+def render_soak(runs):
+    """The soak: tracking (whole run, last fifth), efforts and safe ones, gaps, late ticks,
+    memory growth, estimates bounded."""
+    rows = [[fmt(r["tracking_rms"]), fmt(r["tracking_rms_last_fifth"]), r["efforts"],
+             r["watchdog_efforts"], fmt(r["longest_gap_ms"]), r["gaps_over_2h"],
+             f"{r['controller_late_ticks']}/{r['controller_skipped_ticks']}",
+             f"{100 * r['memory_growth']:.2f} %", "yes" if r["theta_bounded"] else "no"]
+            for r in runs]
+    header = ["tracking RMS (rad)", "last fifth (rad)", "efforts", "safe efforts",
+              "longest gap (ms)", "gaps > 2 periods", "late/skipped ticks", "RSS growth",
+              "estimates bounded"]
+    return ("Goal: tracking within 10x the idle `nominal` case of [A starved machine]"
+            "(#a-starved-machine); estimates bounded.\n\n" + table(header, rows))
+
+
 def render_faults(runs):
     """Per case: tracking against the reference (whole run, and in the faulty window), the
     longest gap between efforts, safe efforts, the guard's spells, late ticks."""

@@ -14,7 +14,13 @@ from rcac_ros.tools.results.blocks import (
     render_compare_consistency, render_compare_rms, render_consistency_campaign,
     render_delay_margin, render_experiment, render_faults, render_friction,
     render_friction_unseen,
-    render_noise, render_noise_sources, render_payload, render_startup, render_timings)
+    render_noise, render_noise_sources, render_payload, render_soak, render_startup,
+    render_timings)
+
+
+def scalars(runs):
+    """A bench's runs without their series (the JSON keeps the figures, the plot the rest)."""
+    return [{k: v for k, v in r.items() if not isinstance(v, list)} for r in runs]
 
 
 #: the plot of a campaign's report (:func:`campaign_commands`)
@@ -214,8 +220,14 @@ SOURCES = {
         "the paper's K_D (doc/failsafe.md \"Starved machine\", \"How to check a machine\").",
         render_faults, ["rcac", "bench", "faults", "--cases", "nominal,starved", "--duration",
                         "60", "--K_D", "10000", "--json", "{out}/faults.json"], "faults.json",
-        keep=lambda runs: [{k: v for k, v in r.items() if not isinstance(v, list)}
-                           for r in runs]),
+        keep=scalars),
+    "soak_loaded": Source(
+        "Thirty minutes on a starved machine",
+        "`rcac bench soak`'s `direct` case (doc/failsafe.md) for 30 minutes, four busy "
+        "processes on the machine throughout.",
+        render_soak, ["rcac", "bench", "soak", "30", "--busy", "4", "--K_D", "10000", "--json",
+                      "{out}/soak.json", "--plot", "{out}/soak.png"], "soak.json",
+        keep=scalars, plots=("soak.png",)),
     "delay_margin": Source(
         "Delay margin per arm",
         "The margin the starvation guard derives at configure from the model and gains "
