@@ -334,7 +334,8 @@ def add_arguments(parser):
 
 
 def check_arguments(args):
-    """One-line errors on the arguments, before anything heavy is imported."""
+    """One-line errors on the arguments, before anything heavy is imported; then
+    :func:`truth` of the checked payload."""
     from rcac_ros.errors import ConfigError
     if args.at >= args.duration:
         raise ConfigError(f"--at: the capture must come before the end of the run "
@@ -347,21 +348,17 @@ def check_arguments(args):
     if args.bag is not None and args.no_ros:
         raise ConfigError("--bag: reads a ROS run; --no-ros asks for none")
     inertia = args.inertia if args.inertia is not None else cube_inertia(args.mass)
-    from rcac_ros.core.model import css_arm_preset    # numpy only, no kernels
-    from rcac_ros.core.payload import arm_reach, check_payload
-    try:
-        check_payload(args.mass, args.com, inertia, reach=arm_reach(css_arm_preset()))
+    try:                                # numpy only, no kernels
+        return truth(args.mass, args.com, inertia)
     except ConfigError as exc:          # named as the command line names it
         raise ConfigError(str(exc).replace("payload.", "--")) from None
-    return inertia
 
 
 def run(args):
-    inertia = check_arguments(args)
+    arm, loaded, payload = check_arguments(args)
     log = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
     out = os.path.abspath(args.out)
     os.makedirs(out, exist_ok=True)
-    arm, loaded, payload = truth(args.mass, args.com, inertia)
     at, release = args.at, args.release
     report = {"settings": {"model": "css_arm (preset, effort limits "
                            f"{arm.effort_limit.tolist()} N m, zero gravity)",
