@@ -152,6 +152,25 @@ def test_safe_stop_counts_spells_once_and_replans_after_a_long_one():
     assert (stop.spells, stop.replans) == (3, 1)
 
 
+def test_a_spell_runs_from_the_laws_last_effort_and_a_stall_is_one():
+    """A loop that stalled trips the watchdog only when it runs again: the arm held the last
+    effort since the law's last step, which is what the spell's length must measure; a
+    stall the watchdog never saw is a spell too, in timer mode only."""
+    ms = 1_000_000
+    stop = SafeStop(replan_after=0.5)
+    stop.controlled(100 * ms)                   # the law's last effort
+    assert stop.trip(8800 * ms)                 # the watchdog, once the loop runs again
+    assert stop.resume(8802 * ms, stalls=True) == (pytest.approx(8.702), True)
+    stop.controlled(8802 * ms)
+    assert stop.resume(9301 * ms, stalls=True) is None      # within replan_after: a delay
+    stop.controlled(9301 * ms)
+    assert stop.resume(9900 * ms) is None       # lockstep: the simulator waited
+    assert stop.resume(9900 * ms, stalls=True) == (pytest.approx(0.599), True)
+    assert (stop.spells, stop.stalls, stop.replans) == (1, 1, 2)
+    stop.restart()                              # activation: nothing to measure from
+    assert stop.resume(20000 * ms, stalls=True) is None
+
+
 def test_params_file_errors_are_one_line(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("rcac_controller:\n  ros__parameters:\n    K_D: [1.0\n")

@@ -42,3 +42,33 @@ def test_a_starved_controller_degrades_once_and_recovers():
         with probe.lock:
             starved = [m for m in probe.logs if m.msg.startswith("starved:")]
         assert len(starved) == spells and len(over_lines(probe)) >= spells - 1  # once a spell
+
+
+def test_a_stalled_loop_is_a_spell_from_the_laws_last_effort():
+    """The controller's process stopped 1 s while the states go on: when it runs again the
+    arm has held its last effort for the whole second. The spell is measured from the law's
+    last effort (not from the watchdog's first safe effort, which comes only after the
+    stall), so it is longer than ``watchdog.replan_after`` (0.5 s): the motion restarts from
+    the measured state and the adaptation holds (cause ``recovering``) until the law's
+    effort is within its limits."""
+    with session() as probe, controller(probe, "mode:=timer") as proc, state_driver(probe):
+        assert wait(lambda: len(probe.efforts) > 1000)
+        replans = int(probe.diagnostics.get(DIAG, {}).get("watchdog_replans", 0))
+        os.kill(proc.pid, signal.SIGSTOP)
+        try:
+            time.sleep(1.0)
+        finally:
+            os.kill(proc.pid, signal.SIGCONT)
+
+        def resumed():
+            with probe.lock:
+                return [m.msg for m in probe.logs if m.msg.startswith("watchdog: ")
+                        and "restarts from the measured state" in m.msg]
+        assert wait(lambda: resumed(), timeout=10.0)
+        held = float(resumed()[0].split(" s without")[0].split()[-1])
+        assert held >= 1.0, resumed()
+        assert wait(lambda: int(probe.diagnostics[DIAG]["watchdog_replans"]) > replans,
+                    timeout=5.0)
+        assert wait(lambda: probe.logged("adaptation again: the law's effort is within")
+                    or "recovering" in probe.diagnostics[DIAG]["adaptation_frozen_by"],
+                    timeout=5.0)

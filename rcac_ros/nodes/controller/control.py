@@ -2,7 +2,11 @@
 
 One step: the latest valid state, the watchdog and the starvation guard, the desired
 motion, the law's step, the effort (clipped; the safe effort for a NaN/Inf one, with the
-last finite estimates restored), the monitors and the FollowJointTrajectory feedback. A
+last finite estimates restored), the monitors and the FollowJointTrajectory feedback.
+After a spell long enough to restart the motion (the watchdog's replan) the adaptation of
+eq 24 holds until the law's effort is within its limits again: while the effort is clipped
+the arm does not feel the torque of eqs 19-20, the tracking term of eq 24 would learn from
+errors the saturation made (anti-windup). A
 fault of the step itself sends the safe effort and is counted (doc/failsafe.md, "Thread
 failures").
 """
@@ -13,12 +17,13 @@ import traceback
 import numpy as np
 
 from rcac_ros.errors import RcacError
+from rcac_ros.nodes.controller.freeze import AdaptationFreeze
 
 
 class ControlStep:
     """The control step of :class:`~.node.ControllerNode` (a mixin: it reads the node's
     ``states``, ``watchdog``, ``failsafe``, ``motion``, ``ctrl``, ``counts``, ``config``,
-    ``_outputs``, ``_starvation``, ``_lookahead``, ``_fjt``, ``loop``)."""
+    ``_outputs``, ``_starvation``, ``_lookahead``, ``_fjt``, ``loop``, ``adaptation``)."""
 
     def _step(self, t_ns, stamp=None):
         """One control step; if it raises (a fault of this code or of a library, not of the
@@ -41,8 +46,7 @@ class ControlStep:
     def _control(self, t_ns, stamp=None):
         state = self.states.take()          # one snapshot (timer mode: set by another thread)
         q, qd = state.q, state.qd
-        spell = self.failsafe.stop.active
-        self.watchdog.resume()              # a spell of safe effort ends here
+        spell = self.watchdog.resume()      # a spell of safe effort (or a stall) ends here
         if self._starvation is not None:    # timer mode: K_D within the delay margin
             self._starvation.step(after_spell=spell)
         if self.filters_stale:
@@ -68,12 +72,20 @@ class ControlStep:
             self._outputs.effort(self.config.safe_effort, stamp)
             self._effort_sent = True
             return
-        tau = np.clip(tau, -self.config.effort_limit, self.config.effort_limit)
+        limit = self.config.effort_limit
+        if AdaptationFreeze.RECOVERING in self.adaptation.reasons \
+                and np.all(np.abs(tau) < limit):    # the law has the arm again: adapt
+            self.adaptation.freeze(AdaptationFreeze.RECOVERING, False)
+            self.get_logger().info(
+                "adaptation again: the law's effort is within its limits "
+                f"{time.monotonic() - self._recovering_since:.3f} s after the spell")
+        tau = np.clip(tau, -limit, limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         if self._lookahead is not None:
             self._lookahead.applied = tau
         self._outputs.effort(tau[self.config.out], stamp)
         self._effort_sent = True
+        self.watchdog.controlled()
         if self.counts.steps % self.config.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,
                                    qd_d, qdd_d, tau, stamp, self.ctrl.friction_hat)

@@ -74,6 +74,7 @@ def diagnostics(node, counts, rejected, starvation, inputs):
         "watchdog": "tripped" if tripped else "ok",
         "watchdog_trips": node.watchdog.trips,
         "watchdog_replans": node.failsafe.stop.replans,
+        "loop_stalls": node.failsafe.stop.stalls,
         "rejected_messages": rejected.total,
         "stamp_restarts": node.failsafe.gate.restarts,
         "desired_limited": node.failsafe.limiter.limited,

@@ -1,10 +1,11 @@
-"""Why the adaptation of eq 24 is frozen: the operator, the starvation guard, or both.
+"""Why the adaptation of eq 24 is frozen: the operator, the starvation guard, a recovery.
 
-The operator's ``~/set_adaptation`` (:mod:`.estimate_services`) and the starvation guard
-(:mod:`.starvation`, doc/failsafe.md "Starved machine") each hold their own reason; the law
-is frozen while either holds (their OR). So the guard's recovery does not undo an
-operator's freeze, and an operator's resume during starvation does not undo the guard's
-freeze: the adaptation comes back when neither holds. Both are called from the node's one
+The operator's ``~/set_adaptation`` (:mod:`.estimate_services`), the starvation guard
+(:mod:`.starvation`, doc/failsafe.md "Starved machine") and the recovery after a long spell
+without the law's effort (:mod:`.control`) each hold their own reason; the law is frozen
+while any holds (their OR). So the guard's recovery does not undo an operator's freeze,
+and an operator's resume during starvation does not undo the guard's freeze: the
+adaptation comes back when none holds. All are called from the node's one
 executor-and-loop thread.
 """
 
@@ -15,10 +16,11 @@ class AdaptationFreeze:
     Attributes
     ----------
     reasons : set of str
-        Those that hold now (:attr:`USER`, :attr:`STARVED`); empty: adapting.
+        Those that hold now (:attr:`USER`, :attr:`STARVED`, :attr:`RECOVERING`); empty:
+        adapting.
     """
 
-    USER, STARVED = "user", "starved"
+    USER, STARVED, RECOVERING = "user", "starved", "recovering"
 
     def __init__(self, ctrl):
         self.ctrl = ctrl

@@ -16,6 +16,7 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 """
 
 import sys
+import time
 
 from rclpy.clock import Clock, ClockType
 
@@ -149,6 +150,7 @@ class ControllerNode(ControlStep, ManagedNode):
         self._last_tick = None
         self.filters_stale = False          # the loop restarts the filters at its next step
         self._outputs.last_answer = None
+        self.adaptation.freeze(AdaptationFreeze.RECOVERING, False)
         if self._starvation is not None:
             self._starvation.reset()
 
@@ -164,9 +166,13 @@ class ControllerNode(ControlStep, ManagedNode):
         self.loop = None
 
     def _replan(self, held):
-        """The watchdog held the safe effort ``held`` s: the motion restarts from the arm."""
+        """The arm went ``held`` s without the law's effort: the motion restarts from it,
+        and the adaptation holds until the law's effort is within its limits again (the
+        control step lifts :attr:`AdaptationFreeze.RECOVERING`)."""
         self.motion.restart(at_arm=True)
-        self._abort_goal(f"the controller sent the safe effort for {held:.3f} s")
+        self.adaptation.freeze(AdaptationFreeze.RECOVERING, True)
+        self._recovering_since = time.monotonic()
+        self._abort_goal(f"the arm went {held:.3f} s without the controller's effort")
 
     def _abort_goal(self, text):
         """Abort the FollowJointTrajectory goal, if any."""

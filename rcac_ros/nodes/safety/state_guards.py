@@ -101,6 +101,14 @@ class SafeStop:
     lost at once, far outside the range the gains were tuned for), so the motion restarts
     from the measured state.
 
+    A spell's length runs from the law's last effort (:meth:`controlled`), not from the
+    first safe effort: a control loop that stalled (its process not scheduled) trips the
+    watchdog only when it runs again, while the arm held the last effort all along. A
+    stall of ``replan_after`` s or more that the watchdog did not see at all (the state
+    came in time for the first step after it) is a spell of the same length when
+    :meth:`resume` is told to look for one (:attr:`stalls`; timer mode: a lockstep
+    simulator waits for the effort).
+
     Parameters
     ----------
     replan_after : float
@@ -111,7 +119,9 @@ class SafeStop:
         self.replan_after_ns = round(replan_after * 1e9)
         self.spells = 0             # spells started
         self.replans = 0            # spells ended with the motion restarted
+        self.stalls = 0             # stalls of the loop without a safe effort
         self.since = None           # steady ns of the first safe effort of this spell
+        self.effort_ns = None       # steady ns of the law's last effort
 
     @property
     def active(self):
@@ -130,18 +140,36 @@ class SafeStop:
         """Forget the spell: the safe effort never acted (a lockstep simulator ignores it)."""
         self.since = None
 
-    def resume(self, now):
+    def restart(self):
+        """A fresh start: no spell, no effort of the law yet."""
+        self.since = self.effort_ns = None
+
+    def controlled(self, now):
+        """The law's effort of the step that began at steady time ``now`` (ns) went out."""
+        self.effort_ns = now
+
+    def resume(self, now, stalls=False):
         """A control step at steady time ``now`` (ns).
+
+        ``stalls``: a step ``replan_after`` s or more after the law's last effort ends a
+        spell even when no safe effort went out (a stall of the loop).
 
         Returns
         -------
         tuple or None
-            ``None`` when no spell was on; else ``(seconds of safe effort, replan)``,
-            ``replan`` telling that the motion must restart from the measured state.
+            ``None`` when no spell was on; else ``(seconds without the law's effort,
+            replan)``, ``replan`` telling that the motion must restart from the measured
+            state.
         """
+        last = self.effort_ns
         if self.since is None:
-            return None
-        held = now - self.since
+            if not stalls or last is None or now - last < self.replan_after_ns:
+                return None
+            self.stalls += 1
+            since = last
+        else:
+            since = self.since if last is None else min(self.since, last)
+        held = now - since
         self.since = None
         replan = held >= self.replan_after_ns
         self.replans += replan

@@ -10,7 +10,11 @@ A spell of safe effort (:class:`~rcac_ros.nodes.safety.state_guards.SafeStop`) i
 log line. It ends at the next control step (:meth:`Watchdog.resume`), where the filters of
 eqs 21-24 restart; after ``watchdog.replan_after`` s of it the motion restarts from the
 measured state. In lockstep mode a state that follows the last one answered ends the spell
-at once: the simulator waited, the safe effort never acted.
+at once: the simulator waited, the safe effort never acted. In timer mode a control step
+that comes ``watchdog.replan_after`` s or more after the law's last effort ends a spell of
+that length even if no safe effort went out: the loop itself stalled (its process not
+scheduled) while the arm held the last effort (``SafeStop.stalls``); a spell's length
+always runs from the law's last effort.
 
 Its clock across threads (doc/failsafe.md, "Watchdog clock"). The watchdog keeps two
 times: ``tick_ns`` and the arrival of the latest valid state, which it does not store but
@@ -87,7 +91,8 @@ class Watchdog:
         """A fresh start: no valid state yet, no tick, no spell."""
         self.tripped = True
         self.tick_ns = None         # steady ns of the latest tick (timer mode)
-        self.stop.cancel()
+        self._step_ns = None        # steady ns of the current control step's start
+        self.stop.restart()
 
     @property
     def check_period(self):
@@ -147,13 +152,23 @@ class Watchdog:
             self.log.info("watchdog: valid state again, control resumed")
 
     def resume(self):
-        """At each control step: end the spell of safe effort, if one is on."""
-        resumed = self.stop.resume(time.monotonic_ns())
+        """At each control step: end the spell of safe effort, or of a stalled loop (timer
+        mode), if one is on; ``True`` if one ended here."""
+        self._step_ns = now = time.monotonic_ns()
+        stalls = self.stop.stalls
+        resumed = self.stop.resume(now, stalls=not self.lockstep)
         if resumed is None or not self.stepped():
-            return
+            return resumed is not None
         held, replan = resumed
         self.filters_missed()               # the filters of eqs 21-24 missed the spell
         if replan:                          # the arm drifted: go on from where it is
             self.replan(held)
-        self.log.info(f"watchdog: control resumed after {held:.3f} s of safe effort"
+        what = "the control loop stalled (no effort sent) for" if self.stop.stalls > stalls \
+            else "control resumed after"
+        self.log.info(f"watchdog: {what} {held:.3f} s without the law's effort"
                       + ("; the motion restarts from the measured state" if replan else ""))
+        return True
+
+    def controlled(self):
+        """The law's effort of this control step went out."""
+        self.stop.controlled(self._step_ns)

@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -117,6 +118,27 @@ def _joiners(run):
          topics.resolve(topics.JOINT_STATES)], env=run.env, start_new_session=True)
 
 
+#: s the controller's process is stopped in the ``stall`` case
+STALL_S = 5.0
+
+
+def _stall(run):
+    """Stop the controller's process for :data:`STALL_S` (SIGSTOP/SIGCONT: a process the
+    machine does not schedule) while the simulator goes on in real time."""
+    import signal
+    os.kill(run.ctrl.proc.pid, signal.SIGSTOP)
+    try:
+        run.spin_for(STALL_S)
+    finally:
+        os.kill(run.ctrl.proc.pid, signal.SIGCONT)
+    run.t_stall_end = time.monotonic_ns()
+
+
+def _stall_figures(run, out):
+    run.t_resume = run.t_stall_end          # recovery counts from the end of the stall
+    _resume_figures(run, out)
+
+
 def _restart_figures(run, out):
     first = run.relay.first_state_after[1]
     resumed = [e[1] for e in run.probe.efforts if not e[2] and first is not None
@@ -209,6 +231,8 @@ CASES = {
                           check=_judge_hostile),
     "starved": Case(window="third", inject=_starve, clear=_stop_busy, plain_loop=True,
                     relay=False, figures=_window_and_machine_figures, check=_judge_starved),
+    "stall": Case(window="third", inject=_stall, relay=False, figures=_stall_figures,
+                  check=_judge_resume),
     "joiners": Case(window="third", inject=_joiners, plain_loop=True, relay=False,
                     figures=_window_and_machine_figures, check=_judge_hostile),
 }

@@ -22,6 +22,7 @@ hostile_flood a third process (niced) publishes every 100 ms a JointState of 1e6
               run, while a plain 500 Hz loop in a fourth process measures the
               machine's own stalls in the same window
 starved       busy processes (two per core) beside the nodes for a third of the run
+stall         the controller's process stopped for 5 s after a third of the run (SIGSTOP)
 joiners       every 2 s of a third of the run a new process (a node with a publisher on
               ``/joint_states``) joins the graph and leaves after 1.5 s, while a plain
               500 Hz loop measures the machine's own stalls
@@ -39,9 +40,10 @@ Per case it reports the tracking RMS (the controller's ``~/tracking_error``, nor
 the joints) against nominal, the longest gap between efforts (sender's stamps), whether
 the estimates stayed finite and bounded, and whether control recovered: the last fifth
 of the run tracks within 3x nominal; after the restart, also the first non-watchdog
-effort within 1 s of the first new state; after the frozen ``/clock``, instead: the first
-non-watchdog effort within 1 s of ``/clock`` resuming, and the tracking error back within
-3x the nominal RMS (and staying there) within 5 s of it (doc/failsafe.md).
+effort within 1 s of the first new state; after the frozen ``/clock`` (and the stall), instead: the first
+non-watchdog effort within 1 s of ``/clock`` resuming (the process continued), and the
+tracking error back within 3x the nominal RMS (and staying there) within 5 s of it
+(doc/failsafe.md).
 ``rcac bench soak MINUTES`` runs the direct case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
