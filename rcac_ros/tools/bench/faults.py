@@ -40,10 +40,10 @@ Per case it reports the tracking RMS (the controller's ``~/tracking_error``, nor
 the joints) against nominal, the longest gap between efforts (sender's stamps), whether
 the estimates stayed finite and bounded, and whether control recovered: the last fifth
 of the run tracks within 3x nominal; after the restart, also the first non-watchdog
-effort within 1 s of the first new state; after the frozen ``/clock`` (and the stall), instead: the first
-non-watchdog effort within 1 s of ``/clock`` resuming (the process continued), and the
-tracking error back within 3x the nominal RMS (and staying there) within 5 s of it
-(doc/failsafe.md).
+effort within 1 s of the first new state; after the frozen ``/clock`` (or the stall),
+instead: the first non-watchdog effort within 1 s of ``/clock`` resuming (or of the process
+continued), and the tracking error back within 3x the nominal RMS (and staying there)
+within 5 s of it (doc/failsafe.md).
 ``rcac bench soak MINUTES`` runs the direct case that long and reports the controller's memory
 growth (RSS) and late ticks.
 """
