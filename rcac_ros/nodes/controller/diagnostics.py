@@ -83,7 +83,8 @@ def diagnostics(node, counts, rejected, starvation, inputs):
         "prediction_error": f"{E[0]:.6g}",        # the first channel's (joint 1 by default)
         "channels": ",".join(cfg.channel_names),
         "adaptation": "on" if node.ctrl.adapting else "frozen",
-        # the causes that hold it (controller/freeze.py): user (set_adaptation), starved
+        # the causes that hold it (controller/freeze.py): user (set_adaptation), starved,
+        # recovering (after a spell, until the effort is within its limits)
         "adaptation_frozen_by": ",".join(sorted(node.adaptation.reasons)) or "none",
         "kernels": node.kernels.status,
         "kernels_ready_s": "" if node.kernels.seconds is None else f"{node.kernels.seconds:.2f}",

@@ -78,8 +78,11 @@ class EstimateServices:
         elif self.ctrl.adapting:
             response.message = "adaptation resumed"
         else:
+            why = {AdaptationFreeze.STARVED: "the starvation guard until the control loop's "
+                   "delay recovers", AdaptationFreeze.RECOVERING: "the recovery after a spell "
+                   "until the effort is within its limits"}
             response.message = "adaptation: the freeze of set_adaptation is lifted; still " \
-                "frozen by the starvation guard until the control loop's delay recovers"
+                "frozen by " + " and ".join(why[r] for r in sorted(self.adaptation.reasons))
         self.log.info(response.message)
         return response
 

@@ -253,7 +253,7 @@ def _collect_figures(run, spec, out, rss, t1, soak):
         spec.figures(run, out)
     diag = probe.diagnostics.get("rcac_controller: control loop", {})
     for key in ("starved_spells", "delay_worst_ms", "late_ticks", "skipped_ticks",
-                "watchdog_trips", "rejected_messages",
+                "watchdog_trips", "watchdog_replans", "loop_stalls", "rejected_messages",
                 "stamp_restarts"):
         if key in diag:
             out[f"controller_{key}"] = diag[key]

@@ -398,13 +398,30 @@ def render_soak(runs):
     rows = [[fmt(r["tracking_rms"]), fmt(r["tracking_rms_last_fifth"]), r["efforts"],
              r["watchdog_efforts"], fmt(r["longest_gap_ms"]), r["gaps_over_2h"],
              f"{r['controller_late_ticks']}/{r['controller_skipped_ticks']}",
-             f"{100 * r['memory_growth']:.2f} %", "yes" if r["theta_bounded"] else "no"]
+             r.get("controller_watchdog_replans", "-"), f"{100 * r['memory_growth']:.2f} %",
+             fmt(r["theta_max"]), "yes" if r["theta_bounded"] else "no"]
             for r in runs]
     header = ["tracking RMS (rad)", "last fifth (rad)", "efforts", "safe efforts",
-              "longest gap (ms)", "gaps > 2 periods", "late/skipped ticks", "RSS growth",
-              "estimates bounded"]
+              "longest gap (ms)", "gaps > 2 periods", "late/skipped ticks", "motion restarts",
+              "RSS growth", "max |θ̂|", "estimates bounded"]
     return ("Goal: tracking within 10x the idle `nominal` case of [A starved machine]"
             "(#a-starved-machine); estimates bounded.\n\n" + table(header, rows))
+
+
+def render_stall(runs):
+    """The stall against the direct case: tracking, when control came back and settled,
+    the largest estimate."""
+    rows = [[r["case"], fmt(r["tracking_rms"]), fmt(r["tracking_rms_last_fifth"]),
+             fmt(r.get("control_back_s")), fmt(r.get("settle_s")),
+             r.get("controller_watchdog_replans", "-"), fmt(r["theta_max"]),
+             "yes" if r["theta_bounded"] else "no", "yes" if r["recovered"] else "no"]
+            for r in runs]
+    header = ["case", "tracking RMS (rad)", "last fifth (rad)", "control back (s)",
+              "within 3x after (s)", "motion restarts", "max |θ̂|", "estimates bounded",
+              "recovered"]
+    return ("Goal: a law's effort within 1 s of the process running again, the tracking error "
+            "within 3x the direct case's RMS within 5 s and staying, estimates bounded.\n\n"
+            + table(header, rows))
 
 
 def render_faults(runs):

@@ -13,9 +13,8 @@ from rcac_ros.tools.results.blocks import (
     render_bench_core, render_bench_ros_modes, render_campaign, render_capture, render_compare,
     render_compare_consistency, render_compare_rms, render_consistency_campaign,
     render_delay_margin, render_experiment, render_faults, render_friction,
-    render_friction_unseen,
-    render_noise, render_noise_sources, render_payload, render_soak, render_startup,
-    render_timings)
+    render_friction_unseen, render_noise, render_noise_sources, render_payload, render_soak,
+    render_stall, render_startup, render_timings)
 
 
 def scalars(runs):
@@ -221,6 +220,14 @@ SOURCES = {
         render_faults, ["rcac", "bench", "faults", "--cases", "nominal,starved", "--duration",
                         "60", "--K_D", "10000", "--json", "{out}/faults.json"], "faults.json",
         keep=scalars),
+    "faults_stall": Source(
+        "A stalled controller",
+        "`rcac bench faults`' `stall` case: the controller's process stopped for 5 s "
+        "(SIGSTOP) after a third of the run while the simulator goes on in real time, the arm "
+        "holding the last effort; the `direct` case as reference (doc/failsafe.md \"Stalls\").",
+        render_stall, ["rcac", "bench", "faults", "--cases", "direct,stall", "--duration",
+                       "30", "--K_D", "10000", "--json", "{out}/faults.json", "--plot",
+                       "{out}/faults.png"], "faults.json", keep=scalars, plots=("faults.png",)),
     "soak_loaded": Source(
         "Thirty minutes on a starved machine",
         "`rcac bench soak`'s `direct` case (doc/failsafe.md) for 30 minutes, four busy "
