@@ -2,8 +2,9 @@
 
 Timer mode only. At each control step :class:`Starvation` feeds the age of the state used
 (steady clock) to a :class:`~rcac_ros.nodes.safety.delay_guard.DelayGuard`; while the
-smoothed delay is past the delay margin of ``K_D`` the core's feedback gain is scaled down
-(:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`) and the adaptation
+smoothed delay is past the delay margin of ``K_D`` over ``SAFETY`` the core's feedback gain
+is scaled down (:meth:`~rcac_ros.core.composite.RecursiveCompositeController.scale_K_D`) and
+the adaptation
 of eq 24 is frozen (the estimates do not learn from errors that the delay made); once the
 delay has stayed within the margin for ``starvation.recover_after`` s the nominal gains
 return, and the adaptation unless the operator froze it (the guard holds its own reason,
@@ -20,7 +21,7 @@ import numpy as np
 from rcac_ros.core.composite import RecursiveCompositeController
 from rcac_ros.core.crba import mass_matrix
 from rcac_ros.nodes.controller.freeze import AdaptationFreeze
-from rcac_ros.nodes.safety.delay_guard import DelayGuard
+from rcac_ros.nodes.safety.delay_guard import DelayGuard, SAFETY
 
 
 #: the delay margin of the law's feedback in its most delay-sensitive mode: the margin, s, and
@@ -186,7 +187,8 @@ class Starvation:
             self.adaptation.freeze(AdaptationFreeze.STARVED, True)
             self.log.warning(
                 f"starved: the control loop's delay {self.guard.delay * 1e3:.1f} ms is past "
-                f"the delay margin of K_D ({self.guard.margin * 1e3:.1f} ms): K_D scaled by "
+                f"{self.guard.limit * 1e3:.1f} ms (the delay margin of K_D, "
+                f"{self.guard.margin * 1e3:.1f} ms, over {SAFETY:g}): K_D scaled by "
                 f"{self.guard.scale:.3g} and adaptation frozen until the delay stays within "
                 f"the margin for {self.guard.recover_after:g} s")
         elif event == "recovered":
