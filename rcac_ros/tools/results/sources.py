@@ -135,7 +135,7 @@ SOURCES = {
         "the model's tanh law (inside the laws' model class).",
         render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
                              "panda_damping_armature", "--engine", "builtin", "--out",
-                             "{out}"], "compare.json", plots=("compare_*.png",)),
+                             "{out}"], "compare.json", plots=("compare_panda_joints.png",)),
     "channels_paper": Source(
         "Channel sets out of sample: the paper arm",
         "`campaigns/channels_paper.yaml`: the paper arm with the motion scaled 0.5-1.5x, K_D "
