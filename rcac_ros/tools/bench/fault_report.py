@@ -92,12 +92,18 @@ def format_table(results, h):
     return "\n".join(lines)
 
 
+#: s without a tracking sample after which the plot breaks its line (samples every 20 ms)
+GAP_S = 0.5
+
+
 def plot(results, path):
     from rcac_ros.tools.plots import plt
     fig, axes = plt.subplots(len(results), 1, figsize=(9, 2.0 * len(results)), sharex=True,
                              squeeze=False)
     for ax, r in zip(axes[:, 0], results):
-        ax.semilogy(r["tracking_t_s"], np.maximum(r["tracking"], 1e-12), lw=0.7)
+        t, e = np.asarray(r["tracking_t_s"], float), np.maximum(r["tracking"], 1e-12)
+        cut = np.flatnonzero(np.diff(t) > GAP_S) + 1      # no line across a silence
+        ax.semilogy(np.insert(t, cut, np.nan), np.insert(e, cut, np.nan), lw=0.7)
         ax.set_ylabel("|q - q_d| (rad)", fontsize=7)
         ax.set_title(r["case"], fontsize=8, loc="left")
         ax.grid(alpha=0.3)

@@ -419,8 +419,8 @@ def render_stall(runs):
     header = ["case", "tracking RMS (rad)", "last fifth (rad)", "control back (s)",
               "within 3x after (s)", "motion restarts", "max |θ̂|", "estimates bounded",
               "recovered"]
-    return ("Goal: a law's effort within 1 s of the process running again, the tracking error "
-            "within 3x the direct case's RMS within 5 s and staying, estimates bounded.\n\n"
+    return ("Goal: the law's effort within 1 s of the process running again, tracking within "
+            "3x `direct`'s RMS within 5 s (and staying), estimates bounded.\n\n"
             + table(header, rows))
 
 

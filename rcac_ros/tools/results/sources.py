@@ -71,19 +71,17 @@ SOURCES = {
         "bench.json"),
     "bench_ros_modes": Source(
         "Timing over ROS, per controller mode",
-        "The simulator (real time, its own 500 Hz deadline loop) and the controller as two "
-        "processes, K_D = 1000, with a third process echoing a JointState (a plain DDS ping), "
-        "once per controller mode. The rows that count are ratios of two figures of the same "
-        "run: effort period p99 over state period p99 (goal <= 1.1) and state→effort latency "
-        "p50 over the ping's one-way p50 (doc/nodes.md, \"Timing\").",
+        "Simulator (real time) and controller as two processes, K_D = 1000, a third echoing "
+        "a JointState (a DDS ping), per controller mode. What counts: effort period p99 over "
+        "state period p99 (goal <= 1.1), state→effort latency p50 over the ping's one-way p50 "
+        "(doc/nodes.md, \"Timing\").",
         render_bench_ros_modes, shown="make readme-bench"),
     "startup": Source(
         "Start-up, with and without the compiled kernels",
-        "Each figure a fresh process with a numba cache of its own, empty (cold: a fresh "
-        "install before `rcac warm`) or filled by the cold run (warm): the imports, a bad "
-        "argument, the controller node's first answer and first effort for the default law "
-        "and the general kernel (`channels: [\"all\"]`), the whole warm-up (doc/tools.md, "
-        "`rcac bench startup`).",
+        "Each figure a fresh process with its own numba cache, empty (cold: before `rcac "
+        "warm`) or filled by the cold run (warm): imports, a bad argument, the controller's "
+        "first answer and effort for the default law and `channels: [\"all\"]`, the whole "
+        "warm-up (doc/tools.md).",
         render_startup, ["rcac", "bench", "startup", "--laws", "default,all", "--json",
                          "{out}/startup.json"], "startup.json"),
     "timings": Source(
@@ -214,17 +212,16 @@ SOURCES = {
         plots=("capture_ros.png", "capture_laws.png")),
     "faults_starved": Source(
         "A starved machine",
-        "`rcac bench faults`' nominal case and its starved case (two busy processes per core "
-        "beside the nodes for the middle third of the run), the controller in timer mode at "
-        "the paper's K_D (doc/failsafe.md \"Starved machine\", \"How to check a machine\").",
+        "The nominal and starved cases (two busy processes per core beside the nodes for the "
+        "middle third), the controller in timer mode at the paper's K_D (doc/failsafe.md "
+        "\"Starved machine\").",
         render_faults, ["rcac", "bench", "faults", "--cases", "nominal,starved", "--duration",
                         "60", "--K_D", "10000", "--json", "{out}/faults.json"], "faults.json",
         keep=scalars),
     "faults_stall": Source(
         "A stalled controller",
-        "`rcac bench faults`' `stall` case: the controller's process stopped for 5 s "
-        "(SIGSTOP) after a third of the run while the simulator goes on in real time, the arm "
-        "holding the last effort; the `direct` case as reference (doc/failsafe.md \"Stalls\").",
+        "The controller's process stopped 5 s (SIGSTOP) at a third of the run, the simulator "
+        "running on with the last effort; reference: `direct` (doc/failsafe.md \"Stalls\").",
         render_stall, ["rcac", "bench", "faults", "--cases", "direct,stall", "--duration",
                        "30", "--K_D", "10000", "--json", "{out}/faults.json", "--plot",
                        "{out}/faults.png"], "faults.json", keep=scalars, plots=("faults.png",)),
