@@ -402,7 +402,8 @@ def render_soak(runs):
              fmt(r["theta_max"]), "yes" if r["theta_bounded"] else "no"]
             for r in runs]
     header = ["tracking RMS (rad)", "last fifth (rad)", "efforts", "safe efforts",
-              "longest gap (ms)", "gaps > 2 periods", "late/skipped ticks", "RSS growth", "max |θ̂|", "estimates bounded"]
+              "longest gap (ms)", "gaps > 2 periods", "late/skipped ticks", "RSS growth",
+              "max |θ̂|", "estimates bounded"]
     return ("Goal: tracking within 10x the idle `nominal` case of [A starved machine]"
             "(#a-starved-machine); estimates bounded.\n\n" + table(header, rows))
 
