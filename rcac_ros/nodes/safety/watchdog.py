@@ -155,7 +155,7 @@ class Watchdog:
         """At each control step: end the spell of safe effort, or of a stalled loop (timer
         mode), if one is on; ``True`` if one ended here."""
         self._step_ns = now = time.monotonic_ns()
-        stalls = self.stop.stalls
+        stalled = not self.stop.active       # no safe effort went out: only a stall ends here
         resumed = self.stop.resume(now, stalls=not self.lockstep)
         if resumed is None or not self.stepped():
             return resumed is not None
@@ -163,7 +163,7 @@ class Watchdog:
         self.filters_missed()               # the filters of eqs 21-24 missed the spell
         if replan:                          # the arm drifted: go on from where it is
             self.replan(held)
-        what = "the control loop stalled (no effort sent) for" if self.stop.stalls > stalls \
+        what = "the control loop stalled (no effort sent) for" if stalled \
             else "control resumed after"
         self.log.info(f"watchdog: {what} {held:.3f} s without the law's effort"
                       + ("; the motion restarts from the measured state" if replan else ""))

@@ -2,6 +2,7 @@
 when, the figures it adds and its verdicts."""
 
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -125,7 +126,6 @@ STALL_S = 5.0
 def _stall(run):
     """Stop the controller's process for :data:`STALL_S` (SIGSTOP/SIGCONT: a process the
     machine does not schedule) while the simulator goes on in real time."""
-    import signal
     os.kill(run.ctrl.proc.pid, signal.SIGSTOP)
     try:
         run.spin_for(STALL_S)
