@@ -45,9 +45,8 @@ from .composite_kernels import friction_step_kernel, rcac_step_kernel
 from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction_step,
                               paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
-from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             feedback_scaled_gain, friction_gain, friction_natural_gain,
-                             gains_at_start, natural_friction_start)
+from .joint_friction import (F_GAIN, F_HAT, F_RATE, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+                             friction_gain, gains_at_start, natural_friction_start, rotor_start)
 from .least_squares import initial_factor
 from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
                              is_body, lambda_min, matched_gain, natural_metric_option, nu_gain)
@@ -140,7 +139,9 @@ class RecursiveCompositeController:
     P_friction : "feedback", float, (3,) or (n, 3)
         Diagonal adaptation gains of the joint terms, positive; default ``"feedback"``:
         :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at the first step's
-        measured ``q`` (doc/design.md §7 "Joint terms without per-arm tuning").
+        measured ``q``, growing with the largest armature estimate (doc/design.md §7
+        "Joint terms without per-arm tuning"). Any ``P_friction``: the joint's feedback
+        grows with the rotor (:func:`~rcac_ros.core.joint_friction.rotor`).
 
     Raises
     ------
@@ -233,9 +234,6 @@ class RecursiveCompositeController:
         if self.joint_friction:                     # the joint terms: k_f x^2, x > 0
             self.friction_hat0 = natural_friction_start(self._friction_hat0_given,
                                                         self.model.joint_terms(), InputError)
-            self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction,
-                                                                self.friction_hat0)
-            self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 
@@ -255,9 +253,12 @@ class RecursiveCompositeController:
         (:meth:`_friction_gain_at_start`)."""
         n = self.n
         self.P_friction = friction_gain(P_friction, n)
-        self._gain_at_start = self.P_friction is None
-        if self._gain_at_start:
-            self.P_friction = feedback_scaled_gain(self.model, self.K_D, np.zeros(n))
+        self._friction_default = self.P_friction is None
+        self._gain_at_start = True          # rates (and the default gain) at the first state
+        got = gains_at_start(self.model, self.K_D, np.zeros(n), self._friction_default, self.h)
+        P, self._grow, self._rate = got
+        if self._friction_default:
+            self.P_friction = P
         self._friction_hat0_given = None if friction_hat0 is None else \
             as_array(friction_hat0, (n, 3), "friction_hat0")
         self.friction_hat0 = self.model.joint_terms() if friction_hat0 is None else \
@@ -292,14 +293,12 @@ class RecursiveCompositeController:
         """The first step with ``P_friction="feedback"``: the gain
         :func:`~rcac_ros.core.joint_friction.gains_at_start` at the measured ``q`` and the
         current estimates (doc/design.md §7), then the step."""
-        got = gains_at_start(self.model, self.K_D, q, self._jdata[:, F_HAT:F_HAT + 3],
-                             self.geometry == "natural")
+        got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h)
         if got is not None:
-            self.P_friction, k_f = got
-            self._jdata[:, F_GAIN:F_GAIN + 3] = self.P_friction
-            if k_f is not None:
-                self._jdata[:, F_K:F_K + 3] = k_f
-                self._jdata[:, F_CAP:F_CAP + 3] = self.P_friction
+            P, self._grow, self._rate = got
+            if P is not None:
+                self.P_friction = P
+            self._rotor_start()
             self._gain_at_start = False
             self._choose_kernel()
         return self._ready_kernel()(data, buf, q, *rest)
@@ -385,9 +384,8 @@ class RecursiveCompositeController:
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
             if self.geometry == "natural":
                 fh = natural_friction_start(fh, None, InputError)
-                # k_f follows the estimate (joint_friction.follow_gain): matched anew
-                self._jdata[:, F_K:F_K + 3] = friction_natural_gain(self.P_friction, fh)
             self._jdata[:, F_HAT:F_HAT + 3] = fh
+            self._rotor_start()     # k_f follows the estimate (follow_gain): matched anew
             self._jfilt[:] = 0.0
         self._state[:] = 0.0
         self._state[:, THETA_HAT:THETA_HAT + 13] = th
@@ -455,6 +453,8 @@ class RecursiveCompositeController:
             raise GainError(f"factor: must be <= 1, got {factor:g}")
         self._const[:, GAIN_K_D:GAIN_K_D + 36] = factor * self.K_D.reshape(self.n, 36)
         self.K_D_scale = factor
+        if self.joint_friction:             # the rotor's feedback k_q = rho_q a_fb too
+            self._jdata[:, F_RATE] = factor * self._rate
 
     def set_applied_torque(self, tau):
         """Tell the filters (``y_c``, eq 22) the torque really applied after the last step.
@@ -517,6 +517,13 @@ class RecursiveCompositeController:
         if self.geometry == "natural":
             fh = natural_friction_start(fh, None, InputError)
         self._jdata[:, F_HAT:F_HAT + 3] = fh
+        self._rotor_start()
+
+    def _rotor_start(self):
+        """The rotor's reference ``a_ref`` at the armature estimates, and the gains from it
+        (:func:`~rcac_ros.core.joint_friction.rotor_start`, doc/design.md §7)."""
+        rotor_start(self._jdata, self.P_friction, self._grow, self.K_D_scale * self._rate,
+                    self.geometry == "natural")
 
     @property
     def E(self):

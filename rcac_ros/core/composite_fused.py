@@ -25,8 +25,9 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .natural_step import natural_gain_rows, retract_links
 from .channels import axis_terms, filter_step, filtered_output
-from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FRICTION_SIGNATURE, JPHI_F,
-                             JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW)
+from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FOLLOW_TIME, FRICTION_SIGNATURE,
+                             JPHI_F,
+                             JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
 from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 
@@ -178,8 +179,9 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
             F[r] += acc
         if joint:
             jrow = jdata[i]
+            k_q = rotor(jrow, False, min(1.0, h / FOLLOW_TIME))     # doc/design.md §7
             tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                             + jrow[F_Y + 2] * jrow[F_HAT + 2])             # eq 20
+                             + jrow[F_Y + 2] * jrow[F_HAT + 2]) - k_q * jrow[F_SQ]  # eq 20
         else:
             tau[i] = F[5]                                                    # eq 20
         if frozen:

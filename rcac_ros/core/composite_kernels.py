@@ -26,7 +26,8 @@ from .natural_step import retract_links
 from .channels import close_channels, predict_link, start_channels
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
                              FOLLOW_TIME, FRICTION_SIGNATURE, adapt_joint, follow_gain,
-                             implicit_solve_joint, predict_joint, retract_term, term_gain)
+                             implicit_solve_joint, predict_joint, retract_term, rotor,
+                             term_gain)
 from .regressor import reference_wrench, regressor_row
 from .spatial import P0, transform_force_T
 
@@ -119,11 +120,13 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
             adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
         if joint:
             jrow = jdata[i]
+            follow = min(1.0, scal[I_H] / FOLLOW_TIME)   # doc/design.md §7, the rotor
+            k_q = rotor(jrow, scal[I_NATURAL] != 0.0, follow)
             tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                             + jrow[F_Y + 2] * jrow[F_HAT + 2])                    # eq 20
+                             + jrow[F_Y + 2] * jrow[F_HAT + 2]) - k_q * jrow[F_SQ]  # eq 20
             if not frozen:
                 if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
-                    a = min(1.0, scal[I_H] / FOLLOW_TIME)
+                    a = follow
                     for k in range(3):
                         x = jrow[F_HAT + k]
                         jrow[F_PREV + k] = x

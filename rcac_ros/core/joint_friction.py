@@ -53,7 +53,12 @@ F_VC = 13           #: v_c of sigma
 F_K = 14            #: natural geometry: k_f,j, the natural gain (3) (doc/design.md §8)
 F_PREV = 17         #: natural geometry: theta_f_hat_j before the step (3)
 F_CAP = 20          #: natural geometry: the largest gain, P_f,j (3) (doc/design.md §8)
-JOINT_COLS = 23
+F_RATE = 23         #: rho_j = D_jj / M_jj, joint j's feedback rate at the start (1/s)
+F_AREF = 24         #: a_ref,j: the largest armature estimate so far (>= 0)
+F_BASE = 25         #: P_f,j at a_ref,j = 0 (3)
+F_GROW = 28         #: dP_f,j / da_ref,j (3): beta rho_j w with the default gain, else 0
+F_AFB = 31          #: a_fb,j: the armature estimate (>= 0) low-passed over FOLLOW_TIME
+JOINT_COLS = 32
 
 # ---- channel c, joint j: jfilt[c, j, :] ----------------------------------------------------
 JPHI_F = 0          #: phi_f^f (3)
@@ -74,6 +79,10 @@ BETA_FRICTION = 30.0
 #: :func:`feedback_scaled_gain`: the armature's column ``qdd_ri`` is the largest and the
 #: fastest-varying of the three.
 TERM_WEIGHTS = (0.1, 1.0, 1.0)
+#: ``N``: the rotor's feedback ``rho_q a_fb`` keeps the sampled joint loop stable while the
+#: armature estimate is below ``N`` times the joint's true rotor plus link inertia
+#: (``h rho_q N <= 2``, :func:`gains_at_start`)
+ROTOR_TOLERANCE = 30.0
 #: natural geometry: the default start floors each model term at this value (SI units)
 START_FLOOR = 1e-3
 #: natural geometry: no joint term goes below this (rounding never reaches 0)
@@ -122,6 +131,29 @@ def predict_joint(chan, jfilt, i, qd, sig, jrow, coef, first):
             jfilt[c, i, JW + k] = w
             E += w * jrow[F_HAT + k]
         chan[c, CH_E] = E
+
+
+@njit(cache=True, inline="always")
+def rotor(jrow, natural, a):
+    """The rotor's share of joint j (doc/design.md §7 "The rotor"): ``a_fb,j`` moves the
+    fraction ``a = min(1, h / T_f)`` toward ``max(a_hat_j, 0)``; ``a_ref,j`` becomes
+    ``max(a_ref,j, a_fb,j)`` and, when it grows, the gain ``P_f,j = base + grow a_ref,j``
+    (in the natural geometry its cap ``F_CAP``). Returns the rotor's feedback
+    ``k_q,j = rho_j a_fb,j`` (the torque adds ``-k_q,j s_qj``).
+
+    So joint j's feedback ``D_jj + k_q,j`` is ``rho_j`` times its inertia with the rotor,
+    ``M_jj + a_fb,j``, and its gain follows it without shrinking (a gain that only grows
+    keeps the Lyapunov function's ``d/dt P_f^-1 <= 0``; any ``k_q >= 0`` keeps its
+    ``-s^T K s``).
+    """
+    x = max(jrow[F_HAT], 0.0)
+    jrow[F_AFB] += a * (x - jrow[F_AFB])
+    if jrow[F_AFB] > jrow[F_AREF]:
+        jrow[F_AREF] = jrow[F_AFB]
+        col = F_CAP if natural else F_GAIN
+        for k in range(3):
+            jrow[col + k] = jrow[F_BASE + k] + jrow[F_GROW + k] * jrow[F_AREF]
+    return jrow[F_RATE] * jrow[F_AFB]
 
 
 @njit(cache=True, inline="always")
@@ -317,6 +349,36 @@ def feedback_scaled_gain(model, K_D, q, beta=BETA_FRICTION, weights=TERM_WEIGHTS
                            np.asarray(weights, dtype=float))
 
 
+def joint_rates(model, K_D, q):
+    """``(rho, D)``, (n,) each: ``D_ii(q)`` the links' feedback on joint i
+    (:func:`joint_feedback`) and ``rho_i = D_ii / M_ii(q)`` (1/s) over its inertia in the
+    model without the rotors (doc/design.md §7 "The rotor"); 0 where ``M_ii`` is 0. With
+    ``K_Dj = kappa M_j`` every ``rho_i`` is ``kappa``."""
+    from .crba import mass_matrix
+    q = np.asarray(q, dtype=float)
+    D = joint_feedback(model, K_D, q)
+    M = np.diag(mass_matrix(model, q)) - np.asarray(model.armature, dtype=float)
+    return np.divide(D, M, out=np.zeros_like(D), where=M > 0.0), D
+
+
+def rotor_start(jdata, P, grow, rate, natural):
+    """Joint data for the rotor (:func:`rotor`) from the current estimates: ``a_ref`` the
+    armature estimate (>= 0), the base gain ``P`` and its growth ``grow`` ((n, 3) each),
+    the rotor's rates ``rate`` (n,), the gain ``P + grow a_ref`` (natural geometry: the cap,
+    and the natural gain matched to it at the estimates)."""
+    a = np.maximum(jdata[:, F_HAT], 0.0)
+    jdata[:, F_AREF] = a
+    jdata[:, F_AFB] = a
+    jdata[:, F_RATE] = rate
+    jdata[:, F_BASE:F_BASE + 3] = P
+    jdata[:, F_GROW:F_GROW + 3] = grow
+    gain = P + grow * a[:, None]
+    jdata[:, F_GAIN:F_GAIN + 3] = gain
+    if natural:
+        jdata[:, F_CAP:F_CAP + 3] = gain
+        jdata[:, F_K:F_K + 3] = friction_natural_gain(gain, jdata[:, F_HAT:F_HAT + 3])
+
+
 def start_posture(q, n):
     """``q`` as a finite float array of n values, or None (the step then reports the bad
     input, and the gain waits for the next)."""
@@ -327,16 +389,23 @@ def start_posture(q, n):
     return q if q.shape == (n,) and np.all(np.isfinite(q)) else None
 
 
-def gains_at_start(model, K_D, q, estimate, natural):
-    """With ``P_friction="feedback"``, at the first state: ``(P_friction, k_f)``, the gain
-    :func:`feedback_scaled_gain` at the measured ``q`` and, in the natural geometry, its
-    natural gain :func:`friction_natural_gain` at the current ``estimate`` (else None); None
-    if ``q`` is not a posture (the step reports it, and the gain waits for the next)."""
+def gains_at_start(model, K_D, q, default, h):
+    """At the first state: ``(P, grow, rate)``: ``rate`` the rotor's rates
+    ``rho_q,i = min(rho_i, 2 / (N h))`` (:func:`joint_rates` at the measured ``q``, ``N``
+    :data:`ROTOR_TOLERANCE`) and, with the default gain
+    (``default``), ``P`` the gain :func:`feedback_scaled_gain` at ``q`` and
+    ``grow = beta rho_q,i w`` its growth with the rotor (doc/design.md §7; else ``P`` None
+    and ``grow`` 0); None if ``q`` is not a posture (the step reports it, and the gains wait
+    for the next)."""
     q0 = start_posture(q, model.n)
     if q0 is None:
         return None
-    P = feedback_scaled_gain(model, K_D, q0)
-    return P, (friction_natural_gain(P, estimate) if natural else None)
+    rate, D = joint_rates(model, K_D, q0)
+    rate = np.minimum(rate, 2.0 / (ROTOR_TOLERANCE * h))
+    if not default:
+        return None, np.zeros((model.n, 3)), rate
+    w = np.asarray(TERM_WEIGHTS, dtype=float)
+    return BETA_FRICTION * np.outer(D, w), BETA_FRICTION * np.outer(rate, w), rate
 
 
 def friction_gain(value, n):

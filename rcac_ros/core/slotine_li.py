@@ -43,7 +43,7 @@ from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lam
                              pseudo_inertia)
 from .retraction import retract_rows
 from .joint_friction import (FOLLOW_TIME, P_FRICTION, friction_gain, friction_natural_gain,
-                             feedback_scaled_gain, gains_at_start,
+                             gains_at_start,
                              natural_friction_start, retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
@@ -302,22 +302,47 @@ class SlotineLiCompositeController:
         self._joint = np.zeros((n if self.joint_friction else 0, 4))
         if self.joint_friction:
             self.P_friction = friction_gain(P_friction, n)
-            self._gain_at_start = self.P_friction is None   # "feedback": at the first step
-            if self._gain_at_start:
-                self.P_friction = feedback_scaled_gain(model, self.K_D, np.zeros(n))
+            self._friction_default = self.P_friction is None
+            self._gain_at_start = True      # rates (and the default gain) at the first state
+            P, self._grow, self._rate = gains_at_start(model, self.K_D, np.zeros(n),
+                                                       self._friction_default, self.h)
+            if self._friction_default:
+                self.P_friction = P
             self.friction_hat0 = model.joint_terms() if friction_hat0 is None else \
                 as_array(friction_hat0, (n, 3), "friction_hat0")
-            self._joint[:, :3] = self.P_friction
             self._joint[:, 3] = model.friction_velocity
             if geometry == "natural":                   # doc/design.md §8: k_f x^2, x > 0
                 self.friction_hat0 = natural_friction_start(
                     None if friction_hat0 is None else self.friction_hat0,
                     model.joint_terms(), InputError)
-                self._friction_k = friction_natural_gain(self.P_friction, self.friction_hat0)
         self._p = (16 if self.joint_friction else 13) * n     # number of parameters
         self._theta = np.zeros(self._p)
         self._filt = np.zeros((4, n, self._p + 1))
         self.reset(theta_hat0)
+
+    def _rotor_start(self):
+        """``a_ref`` at the armature estimates and the gain from it (as
+        :func:`~rcac_ros.core.joint_friction.rotor_start`; natural geometry: the natural gain
+        matched to it, anew)."""
+        fh = self._theta[13 * self.n:].reshape(self.n, 3)
+        self._a_ref = np.maximum(fh[:, 0], 0.0)
+        self._a_fb = self._a_ref.copy()
+        self._cap = self.P_friction + self._grow * self._a_ref[:, None]
+        self._joint[:, :3] = self._cap
+        if self.geometry == "natural":
+            self._friction_k = friction_natural_gain(self._cap, fh)
+
+    def _rotor(self):
+        """:func:`~rcac_ros.core.joint_friction.rotor` of every joint: ``a_fb`` a low-pass of
+        the armature estimate, ``a_ref`` its largest value, and the gain (natural geometry:
+        its cap) grows with it."""
+        a = np.maximum(self._theta[13 * self.n::3], 0.0)
+        self._a_fb += min(1.0, self.h / FOLLOW_TIME) * (a - self._a_fb)
+        if np.any(self._a_fb > self._a_ref):
+            np.maximum(self._a_ref, self._a_fb, out=self._a_ref)
+            self._cap = self.P_friction + self._grow * self._a_ref[:, None]
+            if self.geometry != "natural":
+                self._joint[:, :3] = self._cap
 
     @property
     def n(self):
@@ -335,8 +360,8 @@ class SlotineLiCompositeController:
                 as_array(friction_hat0, (self.n, 3), "friction_hat0")
             if self.geometry == "natural":
                 fh = natural_friction_start(fh, None, InputError)
-                self._friction_k = friction_natural_gain(self.P_friction, fh)   # follows
             self._theta[nl:] = fh.ravel()
+            self._rotor_start()
         self._filt[:] = 0.0
         self._scal[[I_K, I_ERR, I_E, I_Y]] = 0.0
 
@@ -360,15 +385,15 @@ class SlotineLiCompositeController:
         if not self._compiled:
             self.compile()
         if self.joint_friction and self._gain_at_start:     # doc/design.md §7
-            got = gains_at_start(self.model, self.K_D, q,
-                                 self._theta[13 * self.n:].reshape(self.n, 3),
-                                 self.geometry == "natural")
+            got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h)
             if got is not None:
-                self.P_friction, k_f = got
-                self._joint[:, :3] = self.P_friction
-                if k_f is not None:
-                    self._friction_k = k_f
+                P, self._grow, self._rate = got
+                if P is not None:
+                    self.P_friction = P
+                self._rotor_start()
                 self._gain_at_start = False
+        if self.joint_friction:
+            self._rotor()
         if self.geometry == "natural":                      # doc/design.md §8
             th = self._theta[:13 * self.n].reshape(self.n, 13)
             self._prev[:] = th
@@ -382,9 +407,9 @@ class SlotineLiCompositeController:
                 fh = self._theta[13 * self.n:].reshape(self.n, 3)
                 self._prev_f = fh.copy()
                 a = min(1.0, self.h / FOLLOW_TIME)                  # follow_gain
-                self._friction_k *= (self.P_friction / (self._friction_k * fh * fh)) ** a
+                self._friction_k *= (self._cap / (self._friction_k * fh * fh)) ** a
                 self._joint[:, :3] = np.minimum(self._friction_k * fh * fh,   # term_gain
-                                                self.P_friction)
+                                                self._cap)
         try:
             tau = slotine_li_step_kernel(self._data, self._theta, self._filt, self._joint, q, qd,
                                          q_d, qd_d, qdd_d)
@@ -395,6 +420,10 @@ class SlotineLiCompositeController:
                                          *args)
         if tau.shape[0] == 0:
             raise input_error(self._scal, self.n, (q, qd, q_d, qd_d, qdd_d))
+        if self.joint_friction:                 # the rotor's feedback -rho a_fb s_q
+            s_q = np.subtract(qd, qd_d) + self.Lambda * np.subtract(q, q_d)
+            tau -= self._rate * self._a_fb * s_q
+            self._filt[1, :, self._p] = tau         # y filters the torque returned
         if self.geometry == "natural":
             self.retraction_length = retract_rows(self._prev,
                                                   self._theta[:13 * self.n].reshape(self.n, 13),

@@ -9,6 +9,7 @@ from chains import (exact_run as true_parameters_run, frictional, frictional_cha
 from rcac_ros.core import (GainError, InputError, PaperTrajectory, RecursiveCompositeController,
                            Simulator, SlotineLiCompositeController, css_arm)
 from rcac_ros.core.composite_fused import is_paper_law
+from rcac_ros.core.joint_friction import ROTOR_TOLERANCE, joint_rates
 from rcac_ros.core.model import PAPER_Q0
 
 Q0 = np.array(PAPER_Q0)
@@ -56,7 +57,8 @@ def test_all_channels_equal_slotine_li_with_joint_friction(update):
 
 def test_option_off_and_the_joint_torque():
     """joint_friction=False has no joint estimates; with it, the effort adds
-    Y_f friction_hat to the rigid law's effort (the link terms are unchanged)."""
+    Y_f friction_hat and the rotor's feedback -rho a_hat s_q to the rigid law's effort (the
+    link terms are unchanged)."""
     model = frictional(css_arm())
     rigid = RecursiveCompositeController(model, theta_hat0=model.theta())
     assert rigid.friction_hat is None and not rigid.joint_friction
@@ -68,8 +70,10 @@ def test_option_off_and_the_joint_torque():
     t1 = aware.step(q, qd, q_d, qd_d, qdd_d)
     qd_r = qd_d - (q - q_d)
     qdd_r = qdd_d - (qd - qd_d)
+    rho = np.minimum(joint_rates(model, aware.K_D, q)[0], 2.0 / (ROTOR_TOLERANCE * aware.h))
     expected = (model.armature * qdd_r + model.damping * qd_r
-                + model.friction * np.tanh(qd / model.friction_velocity))
+                + model.friction * np.tanh(qd / model.friction_velocity)
+                - rho * model.armature * (qd - qd_r))
     np.testing.assert_allclose(t1 - t0, expected, rtol=1e-12, atol=1e-9)
 
 
