@@ -126,7 +126,7 @@ SOURCES = {
         "laws against the laws with the joint terms (`*_friction`).",
         render_compare_rms, ["rcac", "compare", "--quiet", "--scenarios", "joint_table",
                              "panda_damping_armature", "--out", "{out}"], "compare.json",
-        plots=("compare_*.png",)),
+        plots=("compare_panda_joints.png", "compare_panda_damping_armature.png")),
     "compare_joints_builtin": Source(
         "Joint friction and rotor inertia: the same plants on the built-in simulator",
         "As above with `--engine builtin`: the package's own dynamics, whose dry friction is "
