@@ -230,8 +230,8 @@ CONTROLLER = _robot("controller") + (
           "(doc/design.md §7), published on ~/friction_estimates"),
     Param("P_friction", "double_array", None,
           "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0 "
-          "(unset: each joint's scaled from its feedback gain at the first state, "
-          "doc/design.md §7)"),
+          "(unset: each joint's scaled from its feedback at the first state, growing with "
+          "its rotor, doc/design.md §7)"),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),
