@@ -87,11 +87,12 @@ def test_the_operators_freeze_and_the_guards_are_two_causes_in_both_orders():
         # the guard's freeze holds until its recovery
         spells, recovered = int(status(probe)["starved_spells"]), len(overs(probe))
         starve(proc)
-        assert wait(lambda: frozen_by(probe) == {"starved", "user"}
+        assert wait(lambda: {"starved", "user"} <= frozen_by(probe)
                     and int(status(probe)["starved_spells"]) > spells, timeout=10.0)
         # within recover_after (5 s) of the starving's end: the guard still holds its cause
+        # (a spell of safe effort during the starving may hold "recovering" beside it)
         message = set_adaptation(client, True)
-        assert "still frozen by the starvation guard" in message, message
+        assert "still frozen by" in message and "the starvation guard" in message, message
         assert wait(lambda: len(overs(probe)) > recovered, timeout=30.0)
         assert "adaptation again" in overs(probe)[-1], overs(probe)
         assert fresh(probe, "adaptation_frozen_by", "none", timeout=60.0)
