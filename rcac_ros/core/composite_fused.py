@@ -26,8 +26,7 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
 from .natural_step import natural_gain_rows, retract_links
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FOLLOW_TIME, FRICTION_SIGNATURE,
-                             JPHI_F,
-                             JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
+                             JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
 from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, propagate, transform_force_T
 

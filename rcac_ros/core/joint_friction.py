@@ -21,9 +21,10 @@ qd_i^2) + sum (damping_i qd_i^2 + friction_i qd_i sigma(qd_i))``, so ``phi_f = [
 0, 0]``, ``psi_f = [0, qd_i^2, qd_i sigma(qd_i)]`` at every joint. They are filtered exactly
 as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 
-Options: the joint terms always use their fixed diagonal gain ``P_f,i`` (also when the link
+Options: the joint terms always use their diagonal gain ``P_f,i`` (also when the link
 terms use least squares), by default :func:`feedback_scaled_gain` at the first step's
-posture; the leakage acts on the link terms only; the projection keeps the joint terms >= 0.
+posture, growing with the rotor (:func:`rotor`, which also adds the rotor's feedback); the
+leakage acts on the link terms only; the projection keeps the joint terms >= 0.
 Natural geometry (doc/design.md §8): each term adapts in the positive orthant's geometry
 (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with ``k_f`` following
 the estimate, :func:`follow_gain`, then :func:`retract_term`), so it stays > 0.
@@ -53,10 +54,10 @@ F_VC = 13           #: v_c of sigma
 F_K = 14            #: natural geometry: k_f,j, the natural gain (3) (doc/design.md §8)
 F_PREV = 17         #: natural geometry: theta_f_hat_j before the step (3)
 F_CAP = 20          #: natural geometry: the largest gain, P_f,j (3) (doc/design.md §8)
-F_RATE = 23         #: rho_j = D_jj / M_jj, joint j's feedback rate at the start (1/s)
-F_AREF = 24         #: a_ref,j: the largest armature estimate so far (>= 0)
+F_RATE = 23         #: rho_q,j, the rotor's rate (1/s, gains_at_start; times K_D's scale)
+F_AREF = 24         #: a_ref,j: the largest a_fb,j so far (>= 0)
 F_BASE = 25         #: P_f,j at a_ref,j = 0 (3)
-F_GROW = 28         #: dP_f,j / da_ref,j (3): beta rho_j w with the default gain, else 0
+F_GROW = 28         #: dP_f,j / da_ref,j (3): beta rho_q,j w with the default gain, else 0
 F_AFB = 31          #: a_fb,j: the armature estimate (>= 0) low-passed over FOLLOW_TIME
 JOINT_COLS = 32
 
@@ -139,12 +140,12 @@ def rotor(jrow, natural, a):
     fraction ``a = min(1, h / T_f)`` toward ``max(a_hat_j, 0)``; ``a_ref,j`` becomes
     ``max(a_ref,j, a_fb,j)`` and, when it grows, the gain ``P_f,j = base + grow a_ref,j``
     (in the natural geometry its cap ``F_CAP``). Returns the rotor's feedback
-    ``k_q,j = rho_j a_fb,j`` (the torque adds ``-k_q,j s_qj``).
+    ``k_q,j = rho_q,j a_fb,j`` (the torque adds ``-k_q,j s_qj``).
 
-    So joint j's feedback ``D_jj + k_q,j`` is ``rho_j`` times its inertia with the rotor,
-    ``M_jj + a_fb,j``, and its gain follows it without shrinking (a gain that only grows
-    keeps the Lyapunov function's ``d/dt P_f^-1 <= 0``; any ``k_q >= 0`` keeps its
-    ``-s^T K s``).
+    So joint j's feedback ``D_jj + k_q,j`` is ``rho_q,j`` times its inertia with the rotor,
+    ``M_jj + a_fb,j`` (when ``rho_q,j = D_jj / M_jj``), and its gain follows it without
+    shrinking (a gain that only grows keeps the Lyapunov function's ``d/dt P_f^-1 <= 0``;
+    any ``k_q >= 0`` keeps its ``-s^T K s``).
     """
     x = max(jrow[F_HAT], 0.0)
     jrow[F_AFB] += a * (x - jrow[F_AFB])
