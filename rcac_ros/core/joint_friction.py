@@ -319,35 +319,56 @@ def friction_natural_gain(P_friction, start):
     return P_friction / start ** 2
 
 
-def joint_feedback(model, K_D, q):
-    """``D_ii = sum_j J_ji^T K_Dj J_ji`` (n,): the diagonal of the joint-space feedback gain
-    at ``q`` (eq 2), ``J_ji`` the spatial velocity ``[v; w]`` of link j's frame (in its own
-    axes, about its origin) per unit speed of joint i <= j. With ``K_Dj = kappa M_j`` it is
-    ``kappa`` times the diagonal of the rigid arm's mass matrix."""
+def feedback_matrix(model, K_D, q):
+    """``D(q) = sum_j J_j^T K_Dj J_j`` (n, n): the joint-space feedback gain at ``q`` (eq 2),
+    ``J_j`` (6, n) the spatial velocity ``[v; w]`` of link j's frame (in its own axes, about
+    its origin) per unit joint speed (column i: joint i <= j). With ``K_Dj = kappa M_j`` it
+    is ``kappa M(q)``, the rigid arm's mass matrix."""
     from .kinematics import forward_kinematics
     R, o = forward_kinematics(model, q)
     n = model.n
-    D = np.zeros(n)
-    for i in range(n):
-        z = R[i][:, 2]
-        for j in range(i, n):
-            S = np.concatenate((R[j].T @ np.cross(z, o[j] - o[i]), R[j].T @ z))
-            D[i] += S @ K_D[j] @ S
+    z = np.array([R[i][:, 2] for i in range(n)])
+    D = np.zeros((n, n))
+    for j in range(n):
+        lin = np.cross(z[:j + 1], o[j] - o[:j + 1]) @ R[j]     # rows: R_j^T (z_i x r_ij)
+        S = np.concatenate((lin, z[:j + 1] @ R[j]), axis=1)     # (j + 1, 6): J_j^T
+        D[:j + 1, :j + 1] += S @ K_D[j] @ S.T
     return D
 
 
-def feedback_scaled_gain(model, K_D, q, beta=BETA_FRICTION, weights=TERM_WEIGHTS):
-    """``P_f,i = beta D_ii(q) w`` (n, 3): joint i's gain proportional to its feedback
-    :func:`joint_feedback` at ``q`` (doc/design.md §7 "Joint terms without per-arm tuning").
+def joint_feedback(model, K_D, q):
+    """``D_ii`` (n,): the diagonal of :func:`feedback_matrix`, the links' feedback on joint i
+    with every other joint held."""
+    return np.diag(feedback_matrix(model, K_D, q)).copy()
 
-    Joint i's explicit tracking step is stable while ``h Y_f,i P_f,i Y_f,i^T`` stays below
-    ``D_ii`` (for the plant's inertia ``H_ii``: ``D_ii / H_ii`` is the feedback's rate), and
-    the joint terms converge at the rate ``Y_f,i P_f,i Y_f,i^T / D_ii``: with ``P_f,i``
-    proportional to ``D_ii`` both are the same on every joint of every arm, for any scale
-    of its masses and of ``K_D``.
+
+def effective_feedback(D):
+    """``1 / (D^-1)_ii`` (n,): the feedback joint i meets with every other joint free (the
+    Schur complement of the others in ``D``), ``<= D_ii``, equal where joint i is decoupled;
+    ``diag(1 / (D^-1)_ii) <= n D`` (trace bound), where ``diag(D_ii)`` is unbounded against
+    ``D`` when joints are coupled (doc/design.md §7). ``D_ii`` where ``D`` is not positive
+    definite."""
+    try:
+        L = np.linalg.cholesky(D)
+    except np.linalg.LinAlgError:
+        return np.diag(D).copy()
+    Li = np.linalg.inv(L)
+    return 1.0 / np.einsum("ki,ki->i", Li, Li)                 # (D^-1)_ii = |L^-1 e_i|^2
+
+
+def feedback_scaled_gain(model, K_D, q, beta=BETA_FRICTION, weights=TERM_WEIGHTS):
+    """``P_f,i = beta D_eff,i(q) w`` (n, 3): joint i's gain proportional to its effective
+    feedback :func:`effective_feedback` at ``q`` (doc/design.md §7 "Joint terms without
+    per-arm tuning").
+
+    The joint terms' adaptation acts on the arm as a stiffness ``diag(P_f,i |Y_f,i|^2)``
+    against the feedback ``D``: with ``P_f,i`` proportional to ``D_eff,i`` it is at most
+    ``n beta |Y_f|_w^2 D`` for any coupling of the joints (with ``D_ii`` it can exceed ``D``
+    without bound along a direction the joints share), and the same on every arm, for any
+    scale of its masses and of ``K_D``.
     """
-    return beta * np.outer(joint_feedback(model, K_D, np.asarray(q, dtype=float)),
-                           np.asarray(weights, dtype=float))
+    D = effective_feedback(feedback_matrix(model, K_D, np.asarray(q, dtype=float)))
+    return beta * np.outer(D, np.asarray(weights, dtype=float))
 
 
 def joint_rates(model, K_D, q):
@@ -401,12 +422,11 @@ def gains_at_start(model, K_D, q, default, h):
     q0 = start_posture(q, model.n)
     if q0 is None:
         return None
-    rate, D = joint_rates(model, K_D, q0)
-    rate = np.minimum(rate, 2.0 / (ROTOR_TOLERANCE * h))
+    rate = np.minimum(joint_rates(model, K_D, q0)[0], 2.0 / (ROTOR_TOLERANCE * h))
     if not default:
         return None, np.zeros((model.n, 3)), rate
     w = np.asarray(TERM_WEIGHTS, dtype=float)
-    return BETA_FRICTION * np.outer(D, w), BETA_FRICTION * np.outer(rate, w), rate
+    return feedback_scaled_gain(model, K_D, q0), BETA_FRICTION * np.outer(rate, w), rate
 
 
 def friction_gain(value, n):

@@ -10,7 +10,8 @@ from chains import random_chain
 
 from rcac_ros.core import RecursiveCompositeController, Simulator, SlotineLiCompositeController
 from rcac_ros.core.joint_friction import (BETA_FRICTION, F_AREF, F_GAIN, ROTOR_TOLERANCE,
-                                          TERM_WEIGHTS, joint_rates)
+                                          TERM_WEIGHTS, effective_feedback,
+                                          feedback_matrix, joint_rates)
 from rcac_ros.tools.runs.scenarios import spatial_inertia
 
 H = 0.002
@@ -83,7 +84,7 @@ def test_the_rotor_rate_is_the_links_rate_within_the_tolerance():
 
 def test_the_default_gain_only_grows_with_the_largest_armature_estimate():
     """Adapting from zero joint estimates on the rotor-heavy arm: at every step the gain is
-    ``beta w (D_ii + rho_q a_ref)`` and never falls."""
+    ``beta w (D_eff + rho_q a_ref)`` and never falls."""
     from rcac_ros.core import SinusoidTrajectory
     rigid, plant = rotor_arm()
     ctrl = RecursiveCompositeController(rigid, K_D=link_feedback(rigid), Lambda=5.0, P=1.0,
@@ -96,9 +97,10 @@ def test_the_default_gain_only_grows_with_the_largest_armature_estimate():
     for k in range(1500):
         sim.step(ctrl.step(sim.q, sim.qd, *traj(k * H)))
         if k == 0:
-            rho, D = joint_rates(rigid, ctrl.K_D, q0)
+            rho = joint_rates(rigid, ctrl.K_D, q0)[0]
+            De = effective_feedback(feedback_matrix(rigid, ctrl.K_D, q0))
         gain = ctrl._jdata[:, F_GAIN:F_GAIN + 3]
-        expected = BETA_FRICTION * np.outer(D + rho * ctrl._jdata[:, F_AREF], TERM_WEIGHTS)
+        expected = BETA_FRICTION * np.outer(De + rho * ctrl._jdata[:, F_AREF], TERM_WEIGHTS)
         np.testing.assert_allclose(gain, expected, rtol=1e-12)
         assert np.all(gain >= last)
         last = gain.copy()
