@@ -350,6 +350,17 @@ def render_friction_unseen(d):
             f"({word[met['none_diverged']]}).")
 
 
+def render_friction_ros(d):
+    """Both runs' RMS tracking error over ROS 2, and the plant's joint terms."""
+    rms = d["rms_tracking_error_rad"]
+    terms = ", ".join(f"{k} {v:g}" for k, v in d["plant_joint_terms"].items())
+    rows = [["friction-blind", fmt(rms["blind"]), "1"],
+            ["`joint_friction: true`", fmt(rms["aware"]), fmt(rms["aware"] / rms["blind"])]]
+    return (table(["controller", "RMS tracking error (rad)", "/ blind"], rows)
+            + f"\n\n{fmt(d['duration_s'])} s per run; the plant's joint terms on every joint: "
+            f"{terms} (SI units).")
+
+
 def render_capture(d):
     """The ROS run and the offline laws at the capture (and the release), the mass table."""
     from rcac_ros.tools.demos.capture_figures import mass_markdown, table as capture_table

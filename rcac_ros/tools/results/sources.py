@@ -12,7 +12,7 @@ import re
 from rcac_ros.tools.results.blocks import (
     render_bench_core, render_bench_ros_modes, render_campaign, render_capture, render_compare,
     render_compare_consistency, render_compare_rms, render_consistency_campaign,
-    render_delay_margin, render_experiment, render_faults, render_friction,
+    render_delay_margin, render_experiment, render_faults, render_friction, render_friction_ros,
     render_friction_unseen, render_noise, render_noise_sources, render_payload, render_soak,
     render_stall, render_startup, render_timings)
 
@@ -20,6 +20,11 @@ from rcac_ros.tools.results.blocks import (
 def scalars(runs):
     """A bench's runs without their series (the JSON keeps the figures, the plot the rest)."""
     return [{k: v for k, v in r.items() if not isinstance(v, list)} for r in runs]
+
+
+def without_bags(metrics):
+    """``rcac friction-ros``'s metrics without the paths of its bags (a temporary directory)."""
+    return {k: v for k, v in metrics.items() if k != "bags"}
 
 
 #: the plot of a campaign's report (:func:`campaign_commands`)
@@ -166,6 +171,15 @@ SOURCES = {
           "--quiet"] for arm in ("panda", "ur5", "xarm7")]
         + [["python", "-m", "rcac_ros.tools.sweep.paired", "{out}/panda", "{out}/ur5",
             "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
+    "friction_ros": Source(
+        "Joint terms over ROS 2",
+        "The two nodes over DDS in lockstep, the simulator on MuJoCo with the paper's arm "
+        "and armature, viscous and dry friction on every joint, the controller friction-blind "
+        "and then with `joint_friction: true` and nothing else; one bag per run, read back "
+        "(doc/tools.md, `rcac friction-ros`).",
+        render_friction_ros, ["rcac", "friction-ros", "--out", "{out}"], "metrics.json",
+        keep=without_bags,
+        plots=("friction_ros.png",)),
     "compare_consistency": Source(
         "Physically consistent estimates compared",
         "The natural geometry's laws (`*_natural`: the log-det metric) against the Euclidean "
