@@ -357,8 +357,8 @@ def render_friction_ros(d):
     rows = [["friction-blind", fmt(rms["blind"]), "1"],
             ["`joint_friction: true`", fmt(rms["aware"]), fmt(rms["aware"] / rms["blind"])]]
     return (table(["controller", "RMS tracking error (rad)", "/ blind"], rows)
-            + f"\n\n{fmt(d['duration_s'])} s per run; the plant's joint terms on every joint: "
-            f"{terms} (SI units).")
+            + f"\n\n{fmt(d['duration_s'])} s per run; the plant's terms on each joint: "
+            f"{terms} (SI).")
 
 
 def render_capture(d):

@@ -68,25 +68,22 @@ SOURCES = {
         plots=("tracking_errors.png", "parameter_estimates.png")),
     "bench_core": Source(
         "Speed of one step",
-        "The controller step against Pinocchio's `pin.rnea` on the same chain, the "
-        "non-recursive Slotine-Li baseline (compiled the same way), the simulator (RK4, four "
-        "ABA calls) and the recursive law's variants, on the CSS arm repeated to n = 224 and "
-        "the Panda and UR5 URDFs.",
+        "The step against `pin.rnea` on the same chain, the non-recursive Slotine-Li "
+        "(compiled alike), the simulator (RK4) and the law's variants; the CSS arm repeated "
+        "to n = 224, the Panda and UR5.",
         render_bench_core, ["rcac", "bench", "core", "--json", "{out}/bench.json"],
         "bench.json"),
     "bench_ros_modes": Source(
         "Timing over ROS, per controller mode",
-        "Simulator (real time) and controller as two processes, K_D = 1000, a third echoing "
-        "a JointState (a DDS ping), per controller mode. What counts: effort period p99 over "
-        "state period p99 (goal <= 1.1), state→effort latency p50 over the ping's one-way p50 "
-        "(doc/nodes.md, \"Timing\").",
+        "Simulator (real time) and controller as two processes, a third echoing a JointState "
+        "(a DDS ping), per controller mode. What counts: effort period p99 / state period p99 "
+        "(goal <= 1.1), latency p50 / the ping's one-way p50 (doc/nodes.md, \"Timing\").",
         render_bench_ros_modes, shown="make readme-bench"),
     "startup": Source(
         "Start-up, with and without the compiled kernels",
-        "Each figure a fresh process with its own numba cache, empty (cold: before `rcac "
-        "warm`) or filled by the cold run (warm): imports, a bad argument, the controller's "
-        "first answer and effort for the default law and `channels: [\"all\"]`, the whole "
-        "warm-up (doc/tools.md).",
+        "Each a fresh process with an empty numba cache (cold) or the one the cold run filled "
+        "(warm): imports, a bad argument, the first effort of the default law and "
+        "`channels: [\"all\"]`, the whole warm-up (doc/tools.md).",
         render_startup, ["rcac", "bench", "startup", "--laws", "default,all", "--json",
                          "{out}/startup.json"], "startup.json"),
     "timings": Source(
@@ -96,10 +93,9 @@ SOURCES = {
         render_timings, shown="make readme-timings"),
     "payload": Source(
         "An unknown payload",
-        "The Panda with gravity, from the URDF's nominal parameters, adapting link 7 only; a "
-        "2 kg payload attached in the simulator at 5 s. The composite law, the direct law "
-        "(gamma = 0) and a fixed-parameter computed-torque law with the same feedback "
-        "(doc/tools.md, `rcac payload-demo`).",
+        "The Panda with gravity, adapting link 7 from the URDF's values; a 2 kg payload "
+        "attached at 5 s. The composite law, the direct law (gamma = 0) and computed torque "
+        "with fixed parameters and the same feedback (`rcac payload-demo`).",
         render_payload, ["rcac", "payload-demo", "--quiet", "--out", "{out}"], "metrics.json",
         plots=("payload_summary.png", "link7_estimates.png")),
     "friction": Source(
@@ -120,8 +116,7 @@ SOURCES = {
         "Every law of `rcac compare` on the paper's experiment (`paper`) and the payload run "
         "(`payload`), each with the scenario's gains. `ident.` counts the parameter "
         "combinations the run excited, `consist.` the links whose final estimates are a "
-        "physical body; µs/step is the in-loop time (a noisy figure: the cost ratios are "
-        "those of \"Speed of one step\").",
+        "physical body; µs/step is the in-loop time (noisy: see \"Speed of one step\").",
         render_compare, ["rcac", "compare", "--duration", "20", "--out", "{out}"],
         "compare.json", plots=("compare_*.png",)),
     "compare_joints": Source(
@@ -155,17 +150,15 @@ SOURCES = {
     "friction_campaign": Source(
         "Joint friction and rotor inertia over a campaign",
         "`campaigns/friction.yaml`: the Panda on MuJoCo with damping, dry friction and "
-        "armature drawn per joint over a decade; the friction-blind `composite` law against "
-        "`composite_friction`, paired (the same joint terms for both laws).",
+        "armature drawn per joint over a decade; `composite` (blind) against "
+        "`composite_friction`, paired.",
         render_campaign, campaign_commands("friction"), "summary.json",
         plots=CAMPAIGN_PLOTS),
     "friction_unseen": Source(
         "Joint terms on unseen plants",
-        "`campaigns/friction_{panda,ur5,xarm7}.yaml`: 70 MuJoCo plants per arm, armature, "
-        "viscous and Coulomb friction drawn per joint over the ranges of doc/campaigns.md "
-        "\"Unseen plants\"; the friction-blind recursive composite law against "
-        "`joint_friction=True` with every gain at its default, paired (the same plant for "
-        "both laws; `python -m rcac_ros.tools.sweep.paired` also draws the distribution).",
+        "`campaigns/friction_{panda,ur5,xarm7}.yaml`: 70 MuJoCo plants per arm, joint terms "
+        "drawn per joint (doc/campaigns.md \"Unseen plants\"); the blind law against "
+        "`joint_friction=True` with default gains, paired (the same plant for both).",
         render_friction_unseen,
         [["rcac", "sweep", f"campaigns/friction_{arm}.yaml", "--out", f"{{out}}/{arm}",
           "--quiet"] for arm in ("panda", "ur5", "xarm7")]
@@ -173,10 +166,9 @@ SOURCES = {
             "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
     "friction_ros": Source(
         "Joint terms over ROS 2",
-        "The two nodes over DDS in lockstep, the simulator on MuJoCo with the paper's arm "
-        "and armature, viscous and dry friction on every joint, the controller friction-blind "
-        "and then with `joint_friction: true` and nothing else; one bag per run, read back "
-        "(doc/tools.md, `rcac friction-ros`).",
+        "Both nodes over DDS in lockstep, the paper's arm on MuJoCo with joint friction; the "
+        "controller blind, then with `joint_friction: true` alone; a bag per run "
+        "(`rcac friction-ros`).",
         render_friction_ros, ["rcac", "friction-ros", "--out", "{out}"], "metrics.json",
         keep=without_bags,
         plots=("friction_ros.png",)),
@@ -212,10 +204,9 @@ SOURCES = {
         "sources.json"),
     "capture": Source(
         "A payload captured over ROS 2",
-        "The CSS arm in zero gravity, both nodes over ROS 2 in lockstep, the paper's motion "
-        "and gains; the simulator's `payload.*` parameters set at run time, the controller "
-        "not told (doc/tools.md, `rcac capture-demo`). The same capture offline for four "
-        "laws, and the default law over payload masses.",
+        "The CSS arm in zero gravity, both nodes over ROS 2 in lockstep; the simulator's "
+        "`payload.*` set at run time, the controller not told (`rcac capture-demo`); the "
+        "same offline for four laws, and the default law over payload masses.",
         render_capture, ["rcac", "capture-demo", "--quiet", "--mass-table", "--out", "{out}"],
         "capture.json", plots=("capture_ros.png", "capture_laws.png")),
     "capture_release": Source(
