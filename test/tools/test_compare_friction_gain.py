@@ -18,14 +18,16 @@ def rms(scenario, law, **override):
     return C.metrics(run, scenario)["rms"]
 
 
-def test_the_default_gain_is_beta_kappa_times_the_joint_inertia():
-    """With the scenario's ``K_Di = kappa M_i`` the joint's feedback is ``kappa H_ii`` of the
-    rigid arm (its mass matrix, Pinocchio-checked elsewhere)."""
+def test_the_default_gain_is_beta_kappa_times_the_joint_effective_inertia():
+    """With the scenario's ``K_Di = kappa M_i`` the feedback is ``kappa H`` of the rigid arm
+    (its mass matrix, Pinocchio-checked elsewhere), so each joint's effective feedback is
+    ``kappa / (H^-1)_ii``."""
     scenario = C.SCENARIOS["panda_rigid"]()
     P = C.friction_gain_for(scenario)
     H = mass_matrix(scenario.model, scenario.q0)
+    effective = 1.0 / np.diag(np.linalg.inv(H))
     np.testing.assert_allclose(
-        P, BETA_FRICTION * GAINS["kappa"] * np.outer(np.diag(H), TERM_WEIGHTS), rtol=1e-10)
+        P, BETA_FRICTION * GAINS["kappa"] * np.outer(effective, TERM_WEIGHTS), rtol=1e-10)
 
 
 def test_direct_friction_tracks_the_rigid_panda_as_the_direct_law():
