@@ -45,7 +45,7 @@ from ._packing import (CH_ACTIVE, CH_AXIS, CH_AXIS_DOT, CH_E, CH_JOINT, CH_Y, I_
                        THETA_HAT, W_ROW)
 from .law_options import ALL, parse_channels  # noqa: F401  (re-exported)
 from .regressor import bias_terms, momentum_terms
-from .spatial import P0, propagate
+from .spatial import P0
 
 AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
 AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -70,6 +70,43 @@ def axis_terms(A, Ad, V, g):
            b[6] - d[6], b[7] - d[7], b[8] - d[8], b[9] - d[9], b[10] - d[10], b[11] - d[11],
            b[12] - d[12])
     return phi, psi
+
+
+@njit(cache=True, inline="always")
+def axis_terms_at_joint(V, g):
+    """:func:`axis_terms` at a joint channel's own joint: ``a_j = z6``, ``adot_j = 0``, so
+    ``psi_j = a_j^T Yc(V_j)`` (``adot_j^T Ym(V_j)`` is zero)."""
+    vx, vy, vz, wx, wy, wz = V
+    phi = momentum_terms(0.0, 0.0, 0.0, 0.0, 0.0, 1.0, vx, vy, vz, wx, wy, wz)
+    psi = bias_terms(0.0, 0.0, 0.0, 0.0, 0.0, 1.0, vx, vy, vz, wx, wy, wz, g[0], g[1], g[2])
+    return phi, psi
+
+
+@njit(cache=True, inline="always")
+def propagate_axis(Ci, px, py, pz, qd, A, Ad):
+    """A channel's ``(a_j, adot_j)`` from ``(a_j-1, adot_j-1)``: eqs 9-12 as
+    :func:`~rcac_ros.core.spatial.propagate` with ``(u, ud) = (0, 0)``, the same operations,
+    the rotation ``C[j]`` passed as a 9-tuple ``Ci`` (read once per link, not per channel).
+    """
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = Ci
+    x0, x1, x2, x3, x4, x5 = A
+    ux = x0 + x4 * pz - x5 * py
+    uy = x1 + x5 * px - x3 * pz
+    uz = x2 + x3 * py - x4 * px
+    tvx, tvy, tvz = c0 * ux + c1 * uy + c2 * uz, c3 * ux + c4 * uy + c5 * uz, \
+        c6 * ux + c7 * uy + c8 * uz
+    twx, twy, twz = c0 * x3 + c1 * x4 + c2 * x5, c3 * x3 + c4 * x4 + c5 * x5, \
+        c6 * x3 + c7 * x4 + c8 * x5
+    x0, x1, x2, x3, x4, x5 = Ad
+    ux = x0 + x4 * pz - x5 * py
+    uy = x1 + x5 * px - x3 * pz
+    uz = x2 + x3 * py - x4 * px
+    dvx, dvy, dvz = c0 * ux + c1 * uy + c2 * uz, c3 * ux + c4 * uy + c5 * uz, \
+        c6 * ux + c7 * uy + c8 * uz
+    dwx, dwy, dwz = c0 * x3 + c1 * x4 + c2 * x5, c3 * x3 + c4 * x4 + c5 * x5, \
+        c6 * x3 + c7 * x4 + c8 * x5
+    return ((tvx, tvy, tvz, twx, twy, twz + 0.0),
+            (dvx + qd * tvy, dvy + -qd * tvx, dvz, dwx + qd * twy, dwy + -qd * twx, dwz + 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -154,6 +191,7 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
     """
     fe, fb0, fb1, lam = coef
     px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+    Ci = (C[i, 0], C[i, 1], C[i, 2], C[i, 3], C[i, 4], C[i, 5], C[i, 6], C[i, 7], C[i, 8])
     for c in range(chan.shape[0]):
         code = chan[c, CH_JOINT]
         if code == POWER:
@@ -168,11 +206,14 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
                      chan[c, CH_AXIS + 3], chan[c, CH_AXIS + 4], chan[c, CH_AXIS + 5])
                 Ad = (chan[c, CH_AXIS_DOT], chan[c, CH_AXIS_DOT + 1], chan[c, CH_AXIS_DOT + 2],
                       chan[c, CH_AXIS_DOT + 3], chan[c, CH_AXIS_DOT + 4], chan[c, CH_AXIS_DOT + 5])
-                A, Ad = propagate(C, i, px, py, pz, qd, A, Ad, 0.0, 0.0)
+                A, Ad = propagate_axis(Ci, px, py, pz, qd, A, Ad)
             for r in range(6):
                 chan[c, CH_AXIS + r] = A[r]
                 chan[c, CH_AXIS_DOT + r] = Ad[r]
-            phi, psi = axis_terms(A, Ad, V, g)
+            if i == code:
+                phi, psi = axis_terms_at_joint(V, g)
+            else:
+                phi, psi = axis_terms(A, Ad, V, g)
         (pp[0], pp[1], pp[2], pp[3], pp[4], pp[5], pp[6], pp[7], pp[8], pp[9], pp[10],
          pp[11], pp[12]) = phi
         (pp[13], pp[14], pp[15], pp[16], pp[17], pp[18], pp[19], pp[20], pp[21], pp[22],

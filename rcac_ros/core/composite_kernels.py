@@ -16,9 +16,8 @@ import math
 import numpy as np
 from ._jit import kernel
 
-from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
-    rejects_input
-from ._packing import (ADAPT_GRADIENT, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
+from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
+from ._packing import (ADAPT_GRADIENT, GAIN_K_D, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
@@ -28,7 +27,7 @@ from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC,
                              FOLLOW_TIME, FRICTION_SIGNATURE, adapt_joint, follow_gain,
                              implicit_solve_joint, predict_joint, retract_term, rotor,
                              term_gain)
-from .regressor import reference_wrench, regressor_row
+from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, transform_force_T
 
 #: general_law's: rcac_step_kernel passes data, filt as jdata, jfilt (same types)
@@ -89,9 +88,11 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
                              rwz, wx, wy, wz, gx, gy, gz)
         for k in range(6):
             Fs[i, k] = f[k]
-        regressor_row(G[i], vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
-                      dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
-                      wx, wy, wz, gx, gy, gz)
+        y = regressor_terms(vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
+                            dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy, rwz,
+                            wx, wy, wz, gx, gy, gz)
+        for k in range(13):
+            G[i, k] = y[k]
         predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
         if joint:    # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri), its share
             jrow = jdata[i]
@@ -104,6 +105,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
             predict_joint(chan, jfilt, i, qd[i], sig, jrow, coef, first)
     close_channels(chan, scal)
     frozen = scal[I_FROZEN] != 0.0                 # set_adaptation(False)
+    kd_diag = scal[I_KD_DIAG] != 0.0
     tracking = tracking_active(const, scal, q, qd, q_d, qd_d) and not frozen
     scal[I_TRACKING] = 1.0 if tracking else 0.0
     for k in range(6):
@@ -115,7 +117,14 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
             r = const[i + 1]
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
                 C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
-        feedback_wrench(row, Fs[i], st[S_LINK:S_LINK + 6], scal[I_KD_DIAG] != 0.0, F)   # eq 19b
+        for r in range(6):                                                   # eq 19b
+            acc = Fs[i, r]
+            if kd_diag:
+                acc -= row[GAIN_K_D + 7 * r] * st[S_LINK + r]
+            else:
+                for k in range(6):
+                    acc -= row[GAIN_K_D + 6 * r + k] * st[S_LINK + k]
+            F[r] += acc
         if not frozen:
             adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
         if joint:
