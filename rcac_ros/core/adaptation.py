@@ -87,46 +87,47 @@ def prediction_gradient(chan, filt, i, grad, gamma, implicit):
 
 
 @njit(cache=True, inline="always")
-def leakage_gradient(row, st, scal, grad):
+def leakage_gradient(const, state, i, scal, grad):
     """Add the leakage to ``grad``: ``+ sigma_i (theta_hat_i - theta_0i)`` (module docstring).
 
     ``sigma_i = sigma_0`` (fixed), or the switching ``sigma_i`` of Ioannou & Sun ch. 8 when
-    link i's ``M_0 = row[LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <= M_0``.
+    link i's ``M_0 = const[i, LEAK_M0] > 0``: zero inside ``||theta_hat_i - theta_0i|| <=
+    M_0``.
     """
     sigma = scal[I_LEAK]
-    m0 = row[LEAK_M0]
+    m0 = const[i, LEAK_M0]
     if m0 > 0.0:
         d2 = 0.0
         for k in range(13):
-            d = st[THETA_HAT + k] - row[THETA_0 + k]
+            d = state[i, THETA_HAT + k] - const[i, THETA_0 + k]
             d2 += d * d
         dist = np.sqrt(d2)
         if dist <= m0:
             return
         sigma *= min(dist / m0 - 1.0, 1.0)
     for k in range(13):
-        grad[k] += sigma * (st[THETA_HAT + k] - row[THETA_0 + k])
+        grad[k] += sigma * (state[i, THETA_HAT + k] - const[i, THETA_0 + k])
 
 
 @njit(cache=True, inline="always")
-def gain_step(row, p_diag, st, grad, h, R, i):
+def gain_step(const, p_diag, state, grad, h, R, i):
     """``R_i = theta_hat_i - h P_i grad`` with the fixed gain ``P_i`` (eq 24, explicit part).
 
-    ``st`` is link i's state row (``theta_hat_i`` at ``THETA_HAT``).
+    ``const``, ``state``: the links' packed constants and state (link i in row i).
     """
     if p_diag:
         for a in range(13):
-            R[i, a] = st[THETA_HAT + a] - h * row[GAIN_P + 14 * a] * grad[a]
+            R[i, a] = state[i, THETA_HAT + a] - h * const[i, GAIN_P + 14 * a] * grad[a]
     else:
         for a in range(13):
             acc = 0.0
             for c in range(13):
-                acc += row[GAIN_P + 13 * a + c] * grad[c]
-            R[i, a] = st[THETA_HAT + a] - h * acc
+                acc += const[i, GAIN_P + 13 * a + c] * grad[c]
+            R[i, a] = state[i, THETA_HAT + a] - h * acc
 
 
 @njit(cache=True, inline="always")
-def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
+def adapt_link(const, state, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     """Eq 24, step 1, link i: ``R_i = theta_hat_i - h P_i (Y_ri^T s_i + leakage + prediction
     part)``, and ``U_ci = P_i W_ci^T`` for the implicit solve (P: fixed or least squares).
     With ``least_squares_prediction`` the leakage takes the tracking term's fixed ``P_i``.
@@ -138,6 +139,9 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
     (``scal[I_BARRIER_C] = c > 0``) it is ``P_mix = (H(theta_hat_i) / (c k_i) + P_i^-1)^-1``,
     factored on J's 10 entries with nu eliminated
     (:func:`~rcac_ros.core.natural_step.barrier_factor`).
+
+    ``const``, ``state``: the links' packed constants and state, indexed at link i (views of
+    row i only where a helper needs them, off the default law's path).
     """
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
@@ -150,26 +154,27 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
         grad[k] = G[i, k] if tracking else 0.0
     if natural:
         for k in range(13):
-            st[THETA_PREV + k] = st[THETA_HAT + k]
+            state[i, THETA_PREV + k] = state[i, THETA_HAT + k]
     if scal[I_LEAK] > 0.0:
-        leakage_gradient(row, st, scal, grad)
+        leakage_gradient(const, state, i, scal, grad)
     if mode != ADAPT_LS_PREDICTION:
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
     if natural:     # (H / k_i + Gamma_i)^-1, (H / (c k_i) + P_i^-1)^-1 or k_i H^-1, P_nu
+        row, st = const[i], state[i]
         k_metric = row[NAT_K] if mode == ADAPT_LS else scal[I_BARRIER_C] * row[NAT_K]
         natural_gain_step(row, st, metric, k_metric, grad, h, R, i, Pg, t, M4)
     elif mode == ADAPT_GRADIENT:
-        gain_step(row, p_diag, st, grad, h, R, i)
+        gain_step(const, p_diag, state, grad, h, R, i)
     elif mode == ADAPT_LS:
-        apply_factored(st, P_FACTOR, grad, Pg, t)
+        apply_factored(state[i], P_FACTOR, grad, Pg, t)
         for k in range(13):
-            R[i, k] = st[THETA_HAT + k] - h * Pg[k]
+            R[i, k] = state[i, THETA_HAT + k] - h * Pg[k]
     else:                               # fixed P on the tracking term, least squares on E
-        gain_step(row, p_diag, st, grad, h, R, i)
+        gain_step(const, p_diag, state, grad, h, R, i)
         for k in range(13):
             grad[k] = 0.0
         prediction_gradient(chan, filt, i, grad, gamma, implicit)
-        apply_factored(st, P_FACTOR, grad, Pg, t)
+        apply_factored(state[i], P_FACTOR, grad, Pg, t)
         for k in range(13):
             R[i, k] -= h * Pg[k]
     if not implicit:
@@ -178,21 +183,21 @@ def adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4):
         if chan[c, CH_ACTIVE] == 0.0 or i < channel_start(chan[c, CH_JOINT]):
             continue
         if natural:                             # U_ci = P_eff(theta_hat_i) W_ci^T
-            natural_gain_row(row, st, metric, filt[c, i], t)
+            natural_gain_row(const[i], state[i], metric, filt[c, i], t)
         elif mode == ADAPT_GRADIENT:            # U_ci = P_i W_ci^T, fixed P_i
             if p_diag:
                 for a in range(13):
-                    filt[c, i, U_ROW + a] = row[GAIN_P + 14 * a] * filt[c, i, W_ROW + a]
+                    filt[c, i, U_ROW + a] = const[i, GAIN_P + 14 * a] * filt[c, i, W_ROW + a]
             else:
                 for a in range(13):
                     acc = 0.0
                     for k in range(13):
-                        acc += row[GAIN_P + 13 * a + k] * filt[c, i, W_ROW + k]
+                        acc += const[i, GAIN_P + 13 * a + k] * filt[c, i, W_ROW + k]
                     filt[c, i, U_ROW + a] = acc
         else:
             for k in range(13):
                 grad[k] = filt[c, i, W_ROW + k]
-            apply_factored(st, P_FACTOR, grad, Pg, t)
+            apply_factored(state[i], P_FACTOR, grad, Pg, t)
             for k in range(13):
                 filt[c, i, U_ROW + k] = Pg[k]
 

@@ -45,7 +45,6 @@ from ._packing import (CH_ACTIVE, CH_AXIS, CH_AXIS_DOT, CH_E, CH_JOINT, CH_Y, I_
                        THETA_HAT, W_ROW)
 from .law_options import ALL, parse_channels  # noqa: F401  (re-exported)
 from .regressor import bias_terms, momentum_terms
-from .spatial import P0
 
 AXIS_Z = (0.0, 0.0, 0.0, 0.0, 0.0, 1.0)      #: z6, a joint channel's axis at its joint
 AXIS_0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -178,7 +177,7 @@ def start_channels(chan, state, scal, q, first):
 
 
 @njit(cache=True, inline="always")
-def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
+def predict_link(chan, filt, i, C, p, qd, V, g, state, coef, first, pp):
     """Link i's share of every channel: ``W_ci`` and ``E_c += W_ci theta_hat_i`` (eqs 22-23).
 
     A joint channel k carries its axis in ``chan[c]``: ``a_k = z6``, ``adot_k = 0``, then
@@ -187,10 +186,12 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
     is exact from the first step. The channel loop calls no helper taking an array (each
     would cost atomic reference counts per channel and link): it updates them in place.
     ``phi_ci``, ``psi_ci`` go through the scratch ``pp`` (26): the filter loop then reads an
-    array, not a 13-tuple at a varying index (a switch per read).
+    array, not a 13-tuple at a varying index (a switch per read). ``p`` is joint i's offset
+    ``(px, py, pz)``, ``state`` the links' packed state (``theta_hat_i`` in row i): no view
+    per link either.
     """
     fe, fb0, fb1, lam = coef
-    px, py, pz = row[P0], row[P0 + 1], row[P0 + 2]
+    px, py, pz = p
     Ci = (C[i, 0], C[i, 1], C[i, 2], C[i, 3], C[i, 4], C[i, 5], C[i, 6], C[i, 7], C[i, 8])
     for c in range(chan.shape[0]):
         code = chan[c, CH_JOINT]
@@ -228,7 +229,7 @@ def predict_link(chan, filt, i, C, row, qd, V, g, st, coef, first, pp):
             filt[c, i, PHI_PREV + k] = ph
             filt[c, i, PSI_PREV + k] = ps
             filt[c, i, W_ROW + k] = w
-            E += w * st[THETA_HAT + k]
+            E += w * state[i, THETA_HAT + k]
         chan[c, CH_E] = E
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from ._jit import kernel
 
 from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
-from ._packing import (ADAPT_GRADIENT, GAIN_K_D, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
+from ._packing import (ADAPT_GRADIENT, CONST_COLS, GAIN_K_D, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
@@ -73,19 +73,20 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     V, Vr, Vdr = zero, zero, zero                      # V_i, V_ri, Vdot_ri
     g = (scal[I_G], scal[I_G + 1], scal[I_G + 2])
     for i in range(n):
-        row = const[i]
-        st = state[i]
+        row = data[i]                                  # link i: constants, then state
         V, Vr, Vdr, g = reference_motion(C, i, row, q[i], qd[i], q_d[i], qd_d[i], qdd_d[i],
                                          V, Vr, Vdr, g)
         vx, vy, vz, wx, wy, wz = V
         rvx, rvy, rvz, rwx, rwy, rwz = Vr
         dvx, dvy, dvz, dwx, dwy, dwz = Vdr
         gx, gy, gz = g
-        st[S_LINK], st[S_LINK + 1], st[S_LINK + 2] = vx - rvx, vy - rvy, vz - rvz
-        st[S_LINK + 3], st[S_LINK + 4], st[S_LINK + 5] = wx - rwx, wy - rwy, wz - rwz
+        state[i, S_LINK], state[i, S_LINK + 1], state[i, S_LINK + 2] = \
+            vx - rvx, vy - rvy, vz - rvz
+        state[i, S_LINK + 3], state[i, S_LINK + 4], state[i, S_LINK + 5] = \
+            wx - rwx, wy - rwy, wz - rwz
         # eq 19b's Y_ri theta_hat_i and eq 24's Y_ri^T s_i, neither forming Y_ri
-        f = reference_wrench(st, THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy, rvz, rwx, rwy,
-                             rwz, wx, wy, wz, gx, gy, gz)
+        f = reference_wrench(row, CONST_COLS + THETA_HAT, dvx, dvy, dvz, dwx, dwy, dwz, rvx, rvy,
+                             rvz, rwx, rwy, rwz, wx, wy, wz, gx, gy, gz)
         for k in range(6):
             Fs[i, k] = f[k]
         y = regressor_terms(vx - rvx, vy - rvy, vz - rvz, wx - rwx, wy - rwy, wz - rwz,
@@ -93,7 +94,8 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
                             wx, wy, wz, gx, gy, gz)
         for k in range(13):
             G[i, k] = y[k]
-        predict_link(chan, filt, i, C, row, qd[i], V, g, st, coef, first, pp)
+        predict_link(chan, filt, i, C, (row[P0], row[P0 + 1], row[P0 + 2]), qd[i], V, g, state,
+                     coef, first, pp)
         if joint:    # joint i's terms: Y_f,i and s_qi (eq 18's qd_ri, qdd_ri), its share
             jrow = jdata[i]
             qdr = qd_d[i] - row[LAMBDA] * (q[i] - q_d[i])
@@ -111,22 +113,20 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     for k in range(6):
         F[k] = 0.0
     for i in range(n - 1, -1, -1):
-        row = const[i]
-        st = state[i]
         if i < n - 1:
-            r = const[i + 1]
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
-                C, i + 1, r[P0], r[P0 + 1], r[P0 + 2], F[0], F[1], F[2], F[3], F[4], F[5])
+                C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2], F[0],
+                F[1], F[2], F[3], F[4], F[5])
         for r in range(6):                                                   # eq 19b
             acc = Fs[i, r]
             if kd_diag:
-                acc -= row[GAIN_K_D + 7 * r] * st[S_LINK + r]
+                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
             else:
                 for k in range(6):
-                    acc -= row[GAIN_K_D + 6 * r + k] * st[S_LINK + k]
+                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
             F[r] += acc
         if not frozen:
-            adapt_link(row, st, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
+            adapt_link(const, state, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
         if joint:
             jrow = jdata[i]
             follow = min(1.0, scal[I_H] / FOLLOW_TIME)   # doc/design.md §7, the rotor
