@@ -59,6 +59,13 @@ def channel_codes(channels):
 def axis_terms(A, Ad, V, g):
     """``phi_j = a_j^T Ym(V_j)`` and ``psi_j = -adot_j^T Ym(V_j) + a_j^T Yc(V_j)`` (eq 22) for
     the axis ``A = a_j``, ``Ad = adot_j`` (6-tuples), as two 13-tuples."""
+    return link_axis_terms(A, Ad, V, g)
+
+
+@njit(cache=True, inline="always")
+def link_axis_terms(A, Ad, V, g):
+    """:func:`axis_terms`, inlined where it is called: :func:`predict_link` runs it for
+    every channel at every link."""
     vx, vy, vz, wx, wy, wz = V
     a0, a1, a2, a3, a4, a5 = A
     b0, b1, b2, b3, b4, b5 = Ad
@@ -214,7 +221,7 @@ def predict_link(chan, filt, i, C, p, qd, V, g, state, coef, first, pp):
             if i == code:
                 phi, psi = axis_terms_at_joint(V, g)
             else:
-                phi, psi = axis_terms(A, Ad, V, g)
+                phi, psi = link_axis_terms(A, Ad, V, g)
         (pp[0], pp[1], pp[2], pp[3], pp[4], pp[5], pp[6], pp[7], pp[8], pp[9], pp[10],
          pp[11], pp[12]) = phi
         (pp[13], pp[14], pp[15], pp[16], pp[17], pp[18], pp[19], pp[20], pp[21], pp[22],
