@@ -14,9 +14,9 @@ The paper's law also runs a fused body, bit for bit the same results and faster
 import math
 
 import numpy as np
-from ._jit import kernel, njit
+from ._jit import kernel
 
-from ._blocks import RCAC_SIGNATURE, packed_views, reference_motion, rejects_input
+from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
 from ._packing import (ADAPT_GRADIENT, CONST_COLS, GAIN_K_D, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
@@ -30,17 +30,21 @@ from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC,
 from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, transform_force_T
 
+#: general_law's: rcac_step_kernel passes data, filt as jdata, jfilt (same types)
+GENERAL_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
+                     f"float64[:, :, ::1], boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
 
-@njit(inline="always")
+
+@kernel(GENERAL_SIGNATURE)
 def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`rcac_step_kernel` and :func:`friction_step_kernel`: one control
     period of eqs 18-24, any channels, any option of the adaptation step, with joint i's
     terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true, else without
     them (``jdata``, ``jfilt`` unread). Returns tau (empty on bad input, code in scal[I_ERR]).
 
-    Inlined into each entry, which passes ``joint`` as a constant: numba prunes the branches
-    it rules out, so each entry compiles only its own law, and the step makes no call whose
-    array arguments each cost two atomic reference counts.
+    Compiled once, with ``joint`` a run-time flag (``GENERAL_SIGNATURE``), and called, not
+    inlined, by both entries: inlined into each with ``joint`` a constant, the body compiles
+    twice for no measurable gain per step.
     """
     n, const, state, scal, chan = packed_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
@@ -180,7 +184,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
     return tau
 
 
-@kernel(RCAC_SIGNATURE)
+@kernel(RCAC_SIGNATURE, calls=(general_law,))
 def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     """One control period of eqs 18-24; returns tau (empty on bad input, code in scal[I_ERR]).
 
@@ -190,7 +194,7 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     return general_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
 
 
-@kernel(FRICTION_SIGNATURE)
+@kernel(FRICTION_SIGNATURE, calls=(general_law,))
 def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     """One control period of the law with joint terms (doc/design.md §7); returns tau.
 
