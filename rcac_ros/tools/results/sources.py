@@ -75,9 +75,9 @@ SOURCES = {
         "bench.json"),
     "bench_ros_modes": Source(
         "Timing over ROS, per controller mode",
-        "Simulator (real time) and controller as two processes, a third echoing a JointState "
-        "(a DDS ping), per controller mode. What counts: effort period p99 / state period p99 "
-        "(goal <= 1.1), latency p50 / the ping's one-way p50 (doc/nodes.md, \"Timing\").",
+        "Simulator (real time), controller and a DDS ping (a process echoing a JointState), "
+        "per controller mode. What counts: effort period p99 / state period p99 (goal <= 1.1), "
+        "latency p50 / the ping's one-way p50 (doc/nodes.md, \"Timing\").",
         render_bench_ros_modes, shown="make readme-bench"),
     "startup": Source(
         "Start-up, with and without the compiled kernels",
@@ -113,10 +113,9 @@ SOURCES = {
         "metrics.json", plots=("friction_estimates.png",)),
     "compare": Source(
         "Every adaptive law compared",
-        "Every law of `rcac compare` on the paper's experiment (`paper`) and the payload run "
-        "(`payload`), each with the scenario's gains. `ident.` counts the parameter "
-        "combinations the run excited, `consist.` the links whose final estimates are a "
-        "physical body; µs/step is the in-loop time (noisy: see \"Speed of one step\").",
+        "`rcac compare` on the paper's experiment (`paper`) and the payload run (`payload`), "
+        "each with its scenario's gains. `ident.`: parameter combinations excited; `consist.`: "
+        "links whose final estimates are a physical body; µs/step: in-loop time (noisy).",
         render_compare, ["rcac", "compare", "--duration", "20", "--out", "{out}"],
         "compare.json", plots=("compare_*.png",)),
     "compare_joints": Source(
