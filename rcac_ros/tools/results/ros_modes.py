@@ -5,7 +5,7 @@ controller mode, one after the other: the free-running timer, the timer locked t
 states' arrival (``timer.phase_offset`` 0) and ``on_state`` (the controller's ``lockstep``
 mode answering each state of the real-time simulator), then the timer and ``on_state``
 again with both nodes real time (``--rt``). It stores the figures of each run and the
-conditions (cores, load average before and after) as the source ``bench_ros_modes`` of
+conditions (machine and load average: the record's provenance) as the source ``bench_ros_modes`` of
 doc/results.md (``doc/results/bench_ros_modes.json``) and renders the page. The rows that matter
 are the ratios (doc/nodes.md, "Timing"): what the controller adds to its input, which the
 load of the machine moves less than the absolute times.
@@ -34,17 +34,14 @@ MODES = {
 def measure(duration, rate=500.0):
     """Run the bench once per mode; return ``(results, conditions)``."""
     from rcac_ros.tools.bench.ros import BENCH_CONTROLLER, run_ros_bench
-    load0 = os.getloadavg()[0]
     results = {}
     for column, (mode, over, sim_over) in MODES.items():
         print(f"readme-bench: {column}", flush=True)
         results[column] = run_ros_bench(duration, rate=rate, controller_mode=mode,
                                         controller_overrides=over,
                                         simulator_overrides=sim_over)
-    load1 = os.getloadavg()[0]
     conditions = (
-        f"{os.cpu_count()} cores, 1-minute load average {load0:.1f} before and {load1:.1f} "
-        f"after, {duration:g} s per mode one after the other, {rate:g} Hz, "
+        f"{duration:g} s per mode in turn, {rate:g} Hz, "
         f"K_D = {BENCH_CONTROLLER['K_D']:g}; `--rt`: the controller at SCHED_FIFO "
         f"{RT_OPTIONS['realtime.priority']}, the simulator at "
         f"{SIM_RT_OPTIONS['realtime.priority']}.")
