@@ -4,11 +4,12 @@ Runs ``rcac bench ros`` (:func:`rcac_ros.tools.bench.ros.run_ros_bench`) once pe
 controller mode, one after the other: the free-running timer, the timer locked to the
 states' arrival (``timer.phase_offset`` 0) and ``on_state`` (the controller's ``lockstep``
 mode answering each state of the real-time simulator), then the timer and ``on_state``
-again with both nodes real time (``--rt``). It stores the figures of each run and the
-conditions (machine and load average: the record's provenance) as the source ``bench_ros_modes`` of
-doc/results.md (``doc/results/bench_ros_modes.json``) and renders the page. The rows that matter
-are the ratios (doc/nodes.md, "Timing"): what the controller adds to its input, which the
-load of the machine moves less than the absolute times.
+again with both nodes real time (``--rt``). It stores the figures of each run and its
+conditions (duration, rate, gains; the machine and the load average are in the record's
+provenance) as the source ``bench_ros_modes`` of doc/results.md
+(``doc/results/bench_ros_modes.json``) and renders the page. The rows that matter are the
+ratios (doc/nodes.md, "Timing"): what the controller adds to its input, which the load of
+the machine moves less than the absolute times.
 """
 
 import argparse
