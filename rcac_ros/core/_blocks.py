@@ -9,7 +9,7 @@ import math
 import numpy as np
 from ._jit import njit
 
-from ._packing import CONST_COLS, I_ERR, LAMBDA
+from ._packing import CONST_COLS, GAIN_K_D, I_ERR, LAMBDA, S_LINK
 from rcac_ros.errors import InputError
 from .spatial import P0, RF0, joint_rotation, propagate, rotate, transform_motion
 
@@ -82,6 +82,24 @@ def reference_motion(C, i, row, q, qd, q_d, qd_d, qdd_d, V, Vr, Vdr, g):
                                               V[5])
     Vr, Vdr = propagate(C, i, px, py, pz, qd, Vr, Vdr, qdr, qddr)   # Tdot with the actual qd
     return (vx, vy, vz, wx, wy, wz + qd), Vr, Vdr, rotate(C, i, g[0], g[1], g[2])
+
+
+@njit(cache=True, inline="always")
+def feedback_wrench(const, state, Fs, i, kd_diag, F):
+    """Eq 19b's link i terms, added to ``F`` (6, in place): ``Y_ri theta_hat_i + K_Di (V_ri -
+    V_i)``, with ``Fs[i] = Y_ri theta_hat_i`` and ``s_i = V_i - V_ri`` in ``state[i]``.
+
+    Indexes the packed arrays at link i (no view of a row: each would cost atomic reference
+    counts per link and step).
+    """
+    for r in range(6):
+        acc = Fs[i, r]
+        if kd_diag:
+            acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
+        else:
+            for k in range(6):
+                acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
+        F[r] += acc
 
 
 @njit(cache=True)

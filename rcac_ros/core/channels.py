@@ -89,28 +89,26 @@ def axis_terms_at_joint(V, g):
 
 
 @njit(cache=True, inline="always")
+def transform_axis(Ci, px, py, pz, x):
+    """Eq 9's transform of a 6-vector ``x`` (a tuple) into the next link's frame, the rotation
+    ``C[j]`` as a 9-tuple ``Ci``: the operations of :func:`~rcac_ros.core.spatial.propagate`."""
+    c0, c1, c2, c3, c4, c5, c6, c7, c8 = Ci
+    x0, x1, x2, x3, x4, x5 = x
+    ux = x0 + x4 * pz - x5 * py
+    uy = x1 + x5 * px - x3 * pz
+    uz = x2 + x3 * py - x4 * px
+    return (c0 * ux + c1 * uy + c2 * uz, c3 * ux + c4 * uy + c5 * uz, c6 * ux + c7 * uy + c8 * uz,
+            c0 * x3 + c1 * x4 + c2 * x5, c3 * x3 + c4 * x4 + c5 * x5, c6 * x3 + c7 * x4 + c8 * x5)
+
+
+@njit(cache=True, inline="always")
 def propagate_axis(Ci, px, py, pz, qd, A, Ad):
     """A channel's ``(a_j, adot_j)`` from ``(a_j-1, adot_j-1)``: eqs 9-12 as
     :func:`~rcac_ros.core.spatial.propagate` with ``(u, ud) = (0, 0)``, the same operations,
     the rotation ``C[j]`` passed as a 9-tuple ``Ci`` (read once per link, not per channel).
     """
-    c0, c1, c2, c3, c4, c5, c6, c7, c8 = Ci
-    x0, x1, x2, x3, x4, x5 = A
-    ux = x0 + x4 * pz - x5 * py
-    uy = x1 + x5 * px - x3 * pz
-    uz = x2 + x3 * py - x4 * px
-    tvx, tvy, tvz = c0 * ux + c1 * uy + c2 * uz, c3 * ux + c4 * uy + c5 * uz, \
-        c6 * ux + c7 * uy + c8 * uz
-    twx, twy, twz = c0 * x3 + c1 * x4 + c2 * x5, c3 * x3 + c4 * x4 + c5 * x5, \
-        c6 * x3 + c7 * x4 + c8 * x5
-    x0, x1, x2, x3, x4, x5 = Ad
-    ux = x0 + x4 * pz - x5 * py
-    uy = x1 + x5 * px - x3 * pz
-    uz = x2 + x3 * py - x4 * px
-    dvx, dvy, dvz = c0 * ux + c1 * uy + c2 * uz, c3 * ux + c4 * uy + c5 * uz, \
-        c6 * ux + c7 * uy + c8 * uz
-    dwx, dwy, dwz = c0 * x3 + c1 * x4 + c2 * x5, c3 * x3 + c4 * x4 + c5 * x5, \
-        c6 * x3 + c7 * x4 + c8 * x5
+    tvx, tvy, tvz, twx, twy, twz = transform_axis(Ci, px, py, pz, A)
+    dvx, dvy, dvz, dwx, dwy, dwz = transform_axis(Ci, px, py, pz, Ad)
     return ((tvx, tvy, tvz, twx, twy, twz + 0.0),
             (dvx + qd * tvy, dvy + -qd * tvx, dvz, dwx + qd * twy, dwy + -qd * twx, dwz + 0.0))
 

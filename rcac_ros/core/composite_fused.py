@@ -17,8 +17,9 @@ import math
 import numpy as np
 from ._jit import kernel, njit
 
-from ._blocks import RCAC_SIGNATURE, packed_views, reference_motion, rejects_input
-from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_K_D,
+from ._blocks import RCAC_SIGNATURE, feedback_wrench, packed_views, reference_motion, \
+    rejects_input
+from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS,
                        GAIN_P, I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN,
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
@@ -167,15 +168,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
                 C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2],
                 F[0], F[1], F[2], F[3], F[4], F[5])
-        # eq 19b: + Y_ri theta_hat_i + K_Di (V_ri - V_i), with V_ri - V_i = -s_i
-        for r in range(6):
-            acc = Fs[i, r]
-            if kd_diag:
-                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
-            else:
-                for k in range(6):
-                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
-            F[r] += acc
+        feedback_wrench(const, state, Fs, i, kd_diag, F)    # eq 19b
         if joint:
             jrow = jdata[i]
             k_q = rotor(jrow, False, min(1.0, h / FOLLOW_TIME))     # doc/design.md §7

@@ -16,8 +16,9 @@ import math
 import numpy as np
 from ._jit import kernel
 
-from ._blocks import RCAC_SIGNATURE, VEC, packed_views, reference_motion, rejects_input
-from ._packing import (ADAPT_GRADIENT, CONST_COLS, GAIN_K_D, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
+from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
+    rejects_input
+from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
@@ -117,14 +118,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
                 C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2], F[0],
                 F[1], F[2], F[3], F[4], F[5])
-        for r in range(6):                                                   # eq 19b
-            acc = Fs[i, r]
-            if kd_diag:
-                acc -= const[i, GAIN_K_D + 7 * r] * state[i, S_LINK + r]
-            else:
-                for k in range(6):
-                    acc -= const[i, GAIN_K_D + 6 * r + k] * state[i, S_LINK + k]
-            F[r] += acc
+        feedback_wrench(const, state, Fs, i, kd_diag, F)                    # eq 19b
         if not frozen:
             adapt_link(const, state, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
         if joint:
