@@ -5,7 +5,9 @@ parameters into a frozen config (:mod:`.params`) and compiles the law's kernels 
 (:mod:`.compiling`), activate starts the efforts once they are ready, deactivate sends one
 zero effort. Thin: message -> arrays ->
 :class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
-(one step, :mod:`.control`, per valid JointState, time from its stamp) or ``timer`` mode
+(one step, :mod:`.control`, per valid JointState as the state input's thread reads it, time
+from its stamp; the node's callbacks and the watchdog's thread share its lock,
+:mod:`rcac_ros.nodes.runtime.serial`) or ``timer`` mode
 (``rate`` Hz on the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop`
 or ``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
 the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the desired motion (:mod:`.motion`,
@@ -40,9 +42,14 @@ from rcac_ros.nodes.controller.lookahead import StatePredictor
 from rcac_ros.nodes.runtime.managed import FAILURE, ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
 from rcac_ros.nodes.runtime.realtime import RealtimeOptions
+from rcac_ros.nodes.runtime.serial import SerialCallbacks, SerialTimer
 
 
-class ControllerNode(ControlStep, ManagedNode):
+#: s an interrupt waits for the answer being computed before the zero effort goes out
+INTERRUPT_WAIT = 1.0
+
+
+class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
     """The recursive composite adaptive controller as a managed ROS 2 node.
 
     Constructed as :class:`~rcac_ros.nodes.runtime.managed.ManagedNode` (keyword arguments of
@@ -99,7 +106,8 @@ class ControllerNode(ControlStep, ManagedNode):
             max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
             outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
-            restarted=self._stream_restarted, control=self._step))
+            restarted=self._stream_restarted, control=self._step,
+            serial=self.callback_lock if lockstep else None))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
         self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
             paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
@@ -121,7 +129,11 @@ class ControllerNode(ControlStep, ManagedNode):
         elif cfg.mode == "timer":
             self.loop = DeadlineLoop(cfg.h, self._on_tick)  # run() (or a test) drives it
             self.keep(self._drop_loop, self.loop)
-        if self.loop is None:               # lockstep, or timer mode on /clock
+        if lockstep:                        # beside the answers, without the executor
+            self.keep(SerialTimer.close, SerialTimer(
+                self.watchdog.check_period, self._on_watchdog, self.callback_lock,
+                f"{self.get_name()} watchdog", self._thread_fatal))
+        elif self.loop is None:             # timer mode on /clock
             self.keep(timer, self.create_timer(self.watchdog.check_period, self._on_watchdog,
                                                clock=Clock(clock_type=ClockType.STEADY_TIME)))
         self.keep(EstimateServices.destroy, EstimateServices(
@@ -180,9 +192,17 @@ class ControllerNode(ControlStep, ManagedNode):
             self._fjt.abort(text)
 
     def _on_watchdog(self):
-        """The watchdog's steady timer (lockstep, or timer mode on /clock)."""
+        """The watchdog's steady timer (lockstep: its own thread; timer mode on /clock)."""
         if self.running:
             self.watchdog.check()
+
+    def _thread_fatal(self, text):
+        """The watchdog's thread raised: as an executor callback's fault in :func:`run`, the
+        traceback in the log, one zero effort, and the node stops (exit code 1)."""
+        print(f"controller: fatal: {text}", file=sys.stderr, flush=True)
+        self.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
+        self.on_interrupt()
+        self.exit_code, self.finished = 1, True
 
     def _activate(self):
         """Efforts on; the motion starts again from the next valid state."""
@@ -202,10 +222,16 @@ class ControllerNode(ControlStep, ManagedNode):
         self.get_logger().info("inactive: one zero effort sent, then silence")
 
     def on_interrupt(self):
-        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered."""
-        if self.running:
-            self.running = False
-            self._deactivate()
+        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered (after a
+        lockstep answer being computed, so that none follows it)."""
+        taken = self.callback_lock.acquire(timeout=INTERRUPT_WAIT)
+        try:
+            if self.running:
+                self.running = False
+                self._deactivate()
+        finally:
+            if taken:
+                self.callback_lock.release()
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, changed):
