@@ -147,6 +147,13 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
                  f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
                  f"{list(self.joints)}; compiling the law's kernels")
 
+    @property
+    def loop_thread(self):
+        """Native id of the thread of the control step when it is not the main one (lockstep:
+        the state input's; its real-time options, :func:`run`), else ``None``."""
+        states = getattr(self, "states", None)
+        return states.thread if states is not None and self.config.mode == "lockstep" else None
+
     def _ready_to_activate(self):
         return self.kernels.done.is_set()
 

@@ -159,6 +159,11 @@ class StateInput:
             self._taken = sample
         return sample
 
+    @property
+    def thread(self):
+        """The native id of the side thread (lockstep: the thread of the answers)."""
+        return self._side.native_id
+
     def close(self):
         """Stop the side thread (cleanup; a state waiting for the node's lock is dropped)."""
         self._closing = True

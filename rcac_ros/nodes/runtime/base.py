@@ -199,12 +199,14 @@ def _raise_interrupt(signum, frame):
 
 def _realtime(node):
     """Apply the node's opt-in real-time options (its ``realtime`` attribute, a
-    :class:`~rcac_ros.nodes.runtime.realtime.RealtimeOptions`) to this thread (the loop's)
-    and, for the priority, to the process's other threads."""
+    :class:`~rcac_ros.nodes.runtime.realtime.RealtimeOptions`) to the loop's thread (the
+    node's ``loop_thread``, a native id, if it has one; else this thread) and, for the
+    priority, to the process's other threads."""
     options = getattr(node, "realtime", None)
     if options is None or not options.any:
         return None
-    rt = Realtime(options, warn=node.get_logger().warning)
+    rt = Realtime(options, warn=node.get_logger().warning,
+                  loop_thread=getattr(node, "loop_thread", None))
     if rt.applied:
         node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
     return rt

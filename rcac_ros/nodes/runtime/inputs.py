@@ -106,6 +106,11 @@ class SideInput:
         (``RawReader.errors``)."""
         return self._reader.errors
 
+    @property
+    def native_id(self):
+        """The thread's native id."""
+        return self._reader.native_id
+
     def close(self):
         """Stop the thread and destroy the helper node."""
         self._reader.close()

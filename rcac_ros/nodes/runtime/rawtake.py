@@ -173,6 +173,11 @@ class RawReader:
         return ret
 
     @property
+    def native_id(self):
+        """The thread's native id (its scheduling: :mod:`~rcac_ros.nodes.runtime.realtime`)."""
+        return self._thread.native_id
+
+    @property
     def capacity(self):
         """Bytes of the serialised-message buffer held now."""
         return self._msg.buffer_capacity

@@ -1,12 +1,12 @@
 """Opt-in real-time options of a node process, each best-effort (doc/failsafe.md, "real time").
 
-* ``SCHED_FIFO`` priority of the calling thread (the node's loop), and one below it for the
+* ``SCHED_FIFO`` priority of the thread of the node's loop, and one below it for the
   process's other threads (DDS reception and events, the input threads) and those they
   start: on a loaded machine a state that DDS received must not wait behind busy processes
   before the loop can use it, nor the loop for the interpreter lock held by a thread that
   such processes preempted;
 * ``mlockall`` of the current and future pages (no page fault in the loop);
-* CPU affinity of the calling thread;
+* CPU affinity of the loop's thread;
 * a hold on ``/dev/cpu_dma_latency``: while the file stays open with a value written, the
   kernel keeps the CPUs out of deep idle states, which cuts the wake-up tail of a timer
   (the PM QoS interface, Documentation/power/pm_qos_interface.rst).
@@ -70,7 +70,16 @@ class RealtimeOptions:
 
 
 class Realtime:
-    """Apply :class:`RealtimeOptions` to the calling thread; :meth:`release` undoes the hold.
+    """Apply :class:`RealtimeOptions` to the loop thread; :meth:`release` undoes the hold.
+
+    Parameters
+    ----------
+    options : RealtimeOptions
+    warn : callable, optional
+        ``warn(text)``: an option not applied.
+    loop_thread : int, optional
+        Native id of the thread that runs the control step (the lockstep controller's
+        state input); default the calling thread.
 
     Attributes
     ----------
@@ -80,8 +89,9 @@ class Realtime:
         One line per option that could not be applied (also passed to ``warn``).
     """
 
-    def __init__(self, options, warn=None):
+    def __init__(self, options, warn=None, loop_thread=None):
         self.options = options
+        self.loop_thread = threading.get_native_id() if loop_thread is None else loop_thread
         self.applied = []
         self.warnings = []
         self._warn = warn
@@ -105,8 +115,8 @@ class Realtime:
                 self._warn(text)
 
     def _affinity(self):
-        os.sched_setaffinity(0, self.options.cpus)
-        return f"CPUs {sorted(os.sched_getaffinity(0))}"
+        os.sched_setaffinity(self.loop_thread, self.options.cpus)
+        return f"CPUs {sorted(os.sched_getaffinity(self.loop_thread))}"
 
     def _mlockall(self):
         libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
@@ -121,10 +131,10 @@ class Realtime:
         top = os.sched_get_priority_max(os.SCHED_FIFO)
         if not 1 <= prio <= top:
             raise ValueError(f"priority {prio} outside 1..{top}")
-        own = threading.get_native_id()
+        own = self.loop_thread
         others = [tid for tid in process_threads() if tid != own]
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            os.sched_setscheduler(own, os.SCHED_FIFO, os.sched_param(prio))
         except PermissionError as err:
             raise OSError(err.errno, "SCHED_FIFO needs CAP_SYS_NICE or an rtprio limit "
                           "(/etc/security/limits.conf)") from None
