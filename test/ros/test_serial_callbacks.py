@@ -93,8 +93,12 @@ def test_a_lockstep_answer_waits_for_the_lock():
         executor.add_node(node)
         executor.add_node(probe)
         assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
-        probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
-        assert spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts))
+        for _ in range(40):                 # (until active: its kernels may still compile)
+            probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
+            if spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts),
+                          timeout=0.5):
+                break
+        assert node.counts.steps == 1
         with node.callback_lock:            # as a callback of the executor would
             probe.state(2 * H_NS, PAPER_Q0, np.full(7, 0.5))
             spin_until(executor, lambda: False, timeout=0.3)
