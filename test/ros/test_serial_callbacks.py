@@ -106,3 +106,29 @@ def test_a_lockstep_answer_waits_for_the_lock():
             assert node.counts.steps == 1
         assert spin_until(executor, lambda: any(label(2) in lab for lab, _ in probe.efforts))
         assert node.counts.steps == 2
+
+
+def test_closing_while_a_state_waits_for_the_lock_does_not_wait_for_it():
+    """The cleanup runs in an executor callback, holding the lock that a state being
+    answered waits for: the state input's thread gives up the state and ends."""
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=1.0)])
+        probe = Probe(ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+        for _ in range(40):
+            probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
+            if spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts),
+                          timeout=0.5):
+                break
+        with node.callback_lock:
+            probe.state(2 * H_NS, PAPER_Q0, np.full(7, 0.5))
+            spin_until(executor, lambda: False, timeout=0.3)    # taken, waiting for the lock
+            start = time.monotonic()
+            node.states.close()
+            assert time.monotonic() - start < 1.0           # (a joined thread: 2 s at most)
+        spin_until(executor, lambda: False, timeout=0.3)
+        assert not any(label(2) in lab for lab, _ in probe.efforts)
+        assert node.counts.steps == 1
