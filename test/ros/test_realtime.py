@@ -104,6 +104,70 @@ def test_the_loop_thread_named_takes_the_options_not_the_caller():
     assert out["applied"][0].startswith(f"cpu_affinity (CPUs [{out['cpu']}]")
 
 
+MOVED_LOOP = r"""
+import json, os, sys, threading
+from rcac_ros.nodes.runtime.realtime import Realtime, RealtimeOptions
+stop, ids = threading.Event(), {}
+def idle(key):
+    ids[key] = threading.get_native_id()
+    stop.wait()
+first = threading.Thread(target=idle, args=("first",)); first.start()
+while "first" not in ids:
+    pass
+cpu = min(os.sched_getaffinity(0))
+rt = Realtime(RealtimeOptions(cpus=[cpu], priority=int(sys.argv[1])), warn=lambda t: None,
+              loop_thread=ids["first"])
+second = threading.Thread(target=idle, args=("second",)); second.start()
+while "second" not in ids:
+    pass
+rt.move(ids["second"])                   # a node configured again: a new loop thread
+out = {k: [sorted(os.sched_getaffinity(t)), os.sched_getparam(t).sched_priority]
+       for k, t in ids.items()}
+out["cpu"], out["applied"] = cpu, rt.applied
+stop.set(); first.join(); second.join()
+print(json.dumps(out))
+"""
+
+
+def test_the_options_follow_the_loop_to_its_new_thread():
+    """A node configured again makes a new loop thread (lockstep: a new state input): it
+    takes the CPUs and the priority, the former loop thread goes one below."""
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("one CPU: pinning changes nothing")
+    fifo = subprocess.run([sys.executable, "-c", "import os; os.sched_setscheduler(0, "
+                           "os.SCHED_FIFO, os.sched_param(1))"], capture_output=True)
+    priority = 30 if fifo.returncode == 0 else 0
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    out = json.loads(subprocess.run([sys.executable, "-c", MOVED_LOOP, str(priority)],
+                                    capture_output=True, text=True, timeout=60, env=env,
+                                    check=True).stdout)
+    assert out["second"][0] == [out["cpu"]]
+    if priority:
+        assert out["second"][1] == 30 and out["first"][1] == 29
+
+
+def test_a_controller_configured_again_moves_its_options_to_the_new_state_input():
+    from test_nodes_support import ros_context, spin_until
+    from rcac_ros.nodes.controller.node import ControllerNode
+
+    class Moves:
+        def __init__(self):
+            self.to = []
+
+        def move(self, thread):
+            self.to.append(thread)
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx)
+        executor.add_node(node)
+        assert spin_until(executor, lambda: node.running)      # (once its kernels are ready)
+        node.realtime_applied = moves = Moves()
+        first = node.loop_thread
+        node.trigger_deactivate()
+        node.trigger_cleanup()
+        node.trigger_configure()
+        assert moves.to == [node.loop_thread] and node.loop_thread not in (None, first)
+
+
 def _schedulers(pid):
     """``{thread id: (policy, priority)}`` of process ``pid``'s threads."""
     out = {}

@@ -132,3 +132,77 @@ def test_closing_while_a_state_waits_for_the_lock_does_not_wait_for_it():
         spin_until(executor, lambda: False, timeout=0.3)
         assert not any(label(2) in lab for lab, _ in probe.efforts)
         assert node.counts.steps == 1
+
+
+def test_a_state_read_before_a_deactivation_is_not_answered_after_the_activation():
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=1.0)])
+        probe = Probe(ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+        for _ in range(40):
+            probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
+            if spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts),
+                          timeout=0.5):
+                break
+        with node.callback_lock:
+            probe.state(2 * H_NS, PAPER_Q0, np.full(7, 0.5))
+            spin_until(executor, lambda: False, timeout=0.3)    # read, waiting for the lock
+            node.trigger_deactivate()
+            node.trigger_activate()
+        spin_until(executor, lambda: False, timeout=0.3)
+        assert not any(label(2) in lab for lab, _ in probe.efforts)
+        assert node.running and node.counts.steps == 1
+
+
+def test_an_interrupt_waits_for_the_answer_being_computed():
+    """SIGINT's zero effort goes out after the answer in flight (here: a thread holding the
+    lock as an answer does), so no effort of the law follows it."""
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=1.0)])
+        executor.add_node(node)
+        held, released = threading.Event(), []
+
+        def answer():
+            with node.callback_lock:
+                held.set()
+                time.sleep(0.3)
+                released.append(time.monotonic())
+        other = threading.Thread(target=answer)
+        other.start()
+        held.wait()
+        node.on_interrupt()
+        stopped = time.monotonic()
+        other.join()
+        assert not node.running and stopped >= released[0]
+
+
+def test_the_state_input_follows_the_controllers_remappings():
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, cli_args=[
+            "--ros-args", "-r", "joint_states:=/robot2/joint_states"])
+        assert node.states._side.topic == "/robot2/joint_states"
+        assert node.states._side.subscription.topic_name == "/robot2/joint_states"
+
+
+def test_an_incompatible_state_publisher_is_reported_by_the_controllers_executor(capfd):
+    """The state input's subscription lives on a node no executor spins; its QoS events are
+    served by the controller's executor (rclpy's default handler logs them)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx)
+        other = Node("best_effort_driver", context=ctx)
+        other.create_publisher(JointState, "/joint_states",
+                               QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+        executor.add_node(node)
+        executor.add_node(other)
+        seen = []
+
+        def told():
+            seen.append(capfd.readouterr().err)
+            return any("offering incompatible QoS" in t for t in seen)
+        assert spin_until(executor, told, timeout=10.0), seen

@@ -19,6 +19,7 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 
 import sys
 import time
+import traceback
 
 from rclpy.clock import Clock, ClockType
 
@@ -70,6 +71,7 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
         self.loop = None                    # the steady-clock pacing of timer mode
         self._starvation = None             # timer mode's starvation guard
         self.realtime = None                # its real-time options, once configured
+        self.realtime_applied = None        # run()'s Realtime, once applied
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
 
     # ------------------------------------------------------------------ lifecycle
@@ -143,6 +145,8 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
             estimates_file=lambda: self.get_parameter("estimates_file").value))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
+        if self.realtime_applied is not None:   # configured again: its loop's thread is new
+            self.realtime_applied.move(self.loop_thread)
         log.info(f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
                  f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
                  f"{list(self.joints)}; compiling the law's kernels")
@@ -206,10 +210,14 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
     def _thread_fatal(self, text):
         """The watchdog's thread raised: as an executor callback's fault in :func:`run`, the
         traceback in the log, one zero effort, and the node stops (exit code 1)."""
-        print(f"controller: fatal: {text}", file=sys.stderr, flush=True)
-        self.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
-        self.on_interrupt()
-        self.exit_code, self.finished = 1, True
+        try:
+            print(f"controller: fatal: {text}", file=sys.stderr, flush=True)
+            self.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
+            self.on_interrupt()
+        except Exception:               # noqa: BLE001 -- already failing: report, stop
+            print(f"controller: the stop failed too: {traceback.format_exc()}", file=sys.stderr)
+        finally:
+            self.exit_code, self.finished = 1, True
 
     def _activate(self):
         """Efforts on; the motion starts again from the next valid state."""
@@ -231,14 +239,18 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
     def on_interrupt(self):
         """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered (after a
         lockstep answer being computed, so that none follows it)."""
-        taken = self.callback_lock.acquire(timeout=INTERRUPT_WAIT)
+        lock = self.callback_lock
+        taken = lock.acquire(timeout=INTERRUPT_WAIT)
         try:
             if self.running:
                 self.running = False
                 self._deactivate()
+                if not taken and lock.acquire(timeout=INTERRUPT_WAIT):
+                    taken = True            # an answer held the lock: its effort went out
+                    self._outputs.zero_effort()     # after the zero effort; once more
         finally:
             if taken:
-                self.callback_lock.release()
+                lock.release()
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, changed):

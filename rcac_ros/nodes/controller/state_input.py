@@ -115,7 +115,7 @@ class StateInput:
         self._reader = JointStateReader(joint_names)
         self._rate_warned = False
         self._lock = threading.Lock()       # the side thread's reading against reset()
-        self._serial, self._closing = serial, False
+        self._serial, self._closing, self._resets = serial, False, 0
         self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
                                self._on_state if serial is None else self._on_state_serial,
                                max_bytes, "state", self.warn, prefault=True)
@@ -125,6 +125,7 @@ class StateInput:
         """A fresh start: no state yet, a new velocity estimate, the stamp gate reset (after
         a state being read, if any)."""
         with self._lock:
+            self._resets += 1
             self.velocity = VelocityEstimate(self.velocity_cutoff)
             self.latest = None
             self._restarts = self._taken_restarts = 0
@@ -190,16 +191,19 @@ class StateInput:
                 "(set 'rate' to 1/dt of the simulator)")
 
     def _on_state_serial(self, msg):
-        """Lockstep: read the state, then judge and answer it holding the node's lock."""
+        """Lockstep: read the state, then judge and answer it holding the node's lock (if no
+        reset came meanwhile: a state read before a deactivation is not answered after the
+        activation that follows)."""
         if not self.is_running():
             return
+        resets = self._resets
         try:
             read = self._reader.read(msg)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
         if acquire(self._serial, lambda: self._closing):
             try:
-                if self.is_running():       # (not deactivated while the lock was waited for)
+                if self.is_running() and self._resets == resets:
                     self._answer(msg, *read)
             finally:
                 self._serial.release()

@@ -209,6 +209,7 @@ def _realtime(node):
                   loop_thread=getattr(node, "loop_thread", None))
     if rt.applied:
         node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
+    node.realtime_applied = rt          # (a node configured again moves its loop: rt.move)
     return rt
 
 

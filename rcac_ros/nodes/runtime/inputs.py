@@ -50,8 +50,9 @@ class SideInput:
     Parameters
     ----------
     owner : rclpy.node.Node
-        The node whose topic it is (the name is resolved in its namespace: ``~/x`` stays
-        ``/<owner>/x``, remappings of the owner do not apply).
+        The node whose topic it is: the name is resolved and remapped as the owner's
+        (``~/x`` is ``/<owner>/x``), and the owner's executor serves the subscription's
+        event handlers.
     msg_type, topic, qos :
         As for ``create_subscription``.
     callback : callable
@@ -73,14 +74,22 @@ class SideInput:
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject,
                  prefault=False):
-        if topic.startswith("~/"):      # the owner's private topic, not this side node's
-            topic = owner.resolve_topic_name(topic, only_expand=True)
-        self.topic = topic
+        # the owner's name, namespace and remappings (its own, and the process's), once: the
+        # side node applies no rule of its own
+        self.topic = topic = owner.resolve_topic_name(topic)
         self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,
-                         enable_rosout=False)
+                         enable_rosout=False, use_global_arguments=False)
         self.subscription = self.node.create_subscription(
             msg_type, topic, lambda _: None, qos, raw=True)
+        # rclpy's handlers of the subscription's events (a publisher with incompatible QoS or
+        # type, logged) are served by the owner's executor; no executor spins the side node
+        self._owner, self._events = owner, list(self.subscription.event_handlers)
+        for handler in self._events:
+            self.node.remove_waitable(handler)
+            handler.callback_group = owner.default_callback_group
+            owner.default_callback_group.add_entity(handler)
+            owner.add_waitable(handler)
 
         def on_oversize(nbytes):
             try:
@@ -112,6 +121,12 @@ class SideInput:
         return self._reader.native_id
 
     def close(self):
-        """Stop the thread and destroy the helper node."""
+        """Stop the thread, take the event handlers back and destroy the helper node (once)."""
+        if self._owner is None:
+            return
         self._reader.close()
+        for handler in self._events:            # back where rclpy destroys them
+            self._owner.remove_waitable(handler)
+            self.node.add_waitable(handler)
+        self._owner = None
         self.node.destroy_node()

@@ -91,7 +91,8 @@ class Realtime:
 
     def __init__(self, options, warn=None, loop_thread=None):
         self.options = options
-        self.loop_thread = threading.get_native_id() if loop_thread is None else loop_thread
+        self._caller = threading.get_native_id()
+        self.loop_thread = self._caller if loop_thread is None else loop_thread
         self.applied = []
         self.warnings = []
         self._warn = warn
@@ -145,6 +146,30 @@ class Realtime:
             except ProcessLookupError:      # the thread ended meanwhile
                 pass
         return f"priority {prio}, the process's {len(others)} other threads {below}"
+
+    def move(self, loop_thread=None):
+        """The loop moved to another thread (``None``: the thread that applied the options),
+        as when a node is configured again: the CPUs and the priority follow it, the former
+        loop thread, if it still runs, goes one below. Best effort, as at the start."""
+        new = self._caller if loop_thread is None else loop_thread
+        old, self.loop_thread = self.loop_thread, new
+        if new == old:
+            return
+        fifo = any(a.startswith("sched_fifo") for a in self.applied)
+        prio = self.options.priority
+        for tid, cpus, level in ((new, self.options.cpus, prio), (old, None, max(prio - 1, 1))):
+            try:
+                if cpus:
+                    os.sched_setaffinity(tid, cpus)
+                if fifo:
+                    os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(level))
+            except ProcessLookupError:      # the thread ended (the former loop's, closed)
+                pass
+            except OSError as err:
+                text = f"real-time options not moved to thread {tid}: {err}"
+                self.warnings.append(text)
+                if self._warn is not None:
+                    self._warn(text)
 
     def _dma_hold(self):
         fd = os.open(DMA_LATENCY, os.O_WRONLY)

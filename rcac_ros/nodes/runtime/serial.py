@@ -6,11 +6,13 @@ rebuilds its wait set in Python at every spin, about 0.3 ms holding the interpre
 (doc/failsafe.md, "Known limitations"), which would sit between a state's arrival and its
 answer. The node's other callbacks (lifecycle transitions, parameters, services, the
 trajectory hand-over, the action server) still run in the executor and change what the
-answer reads. :class:`SerialCallbackGroup` makes them take the node's lock, whatever executor
-spins the node: rclpy calls :meth:`~SerialCallbackGroup.beginning_execution` before each
-callback of a group's entity and :meth:`~SerialCallbackGroup.ending_execution` after it. A
-thread that holds the same lock therefore never runs beside any of them: the node's state has
-one writer at a time.
+answer reads. :class:`SerialCallbackGroup` makes them take the node's lock: rclpy's Python
+executors (single- and multi-threaded) call :meth:`~SerialCallbackGroup.beginning_execution`
+before each callback of a group's entity and :meth:`~SerialCallbackGroup.ending_execution`
+after it (the experimental ``EventsExecutor`` calls neither: not for these nodes). The
+lifecycle transitions, also when triggered outside a callback, and ``destroy_node`` hold it
+too. A thread that holds the same lock therefore never runs beside any of them: the node's
+state has one writer at a time.
 
 :class:`SerialTimer` is a steady timer of the same kind: its thread wakes at its period and
 runs its callback holding the lock, without the executor. The watchdog checks at 100 Hz; as
@@ -58,12 +60,44 @@ class SerialCallbackGroup(CallbackGroup):
 
 class SerialCallbacks:
     """A node mixin (before :class:`rclpy.node.Node` in the bases): its entities are created
-    in one :class:`SerialCallbackGroup` by default, whose lock is :attr:`callback_lock`.
+    in one :class:`SerialCallbackGroup` by default, whose lock is :attr:`callback_lock`; its
+    lifecycle transitions and ``destroy_node`` hold the lock (a transition triggered by a
+    direct call, not by a service, as autostart does).
 
     rclpy's node creates its parameter and lifecycle services in its constructor, in
     ``default_callback_group``; the group is made at the first access, so those are in it
     too.
     """
+
+    def on_configure(self, state):
+        with self.callback_lock:
+            return super().on_configure(state)
+
+    def on_activate(self, state):
+        with self.callback_lock:
+            return super().on_activate(state)
+
+    def on_deactivate(self, state):
+        with self.callback_lock:
+            return super().on_deactivate(state)
+
+    def on_cleanup(self, state):
+        with self.callback_lock:
+            return super().on_cleanup(state)
+
+    def on_shutdown(self, state):
+        with self.callback_lock:
+            return super().on_shutdown(state)
+
+    def on_error(self, state):
+        with self.callback_lock:
+            return super().on_error(state)
+
+    def destroy_node(self):
+        """The node's ``destroy_node``, holding the lock (its threads, waiting for the lock
+        to answer, see that they are closed and end)."""
+        with self.callback_lock:
+            return super().destroy_node()
 
     @property
     def callback_lock(self):
