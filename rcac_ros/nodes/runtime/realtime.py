@@ -106,6 +106,23 @@ class Realtime:
         if options.dma_latency_us >= 0:
             self._try("cpu_dma_latency", self._dma_hold)
 
+    @classmethod
+    def for_node(cls, node):
+        """Apply a node's opt-in options (its ``realtime`` attribute, a
+        :class:`RealtimeOptions`) to its loop's thread (its ``loop_thread``, a native id, if
+        it has one; else this thread) and, for the priority, to the process's other threads;
+        logged, kept as the node's ``realtime_applied`` (configured again, the node moves
+        them: :meth:`move`). ``None`` if none is asked for."""
+        options = getattr(node, "realtime", None)
+        if options is None or not options.any:
+            return None
+        rt = cls(options, warn=node.get_logger().warning,
+                 loop_thread=getattr(node, "loop_thread", None))
+        if rt.applied:
+            node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
+        node.realtime_applied = rt
+        return rt
+
     def _try(self, name, action):
         try:
             self.applied.append(f"{name} ({action()})")
