@@ -206,3 +206,27 @@ def test_an_incompatible_state_publisher_is_reported_by_the_controllers_executor
             seen.append(capfd.readouterr().err)
             return any("offering incompatible QoS" in t for t in seen)
         assert spin_until(executor, told, timeout=10.0), seen
+
+
+def test_the_watchdog_checks_under_the_lock():
+    """No state for ``state_timeout``: the watchdog's safe effort, but not while the lock is
+    held (an answer, a callback), and at once after."""
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=0.2)])
+        probe = Probe(ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+        for _ in range(40):
+            probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
+            if spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts),
+                          timeout=0.5):
+                break
+        with node.callback_lock:
+            spin_until(executor, lambda: False, timeout=0.6)     # beyond state_timeout
+            held = len(probe.efforts)
+            assert node.watchdog.trips == 0
+        assert spin_until(executor, lambda: node.watchdog.trips == 1, timeout=5.0)
+        assert spin_until(executor, lambda: any(lab.endswith("watchdog")
+                                                for lab, _ in probe.efforts[held:]))
