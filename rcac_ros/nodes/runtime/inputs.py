@@ -51,8 +51,7 @@ class SideInput:
     ----------
     owner : rclpy.node.Node
         The node whose topic it is: the name is resolved and remapped as the owner's
-        (``~/x`` is ``/<owner>/x``), and the owner's executor serves the subscription's
-        event handlers.
+        (``~/x`` is ``/<owner>/x``).
     msg_type, topic, qos :
         As for ``create_subscription``.
     callback : callable
@@ -82,14 +81,7 @@ class SideInput:
                          enable_rosout=False, use_global_arguments=False)
         self.subscription = self.node.create_subscription(
             msg_type, topic, lambda _: None, qos, raw=True)
-        # rclpy's handlers of the subscription's events (a publisher with incompatible QoS or
-        # type, logged) are served by the owner's executor; no executor spins the side node
-        self._owner, self._events = owner, list(self.subscription.event_handlers)
-        for handler in self._events:
-            self.node.remove_waitable(handler)
-            handler.callback_group = owner.default_callback_group
-            owner.default_callback_group.add_entity(handler)
-            owner.add_waitable(handler)
+        self._closed = False
 
         def on_oversize(nbytes):
             try:
@@ -107,7 +99,8 @@ class SideInput:
 
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,
-                                 f"{what} input", owner.get_logger(), prefault=prefault)
+                                 f"{what} input", owner.get_logger(), prefault=prefault,
+                                 events=self.subscription.event_handlers)
 
     @property
     def errors(self):
@@ -121,12 +114,9 @@ class SideInput:
         return self._reader.native_id
 
     def close(self):
-        """Stop the thread, take the event handlers back and destroy the helper node (once)."""
-        if self._owner is None:
+        """Stop the thread and destroy the helper node (once)."""
+        if self._closed:
             return
+        self._closed = True
         self._reader.close()
-        for handler in self._events:            # back where rclpy destroys them
-            self._owner.remove_waitable(handler)
-            self.node.add_waitable(handler)
-        self._owner = None
         self.node.destroy_node()

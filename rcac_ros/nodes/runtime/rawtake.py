@@ -121,6 +121,11 @@ class RawReader:
         ones are (the thread's other samples then wait less behind it).
     name : str
         The thread's name (and the prefix of its log lines).
+    events : sequence of rclpy.event_handler.EventHandler
+        The subscription's event handlers (``subscription.event_handlers``), waited for in
+        this thread's wait set and called here (rclpy's log the incompatible QoS or type of a
+        publisher). Not in an executor's too: with rmw_fastrtps, an executor waiting for
+        them beside this thread's wait set returned at once, over and over (measured).
     log : logger
         ``log.error(text)``: the first error of each kind (see :attr:`errors`).
 
@@ -144,9 +149,10 @@ class RawReader:
     HOLD = 33_554_432
 
     def __init__(self, subscription, context, on_bytes, on_oversize, cap, name, log,
-                 hold=HOLD, prefault=False):
+                 hold=HOLD, prefault=False, events=()):
         self._rcl, self._rcutils = _libraries()
         self._sub = subscription
+        self._events = list(events)
         self._context = context
         self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
         self._bound = max(cap, self.KEEP, hold)
@@ -246,6 +252,17 @@ class RawReader:
                     if self._msg.buffer_capacity > self._bound:
                         self._shrink()
 
+    def _on_event(self, event):
+        """A QoS event of the subscription (rclpy's handler, e.g. a publisher offering
+        incompatible QoS): its callback, as an executor would call it."""
+        try:
+            data = event.take_data()
+            if data:
+                event.callback(data)
+        except Exception as err:    # noqa: BLE001 -- the input must keep flowing
+            self._error("callback", "an event callback raised; the reader goes on:\n"
+                        + traceback.format_exc().rstrip(), type(err))
+
     def _run(self):
         """The thread: serve the subscription; a loop that raised is logged with its
         traceback, counted (``"thread"``) and started again after :data:`RESTART_BACKOFF`."""
@@ -262,15 +279,20 @@ class RawReader:
 
     def _serve(self):
         """Wait and take until stopped (a new wait set each time the loop starts)."""
-        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, self._context.handle)
+        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, len(self._events), self._context.handle)
         while not self._stop.is_set() and self._context.ok():
             with self._sub.handle, self._context.handle:
                 wait_set.clear_entities()
                 wait_set.add_subscription(self._sub.handle)
+                for event in self._events:
+                    event.add_to_wait_set(wait_set)
                 wait_set.wait(WAIT_NS)                  # without the lock
             if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
                     and self._take_all():
                 self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
+            for event in self._events:
+                if event.is_ready(wait_set):
+                    self._on_event(event)
             if self._msg.buffer_capacity > self._bound:     # a failed shrink: again
                 self._shrink()
 
