@@ -71,14 +71,14 @@ def kernel_gain(theta, P, kk, barrier):
     row[BAR_F:BAR_F + 30] = F[0].ravel()
     row[NAT_P_NU:NAT_P_NU + 9] = nu_gain(P[None])[0].ravel()
     if barrier:
-        barrier_factor(row, st, kk, np.empty((4, 4, 4)))
+        barrier_factor(row, 0, st, 0, kk)
     else:
         natural_ls_factor(st, kk, np.empty(13), np.empty((4, 4, 4)))
 
     def apply(g):
         out = np.empty(13)
         if barrier:
-            barrier_apply(row, st, g, 0, out, 0, np.empty(13))
+            barrier_apply(row, 0, st, 0, g, 0, out, 0)
         else:
             natural_ls_apply(st, g, 0, out, 0, np.empty(13))
         return out
