@@ -80,14 +80,13 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     n, const, state, scal, chan = packed_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
-    work = np.empty(n * 41 + 96, q.dtype)
+    work = np.empty(n * 41 + 19, q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
     R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
     F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
-    Pg, t = work[41 * n + 6:41 * n + 19], work[41 * n + 19:41 * n + 32]   # natural: gain
-    M4 = work[41 * n + 32:41 * n + 96].reshape((4, 4, 4))   # natural: 4x4 scratch
+    Pg = work[41 * n + 6:41 * n + 19]             # natural: P_eff G_i
     tau = np.empty(n, q.dtype)
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
@@ -210,7 +209,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
         scal[I_K] += 1.0
         return tau
     if natural:      # eq 24, step 1 with P_eff(theta_hat_i) (doc/design.md §8), one call
-        natural_gain_rows(const, state, filt[0], G, R, scal, Pg, t, M4)
+        natural_gain_rows(data, filt, G, R, Pg)
     # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
     # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
     w_dot_r = 0.0
@@ -236,7 +235,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
     if natural:
-        retract_links(state, scal)                    # doc/design.md §8
+        retract_links(data)                           # doc/design.md §8
     scal[I_K] += 1.0
     return tau
 

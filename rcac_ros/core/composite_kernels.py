@@ -164,7 +164,7 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
                 for k in range(3):
                     jdata[i, F_HAT + k] = max(jdata[i, F_HAT + k], 0.0)
     if not frozen and scal[I_NATURAL] != 0.0:
-        retract_links(state, scal)                    # doc/design.md §8
+        retract_links(data)                           # doc/design.md §8
         if joint:
             a_min = scal[I_RETRACT_MIN]
             for i in range(n):

@@ -14,9 +14,9 @@ natural geometry (compile time; a call per link costs nothing measurable per ste
 import numpy as np
 
 from ._jit import njit
-from ._packing import (BAR_F, BAR_Q, I_BARRIER_C, I_H, I_RETRACT_MIN, NAT_K,
-                       NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_HAT, THETA_PREV, U_ROW,
-                       W_ROW)
+from ._packing import (BAR_F, BAR_Q, CONST_COLS, FILT_COLS, I_BARRIER_C, I_H, I_RETRACT_MIN,
+                       LINK_COLS, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_HAT,
+                       THETA_PREV, U_ROW, W_ROW)
 from .pseudo_inertia import (cholesky_entries, inverse_cholesky4, natural_gain_apply,
                              pseudo_entries, pseudo_inertia_into, whitened_into)
 from .retraction import retract, retract_short
@@ -59,44 +59,60 @@ def natural_gain_row(row, st, metric, f, t):
 
 
 @njit(cache=True)
-def natural_gain_rows(const, state, filt0, G, R, scal, Pg, t, M4):
+def natural_gain_rows(data, filt, G, R, Pg):
     """Eq 24, step 1 of the paper's law (one channel, joint 1) in the natural geometry, every
-    link: ``R_i = theta_hat_i - h P_eff,i G_i`` and ``U_i = P_eff,i W_i^T`` (``filt0``: the
-    channel's rows), ``G_i`` already holding ``Y_ri^T s_i - gamma W_i^T y``, and
+    link: ``R_i = theta_hat_i - h P_eff,i G_i`` and ``U_i = P_eff,i W_i^T`` (channel 0's rows
+    of ``filt``), ``G_i`` already holding ``Y_ri^T s_i - gamma W_i^T y``, and
     ``theta_hat_i`` kept for the retraction; ``P_eff`` of either metric, as
-    :func:`adapt_link` computes it (doc/design.md §8). ``Pg``, ``t``: 13 scratch each;
-    ``M4``: 4x4 scratch. Not inlined: the fused kernel calls it once per step, so its
-    Euclidean instances do not compile it (compile time)."""
-    h = scal[I_H]
-    c = scal[I_BARRIER_C]
-    metric = BARRIER if c > 0.0 else LOG_DET
-    for i in range(state.shape[0]):
-        st = state[i]
-        row = const[i]
+    :func:`adapt_link` computes it (doc/design.md §8). ``data``, ``filt``: the kernel's
+    packed arrays, read at plain offsets of their flat views (no per-link view); ``Pg``: 13
+    scratch. Not inlined: the fused kernel calls it once per step, so its Euclidean
+    instances do not compile it (compile time)."""
+    n = data.shape[0] - 1
+    d = data.reshape(data.size)
+    fl = filt.reshape(filt.size)
+    g = G.reshape(G.size)
+    h = d[n * LINK_COLS + I_H]
+    c = d[n * LINK_COLS + I_BARRIER_C]
+    for i in range(n):
+        co = i * LINK_COLS                      # link i's constants, then its state
+        so = co + CONST_COLS
+        fo = i * FILT_COLS                      # channel 0, link i
         for k in range(13):
-            st[THETA_PREV + k] = st[THETA_HAT + k]
-        # the barrier's (H / (c k_i) + P_i^-1)^-1, factored; else k_i H^-1 and P_nu
-        natural_gain_step(row, st, metric, c * row[NAT_K], G[i], h, R, i, Pg, t, M4)
-        natural_gain_row(row, st, metric, filt0[i], t)
+            d[so + THETA_PREV + k] = d[so + THETA_HAT + k]
+        if c > 0.0:     # the barrier's (H / (c k_i) + P_i^-1)^-1, factored, on G_i and W_i
+            barrier_factor(d, co, d, so, c * d[co + NAT_K])
+            barrier_apply(d, co, d, so, g, 13 * i, Pg, 0)
+            barrier_apply(d, co, d, so, fl, fo + W_ROW, fl, fo + U_ROW)
+        else:           # k_i H^-1 and P_nu
+            k_i = d[co + NAT_K]
+            natural_gain_apply(d, so + THETA_HAT, g, 13 * i, Pg, 0, k_i, d, co + NAT_P_NU)
+            natural_gain_apply(d, so + THETA_HAT, fl, fo + W_ROW, fl, fo + U_ROW, k_i, d,
+                               co + NAT_P_NU)
+        for k in range(13):
+            R[i, k] = d[so + THETA_HAT + k] - h * Pg[k]
 
 
 @njit(cache=True)
-def retract_links(state, scal):
+def retract_links(data):
     """Natural geometry, step 3: every link's step ``theta_prev -> theta_hat`` made
     consistent by the retraction of :func:`~rcac_ros.core.retraction.retract`, or with
     the metric ``"barrier"`` by the shortened Euclidean step of
     :func:`~rcac_ros.core.retraction.retract_short` (doc/design.md §8); the smallest
-    step length goes to ``scal[I_RETRACT_MIN]``."""
+    step length goes to the scalar ``I_RETRACT_MIN``. ``data``: the kernel's packed array,
+    read at plain offsets of its flat view."""
+    n = data.shape[0] - 1
+    d = data.reshape(data.size)
     a_min = 1.0
-    short = scal[I_BARRIER_C] > 0.0
-    for i in range(state.shape[0]):
-        st = state[i]
+    short = d[n * LINK_COLS + I_BARRIER_C] > 0.0
+    for i in range(n):
+        so = i * LINK_COLS + CONST_COLS
         if short:
-            a = retract_short(st, THETA_PREV, st, THETA_HAT)
+            a = retract_short(d, so + THETA_PREV, d, so + THETA_HAT)
         else:
-            a = retract(st, THETA_PREV, st, THETA_HAT)
+            a = retract(d, so + THETA_PREV, d, so + THETA_HAT)
         a_min = min(a_min, a)
-    scal[I_RETRACT_MIN] = a_min
+    d[n * LINK_COLS + I_RETRACT_MIN] = a_min
 
 
 @njit(cache=True, inline="always")
