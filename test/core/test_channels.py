@@ -182,6 +182,32 @@ def test_fused_paper_natural_step_equals_the_general_kernel(options):
     assert min(float(x[0]) for x in runs[0][3::4]) > 0.0
 
 
+@pytest.mark.parametrize("metric", ["log_det", "barrier"])
+def test_fused_natural_step_on_chains_equals_the_general_kernel(metric):
+    """The fused natural law reads its links at offsets of the packed arrays: chains of 3, 9
+    and 14 links, bit for bit the general kernel's run (its own path, a row per link):
+    efforts, estimates and the retraction's step length at every step, along random inputs,
+    then one random state held, which shortens every step (the retraction's halvings)."""
+    from rcac_ros.core import composite_fused
+    rng = np.random.default_rng(11)
+    for n in (3, 9, 14):
+        model = random_chain(rng, n)
+        inputs = [tuple(rng.normal(size=(5, n)) * 0.3) for _ in range(100)]
+        inputs += [tuple(rng.normal(size=(5, n)) * 0.1)] * 100
+        runs = []
+        for fused in (True, False):
+            ctrl = RecursiveCompositeController(model, geometry="natural",
+                                                natural_metric=metric)
+            ctrl.use_fused_kernel(fused)
+            assert (ctrl._entry is composite_fused.paper_natural_step) == fused
+            out = []
+            for args in inputs:
+                out += [ctrl.step(*args), ctrl.theta_hat, np.array([ctrl.retraction_length])]
+            runs.append(out)
+        assert all(np.array_equal(a, b) for a, b in zip(*runs))
+        assert min(float(x[0]) for x in runs[0][2::3]) < 1e-3
+
+
 @pytest.mark.parametrize("joint_friction", [False, True])
 def test_use_fused_kernel_chooses_the_kernel(monkeypatch, joint_friction):
     """use_fused_kernel(False) sends the paper's law through the general kernel (counted
