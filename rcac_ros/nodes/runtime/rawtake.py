@@ -44,8 +44,7 @@ RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
 ERROR_BACKOFF = 0.001
 #: the wait for a sample, ns (also the longest a failed shrink waits for its next attempt)
 WAIT_NS = 50_000_000
-#: s before the reader's loop starts again after it raised (a lasting fault is retried at
-#: 10 Hz, not spun)
+#: s before the reader's loop starts again after it raised (a lasting fault: 10 Hz, no spin)
 RESTART_BACKOFF = 0.1
 
 
@@ -122,10 +121,8 @@ class RawReader:
     name : str
         The thread's name (and the prefix of its log lines).
     events : sequence of rclpy.event_handler.EventHandler
-        The subscription's event handlers (``subscription.event_handlers``), waited for in
-        this thread's wait set and called here (rclpy's log the incompatible QoS or type of a
-        publisher). Not in an executor's too: with rmw_fastrtps, an executor waiting for
-        them beside this thread's wait set returned at once, over and over (measured).
+        The subscription's (``subscription.event_handlers``: incompatible QoS or type, logged),
+        served in this thread's wait set; an executor's beside it spun (rmw_fastrtps).
     log : logger
         ``log.error(text)``: the first error of each kind (see :attr:`errors`).
 
@@ -253,11 +250,9 @@ class RawReader:
                         self._shrink()
 
     def _on_event(self, event):
-        """A QoS event of the subscription (rclpy's handler, e.g. a publisher offering
-        incompatible QoS): its callback, as an executor would call it."""
+        """A QoS event of the subscription: its handler's callback, as an executor's."""
         try:
-            data = event.take_data()
-            if data:
+            if (data := event.take_data()):
                 event.callback(data)
         except Exception as err:    # noqa: BLE001 -- the input must keep flowing
             self._error("callback", "an event callback raised; the reader goes on:\n"
