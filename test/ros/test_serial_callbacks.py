@@ -230,3 +230,25 @@ def test_the_watchdog_checks_under_the_lock():
         assert spin_until(executor, lambda: node.watchdog.trips == 1, timeout=5.0)
         assert spin_until(executor, lambda: any(lab.endswith("watchdog")
                                                 for lab, _ in probe.efforts[held:]))
+
+
+def test_a_state_that_came_while_inactive_is_answered_at_the_activation():
+    """A lockstep simulator started as the controller is configured sends its first state
+    before the controller is active: the activation answers it."""
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=1.0)])
+        probe = Probe(ctx)
+        executor.add_node(node)
+        executor.add_node(probe)
+        assert spin_until(executor, lambda: probe.pub_state.get_subscription_count() > 0)
+        assert spin_until(executor, lambda: node.running)
+        node.trigger_deactivate()
+        for _ in range(10):                 # taken by the input thread while inactive
+            probe.state(H_NS, PAPER_Q0, np.full(7, 0.5))
+            spin_until(executor, lambda: False, timeout=0.05)
+        assert node.states._parked is not None
+        assert not any(label(1) in lab for lab, _ in probe.efforts)
+        node.trigger_activate()
+        assert spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts))
+        assert node.counts.steps == 1

@@ -163,7 +163,13 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
 
     def on_activate(self, state):
         """Activate once the kernels are ready (waits for them); FAILURE if they failed."""
-        return super().on_activate(state) if self.kernels.wait() else FAILURE
+        if not self.kernels.wait():
+            return FAILURE
+        result = super().on_activate(state)
+        if self.running and self.config.mode == "lockstep":
+            with self.callback_lock:        # the state that came while inactive, if recent
+                self.states.answer_parked()
+        return result
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""

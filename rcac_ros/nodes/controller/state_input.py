@@ -116,6 +116,7 @@ class StateInput:
         self._rate_warned = False
         self._lock = threading.Lock()       # the side thread's reading against reset()
         self._serial, self._closing, self._resets = serial, False, 0
+        self._parked = None                 # lockstep: (msg, read, steady ns) while inactive
         self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
                                self._on_state if serial is None else self._on_state_serial,
                                max_bytes, "state", self.warn, prefault=True)
@@ -191,22 +192,32 @@ class StateInput:
                 "(set 'rate' to 1/dt of the simulator)")
 
     def _on_state_serial(self, msg):
-        """Lockstep: read the state, then judge and answer it holding the node's lock (if no
-        reset came meanwhile: a state read before a deactivation is not answered after the
-        activation that follows)."""
-        if not self.is_running():
-            return
-        resets = self._resets
+        """Lockstep: read the state, then judge and answer it holding the node's lock. A
+        state read while active is not answered after a reset (a deactivation and the
+        activation that follows); one that comes while inactive is kept, the latest only,
+        for :meth:`answer_parked` at the activation (a simulator started as the controller
+        is configured sends its first state before the controller is active)."""
+        running, resets = self.is_running(), self._resets
         try:
             read = self._reader.read(msg)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
         if acquire(self._serial, lambda: self._closing):
             try:
-                if self.is_running() and self._resets == resets:
+                if not self.is_running():
+                    self._parked = (msg, read, time.monotonic_ns())
+                elif self._resets == resets or not running:
                     self._answer(msg, *read)
             finally:
                 self._serial.release()
+
+    def answer_parked(self):
+        """Lockstep, at the activation (holding the node's lock): answer the latest state that
+        came while inactive, if it came within the watchdog's ``state_timeout``."""
+        parked, self._parked = self._parked, None
+        if parked is not None \
+                and time.monotonic_ns() - parked[2] <= self.watchdog.state_timeout * 1e9:
+            self._answer(parked[0], *parked[1])
 
     def _on_state(self, msg):
         if not self.is_running():
