@@ -17,8 +17,9 @@ from ._jit import njit
 from ._packing import (BAR_F, BAR_Q, CONST_COLS, FILT_COLS, I_BARRIER_C, I_H, I_RETRACT_MIN,
                        LINK_COLS, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_HAT,
                        THETA_PREV, U_ROW, W_ROW)
-from .pseudo_inertia import (cholesky_entries, inverse_cholesky4, natural_gain_apply,
-                             pseudo_entries, pseudo_inertia_into, whitened_into)
+from .pseudo_inertia import (cholesky_entries, inverse_cholesky4, inverse_entries,
+                             natural_gain_apply, pseudo_entries, pseudo_inertia_into,
+                             whitened_into)
 from .retraction import retract, retract_short
 
 
@@ -169,24 +170,9 @@ def barrier_factor(c, co, s, so, ck):
     ok, l00, l10, l11, l20, l21, l22, l30, l31, l32, l33 = cholesky_entries(
         j00, j11, j22, j33, j01, j02, j12, j03, j13, j23)
     w = 2.0 / ck
-    if ok:                              # R = L^-1 (inverse_cholesky4), then J^-1 = R^T R
-        r00, r11, r22, r33 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33
-        r10 = -(l10 * r00) * r11
-        r20 = -(l20 * r00 + l21 * r10) * r22
-        r30 = -(l30 * r00 + l31 * r10 + l32 * r20) * r33
-        r21 = -(l21 * r11) * r22
-        r31 = -(l31 * r11 + l32 * r21) * r33
-        r32 = -(l32 * r22) * r33
-        i00 = 0.0 + r00 * r00 + r10 * r10 + r20 * r20 + r30 * r30
-        i10 = 0.0 + r11 * r10 + r21 * r20 + r31 * r30
-        i11 = 0.0 + r11 * r11 + r21 * r21 + r31 * r31
-        i20 = 0.0 + r22 * r20 + r32 * r30
-        i21 = 0.0 + r22 * r21 + r32 * r31
-        i22 = 0.0 + r22 * r22 + r32 * r32
-        i30 = 0.0 + r33 * r30
-        i31 = 0.0 + r33 * r31
-        i32 = 0.0 + r33 * r32
-        i33 = 0.0 + r33 * r33
+    if ok:                              # J^-1 = R^T R, R = L^-1 (inverse_cholesky4)
+        i00, i10, i20, i30, i11, i21, i31, i22, i32, i33 = inverse_entries(
+            l00, l10, l11, l20, l21, l22, l30, l31, l32, l33)
     else:
         w = 0.0
         i00 = i10 = i11 = i20 = i21 = i22 = i30 = i31 = i32 = i33 = 0.0

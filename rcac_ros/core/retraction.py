@@ -15,7 +15,7 @@ O(1) per link: 4x4 products and one 4x4 Cholesky factorisation.
 import math
 
 from ._jit import njit
-from .pseudo_inertia import cholesky_entries, pseudo_entries, theta_from_entries
+from .pseudo_inertia import cholesky_entries, inverse_entries, pseudo_entries, theta_from_entries
 
 
 #: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
@@ -74,23 +74,8 @@ def retract(old, oo, new, on):
         theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, n0, n1, n2,
                            new, on)
         return 0.0
-    i00, i11, i22, i33 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33    # L^-1 (lower)
-    i10 = -(l10 * i00) * i11
-    i20 = -(l20 * i00 + l21 * i10) * i22
-    i30 = -(l30 * i00 + l31 * i10 + l32 * i20) * i33
-    i21 = -(l21 * i11) * i22
-    i31 = -(l31 * i11 + l32 * i21) * i33
-    i32 = -(l32 * i22) * i33
-    k00 = 0.0 + i00 * i00 + i10 * i10 + i20 * i20 + i30 * i30    # J_hat^-1 = L^-T L^-1
-    k01 = 0.0 + i10 * i11 + i20 * i21 + i30 * i31
-    k02 = 0.0 + i20 * i22 + i30 * i32
-    k03 = 0.0 + i30 * i33
-    k11 = 0.0 + i11 * i11 + i21 * i21 + i31 * i31
-    k12 = 0.0 + i21 * i22 + i31 * i32
-    k13 = 0.0 + i31 * i33
-    k22 = 0.0 + i22 * i22 + i32 * i32
-    k23 = 0.0 + i32 * i33
-    k33 = 0.0 + i33 * i33
+    k00, k01, k02, k03, k11, k12, k13, k22, k23, k33 = inverse_entries(   # J_hat^-1
+        l00, l10, l11, l20, l21, l22, l30, l31, l32, l33)
     tr_inv = k00 + k11 + k22 + k33                # >= 1 / lambda_min(J_hat)
     # J_hat^-1 Delta
     m00 = k00 * d00 + k01 * d01 + k02 * d02 + k03 * d03
