@@ -121,3 +121,28 @@ def test_a_short_capture_over_ros_equals_the_same_loop_offline(tmp_path):
         assert ros["goals"]["no_watchdog_trip"] is True
     for name in ("capture.md", "capture_ros.png", "capture_laws.png"):
         assert (out / name).is_file()
+
+
+def test_a_bag_without_the_controllers_answers_is_named_with_its_log(tmp_path, capsys):
+    """A bag with the simulator's clock only (no answer of the controller recorded): one
+    error that names what is missing and quotes the controller's log, exit 1."""
+    from rosbags.typesys import get_typestore, Stores
+    from rcac_ros.tools.bags.writer import BagWriter
+    store = get_typestore(Stores.ROS2_JAZZY)
+    Clock = store.types["rosgraph_msgs/msg/Clock"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    w = BagWriter(str(tmp_path / "bag"), "mcap", flush_period=1e9)
+    w.add_topic("/clock", "rosgraph_msgs/msg/Clock")
+    for k in range(10):
+        raw = store.serialize_cdr(Clock(clock=Time(sec=0, nanosec=k * 2_000_000)),
+                                  "rosgraph_msgs/msg/Clock")
+        w.write("/clock", 10**18 + k, bytes(raw), sequence=k + 1)
+    w.close()
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "controller.log").write_text("[ERROR] the control step raised\n")
+    assert main(["capture-demo", "--bag", str(tmp_path / "bag"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    first = err.splitlines()[0]
+    assert first.startswith("rcac capture-demo: error: the bag holds no tracking_error and no "
+                            "parameter_estimates of the controller"), err
+    assert "'/clock': 10" in first and "the control step raised" in err

@@ -155,10 +155,19 @@ def read_run(bag, arm):
     store = get_typestore(Stores.ROS2_JAZZY)
     with Reader(bag) as reader:
         conns = [c for c in reader.connections if c.topic == name]
-        for conn, _, raw in reader.messages(connections=conns):
+        # (rosbags reads every topic when given no connection)
+        for conn, _, raw in reader.messages(connections=conns) if conns else ():
             msg = store.deserialize_cdr(raw, conn.msgtype)
             changes.append({"t": msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
                             "mass": msg.inertia.m})
+    missing = [k for k in ("tracking_error", "parameter_estimates") if k not in series]
+    if missing:
+        from rcac_ros.tools.launch import NodeFailed
+        log = os.path.join(os.path.dirname(os.path.abspath(bag)), "logs", "controller.log")
+        tail = open(log).read()[-3000:] if os.path.isfile(log) else "(no controller log)"
+        counts = {name: s.count for name, s in data.items()}
+        raise NodeFailed(f"the bag holds no {' and no '.join(missing)} of the controller "
+                         f"(messages per topic: {counts}); the end of {log}:\n{tail}")
     track = series["tracking_error"]
     t_est, est = series["parameter_estimates"]
     # the controller publishes its desired state (stamped with the state it answers), its
@@ -398,7 +407,11 @@ def run(args):
                     print(f"rcac capture-demo: error: the simulator refused the payload: "
                           f"{r.reason}", file=sys.stderr)
                     return 1
-        ros = read_run(bag, arm)
+        try:
+            ros = read_run(bag, arm)
+        except NodeFailed as err:
+            print(f"rcac capture-demo: error: {err}", file=sys.stderr)
+            return 1
         changes = ros["payload_changes"]
         held = [c["t"] for c in changes if c["mass"] > 0.0]
         freed = [c["t"] for c in changes if c["mass"] == 0.0 and held and c["t"] > held[0]]
