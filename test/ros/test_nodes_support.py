@@ -163,6 +163,19 @@ def spin_until(executor, cond, timeout=20.0):
     return cond()
 
 
+def distinct(states):
+    """``states`` with each stamp once, in order: the lockstep simulator sends state 0 again
+    while it waits for its first answer (a copy), which a slow probe may read after the
+    answer it sent."""
+    seen, out = set(), []
+    for m in states:
+        ns = m.header.stamp.sec * NS + m.header.stamp.nanosec
+        if ns not in seen:
+            seen.add(ns)
+            out.append(m)
+    return out
+
+
 def stamp(ns):
     """Integer nanoseconds as a builtin_interfaces/Time."""
     return TimeMsg(sec=ns // NS, nanosec=ns % NS)
