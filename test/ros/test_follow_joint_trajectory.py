@@ -368,14 +368,15 @@ class Loop:
     stall on the node's object, and the run asserts it never tripped.
     """
 
-    def __init__(self, ctx, ex):
+    def __init__(self, ctx, ex, **params):
         from rclpy.parameter import Parameter
         from test_nodes_support import PAPER_Q0, Probe
         from rcac_ros.core.model import css_arm
         from rcac_ros.core.simulator import Simulator
         from rcac_ros.nodes.controller.node import ControllerNode
+        params = dict(trajectory="topic", state_timeout=1.0, **params)
         self.node = ControllerNode(context=ctx, parameter_overrides=[
-            Parameter("trajectory", value="topic"), Parameter("state_timeout", value=1.0)])
+            Parameter(name, value=value) for name, value in params.items()])
         self.node.watchdog.state_timeout = math.inf     # no trip on a stalled process
         self.probe = Probe(ctx, record=("efforts",))
         self.ex = ex
@@ -571,3 +572,37 @@ def test_controller_topic_trajectory_replaces_the_goal_in_the_executor_thread():
         pub.publish(empty)                  # empty: hold, in the executor thread too
         assert loop.wait(lambda: node.motion.active is None)
         assert len(threads) >= 2 and all(t is threading.current_thread() for t in threads)
+
+
+@needs_control_msgs
+def test_controller_outcome_decided_off_the_executor_ends_the_goal_at_once():
+    """In lockstep the outcome is decided in the state input's thread: the executor, waiting
+    (no state, diagnostics every 30 s), is woken and ends the goal at once."""
+    import threading
+    from action_msgs.msg import GoalStatus
+    from test_nodes_support import PAPER_Q0
+    with ros_context() as (ctx, ex):
+        loop = Loop(ctx, ex, diagnostics_period=30.0)
+        for k in range(5):
+            loop.step(k)
+        handle = loop.send(_arm_goal(PAPER_Q0, 0))
+        assert handle.accepted
+        result = handle.get_result_async()
+        loop.step(5)
+        spin_until(ex, lambda: False, timeout=0.2)      # the executor has nothing left to do
+        decided = []
+
+        def abort():                                    # as the answer to a state does
+            time.sleep(0.3)                             # while the executor waits
+            with loop.node.callback_lock:
+                loop.node._fjt.abort("decided in another thread")
+                decided.append(time.monotonic())
+        other = threading.Thread(target=abort)
+        other.start()
+        end = time.monotonic() + 10.0
+        while not result.done() and time.monotonic() < end:
+            ex.spin_once(timeout_sec=3.0)
+        other.join()
+        assert result.done() and time.monotonic() - decided[0] < 1.0
+        assert result.result().status == GoalStatus.STATUS_ABORTED
+        assert "decided in another thread" in result.result().result.error_string

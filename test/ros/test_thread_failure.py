@@ -7,9 +7,9 @@ place the nodes run code of their own.
 * The controller's control step (an exception that is not the law's own ``RcacError``): the
   safe effort answers instead, ``control_errors`` counts it, one log line with the
   traceback, and control resumes once the fault is gone.
-* A callback that no part of the node guards (a controller process, timer mode): the
-  node logs the traceback, sends its zero effort (the arm must not keep its last effort),
-  and exits 1.
+* A callback that no part of the node guards (a controller process: timer mode's tick, in
+  the executor; lockstep's watchdog, in its own thread): the node logs the traceback, sends
+  its zero effort (the arm must not keep its last effort), and exits 1.
 
 The faults are injected from the test (a wrapped wait set, a wrapped core step, a wrapped
 watchdog in a child process); the code under test is the package's own.
@@ -21,6 +21,7 @@ import textwrap
 import time
 
 import numpy as np
+import pytest
 
 from test_nodes_support import (H_NS, JOINTS, PAPER_Q0, Probe, ros_context, ROOT, spin_until,
                                 stop)
@@ -129,34 +130,40 @@ def test_a_control_step_that_raises_sends_the_safe_effort_counts_logs_and_resume
         assert "Traceback" in lines[0] and "ZeroDivisionError: injected step failure" in lines[0]
 
 
-#: a controller process (timer mode) whose watchdog raises at its 500th tick with a state
-#: (about 1 s of control): outside the
-#: control step, so nothing in the node guards it
+#: a controller process whose watchdog raises at its 500th tick (timer mode) or 100th check
+#: (lockstep mode, its own thread) with a state: about 1 s of control, outside the control
+#: step, so nothing in the node guards it
 CHILD = textwrap.dedent("""
     import sys
     from rcac_ros.nodes.controller import node
     from rcac_ros.nodes.runtime.base import run
     from rcac_ros.nodes.safety.watchdog import Watchdog
 
-    ticked = Watchdog.ticked
+    METHOD, AT = sys.argv[1], int(sys.argv[2])
+    original = getattr(Watchdog, METHOD)
     count = [0]
 
-    def failing_tick(self):
+    def failing(self):
         count[0] += self.state_received() is not None
-        if count[0] == 500:
-            raise KeyError("injected tick failure")
-        ticked(self)
+        if count[0] == AT:
+            raise KeyError("injected watchdog failure")
+        original(self)
 
-    Watchdog.ticked = failing_tick
+    setattr(Watchdog, METHOD, failing)
     sys.exit(run(node.ControllerNode, "controller", sys.argv))
 """)
 
 
-def test_an_unguarded_fault_stops_the_node_with_its_traceback_and_a_zero_effort():
+WATCHDOG_FAULTS = [("timer", "ticked", 500), ("lockstep", "check", 100)]
+
+
+@pytest.mark.parametrize("mode, method, at", WATCHDOG_FAULTS)
+def test_an_unguarded_fault_stops_the_node_with_its_traceback_and_a_zero_effort(
+        mode, method, at):
     from failsafe_harness import session, state_driver, wait
     with session() as probe:
         proc = subprocess.Popen(
-            [sys.executable, "-c", CHILD, "--ros-args", "-p", "mode:=timer",
+            [sys.executable, "-c", CHILD, method, str(at), "--ros-args", "-p", f"mode:={mode}",
              "-p", "state_timeout:=1.0"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
         try:
@@ -170,7 +177,8 @@ def test_an_unguarded_fault_stops_the_node_with_its_traceback_and_a_zero_effort(
             if proc.poll() is None:
                 stop(proc)
         assert code == 1, out
-        assert "controller: fatal: Traceback" in out and "KeyError: 'injected tick failure'" in out
+        assert "controller: fatal: Traceback" in out
+        assert "KeyError: 'injected watchdog failure'" in out
         assert wait(lambda: probe.logged("a callback raised; the node stops"), timeout=5.0)
         with probe.lock:
             efforts = list(probe.efforts)

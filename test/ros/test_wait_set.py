@@ -28,9 +28,15 @@ def test_publishers_have_no_default_event_handlers_subscriptions_keep_theirs():
         for node in (sim, ctrl):
             executor.add_node(node)
             subs = list(node.subscriptions)
-            assert len(list(node.publishers)) >= 3 and subs
+            assert len(list(node.publishers)) >= 3
             # rclpy gives each subscription two (incompatible QoS, incompatible type)
             assert len(handlers(node)) == 2 * len(subs), node.get_name()
+        # the controller's states come on a node of their own, which no executor spins: its
+        # reader's thread serves the subscription's two
+        state_input = ctrl.states._side
+        assert list(sim.subscriptions) and len(list(state_input.node.subscriptions)) == 1
+        events = state_input.subscription.event_handlers
+        assert len(events) == 2 and state_input._reader._events == events
         # an explicit request is kept
         seen = []
         pub = sim.create_publisher(JointState, "~/probe", 10,

@@ -5,7 +5,9 @@ parameters into a frozen config (:mod:`.params`) and compiles the law's kernels 
 (:mod:`.compiling`), activate starts the efforts once they are ready, deactivate sends one
 zero effort. Thin: message -> arrays ->
 :class:`~rcac_ros.core.composite.RecursiveCompositeController` -> message, in ``lockstep``
-(one step, :mod:`.control`, per valid JointState, time from its stamp) or ``timer`` mode
+(one step, :mod:`.control`, per valid JointState as the state input's thread reads it, time
+from its stamp; the node's callbacks and the watchdog's thread share its lock,
+:mod:`rcac_ros.nodes.runtime.serial`) or ``timer`` mode
 (``rate`` Hz on the latest valid state, on :class:`~rcac_ros.nodes.runtime.pacing.DeadlineLoop`
 or ``/clock``). Its parts, each given what it uses: the state input (:mod:`.state_input`),
 the watchdog (:mod:`rcac_ros.nodes.safety.watchdog`), the desired motion (:mod:`.motion`,
@@ -17,6 +19,7 @@ doc/nodes.md, doc/failsafe.md; parameters: ``config/controller.yaml``, doc/param
 
 import sys
 import time
+import traceback
 
 from rclpy.clock import Clock, ClockType
 
@@ -40,9 +43,14 @@ from rcac_ros.nodes.controller.lookahead import StatePredictor
 from rcac_ros.nodes.runtime.managed import FAILURE, ManagedNode
 from rcac_ros.nodes.runtime.pacing import DeadlineLoop
 from rcac_ros.nodes.runtime.realtime import RealtimeOptions
+from rcac_ros.nodes.runtime.serial import SerialCallbacks, SerialTimer
 
 
-class ControllerNode(ControlStep, ManagedNode):
+#: s an interrupt waits for the answer being computed before the zero effort goes out
+INTERRUPT_WAIT = 1.0
+
+
+class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
     """The recursive composite adaptive controller as a managed ROS 2 node.
 
     Constructed as :class:`~rcac_ros.nodes.runtime.managed.ManagedNode` (keyword arguments of
@@ -63,6 +71,7 @@ class ControllerNode(ControlStep, ManagedNode):
         self.loop = None                    # the steady-clock pacing of timer mode
         self._starvation = None             # timer mode's starvation guard
         self.realtime = None                # its real-time options, once configured
+        self.realtime_applied = None        # run()'s Realtime, once applied
         super().__init__(topics.CONTROLLER_NODE, **kwargs)
 
     # ------------------------------------------------------------------ lifecycle
@@ -99,7 +108,8 @@ class ControllerNode(ControlStep, ManagedNode):
             max_bytes=self.failsafe.max_state_bytes, watchdog=self.watchdog,
             outputs=self._outputs, log=log, warn=self._throttle.warn,
             is_running=lambda: self.running, steps=lambda: self.counts.steps,
-            restarted=self._stream_restarted, control=self._step))
+            restarted=self._stream_restarted, control=self._step,
+            serial=self.callback_lock if lockstep else None))
         self.inputs = [self.states]         # their side threads' errors: diagnostics
         self.motion = ControllerMotion(     # sampled by the control step, driven by the sources
             paper=cfg.paper, start=cfg.paper_q0, joint_names=self.model.joint_names,
@@ -121,7 +131,11 @@ class ControllerNode(ControlStep, ManagedNode):
         elif cfg.mode == "timer":
             self.loop = DeadlineLoop(cfg.h, self._on_tick)  # run() (or a test) drives it
             self.keep(self._drop_loop, self.loop)
-        if self.loop is None:               # lockstep, or timer mode on /clock
+        if lockstep:                        # beside the answers, without the executor
+            self.keep(SerialTimer.close, SerialTimer(
+                self.watchdog.check_period, self._on_watchdog, self.callback_lock,
+                f"{self.get_name()} watchdog", self._thread_fatal))
+        elif self.loop is None:             # timer mode on /clock
             self.keep(timer, self.create_timer(self.watchdog.check_period, self._on_watchdog,
                                                clock=Clock(clock_type=ClockType.STEADY_TIME)))
         self.keep(EstimateServices.destroy, EstimateServices(
@@ -131,16 +145,31 @@ class ControllerNode(ControlStep, ManagedNode):
             estimates_file=lambda: self.get_parameter("estimates_file").value))
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.keep(self.remove_post_set_parameters_callback, self._apply_parameters)
+        if self.realtime_applied is not None:   # configured again: its loop's thread is new
+            self.realtime_applied.move(self.loop_thread)
         log.info(f"configured: {cfg.mode} mode, model {self.model.name} (n={self.model.n}), "
                  f"trajectory {cfg.trajectory_source}, h={cfg.h * 1e3:g} ms, joints "
                  f"{list(self.joints)}; compiling the law's kernels")
+
+    @property
+    def loop_thread(self):
+        """Native id of the thread of the control step when it is not the main one (lockstep:
+        the state input's; its real-time options, :func:`run`), else ``None``."""
+        states = getattr(self, "states", None)
+        return states.thread if states is not None and self.config.mode == "lockstep" else None
 
     def _ready_to_activate(self):
         return self.kernels.done.is_set()
 
     def on_activate(self, state):
         """Activate once the kernels are ready (waits for them); FAILURE if they failed."""
-        return super().on_activate(state) if self.kernels.wait() else FAILURE
+        if not self.kernels.wait():
+            return FAILURE
+        result = super().on_activate(state)
+        if self.running and self.config.mode == "lockstep":
+            with self.callback_lock:        # the state that came while inactive, if recent
+                self.states.answer_parked()
+        return result
 
     def _reset_motion(self):
         """A fresh start: the motion, the state input and the watchdog restart."""
@@ -180,9 +209,21 @@ class ControllerNode(ControlStep, ManagedNode):
             self._fjt.abort(text)
 
     def _on_watchdog(self):
-        """The watchdog's steady timer (lockstep, or timer mode on /clock)."""
+        """The watchdog's steady timer (lockstep: its own thread; timer mode on /clock)."""
         if self.running:
             self.watchdog.check()
+
+    def _thread_fatal(self, text):
+        """The watchdog's thread raised: as an executor callback's fault in :func:`run`, the
+        traceback in the log, one zero effort, and the node stops (exit code 1)."""
+        try:
+            print(f"controller: fatal: {text}", file=sys.stderr, flush=True)
+            self.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
+            self.on_interrupt()
+        except Exception:               # noqa: BLE001 -- already failing: report, stop
+            print(f"controller: the stop failed too: {traceback.format_exc()}", file=sys.stderr)
+        finally:
+            self.exit_code, self.finished = 1, True
 
     def _activate(self):
         """Efforts on; the motion starts again from the next valid state."""
@@ -202,10 +243,20 @@ class ControllerNode(ControlStep, ManagedNode):
         self.get_logger().info("inactive: one zero effort sent, then silence")
 
     def on_interrupt(self):
-        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered."""
-        if self.running:
-            self.running = False
-            self._deactivate()
+        """SIGINT/SIGTERM (from :func:`run`): if active, one zero effort, delivered (after a
+        lockstep answer being computed, so that none follows it)."""
+        lock = self.callback_lock
+        taken = lock.acquire(timeout=INTERRUPT_WAIT)
+        try:
+            if self.running:
+                self.running = False
+                self._deactivate()
+                if not taken and lock.acquire(timeout=INTERRUPT_WAIT):
+                    taken = True            # an answer held the lock: its effort went out
+                    self._outputs.zero_effort()     # after the zero effort; once more
+        finally:
+            if taken:
+                lock.release()
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, changed):

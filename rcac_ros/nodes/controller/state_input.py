@@ -1,13 +1,13 @@
 """The controller's state input: ``/joint_states`` in, the latest valid ``(q, qd)`` out.
 
-:class:`StateInput` subscribes with the size cap checked on the serialised bytes (doc/failsafe.md;
-in timer mode in its own thread, :class:`~rcac_ros.nodes.runtime.inputs.SideInput`, so the loop
-thread only ticks), reads each message into model order
+:class:`StateInput` takes the states in its own thread
+(:class:`~rcac_ros.nodes.runtime.inputs.SideInput`) with the size cap checked on the
+serialised bytes (doc/failsafe.md), reads each message into model order
 (:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`), judges its stamp
 (:class:`~rcac_ros.nodes.safety.state_guards.StampGate`: a restart of the stream is followed, a
 stamp in the future refused), estimates the velocity when none is given and tells the
 watchdog that a valid state came. In lockstep mode the control step is the answer to the
-state, run in its callback.
+state, run in that thread as soon as the state is read.
 
 Threads (timer mode: the states come in the side thread, the control loop runs in its own):
 
@@ -24,7 +24,11 @@ Threads (timer mode: the states come in the side thread, the control loop runs i
   (the activation), never by the control step: a reset waits for a state being read, so
   no state from before it survives it and the gate is never reset halfway through a check.
 
-In lockstep mode all of it runs in the executor's thread; the lock is then never contended.
+In lockstep mode the side thread reads the message, then judges the state and answers it
+holding the node's lock (:class:`~rcac_ros.nodes.runtime.serial.SerialCallbacks`), which
+every callback of the node's executor and the watchdog's thread also hold: no answer runs
+beside an activation, a parameter change, a trajectory's hand-over or a watchdog check. The
+executor is out of the answer's path (doc/failsafe.md, "Known limitations").
 """
 
 import threading
@@ -36,7 +40,8 @@ from sensor_msgs.msg import JointState
 
 from rcac_ros import topics
 from rcac_ros.nodes.runtime.base import QOS
-from rcac_ros.nodes.runtime.inputs import capped, SideInput
+from rcac_ros.nodes.runtime.inputs import SideInput
+from rcac_ros.nodes.runtime.serial import acquire
 from rcac_ros.nodes.msgs.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                              VelocityEstimate)
 from rcac_ros.nodes.safety.state_guards import StampGate
@@ -57,7 +62,8 @@ class StateInput:
     joint_names : sequence of str
         The model's joints.
     lockstep : bool
-        Each valid state is answered in its callback (else timer mode: a side thread).
+        Each valid state is answered as it is read (else timer mode: the loop takes the
+        latest).
     h : float
         The control period, s.
     velocity_cutoff : float
@@ -82,6 +88,8 @@ class StateInput:
         ``restarted()``: the stream restarted; the motion and the filters start over.
     control : callable
         Lockstep: ``control(t_ns, header_stamp)``, the answer to a valid state.
+    serial : threading.RLock, optional
+        Lockstep: the node's lock, held to judge and answer a state (not while reading it).
 
     Attributes
     ----------
@@ -96,7 +104,8 @@ class StateInput:
     """
 
     def __init__(self, node, *, joint_names, lockstep, h, velocity_cutoff, gate, max_bytes,
-                 watchdog, outputs, log, warn, is_running, steps, restarted, control):
+                 watchdog, outputs, log, warn, is_running, steps, restarted, control,
+                 serial=None):
         self.node = node
         self.lockstep, self.h, self.velocity_cutoff = lockstep, h, velocity_cutoff
         self.gate, self.watchdog, self.outputs = gate, watchdog, outputs
@@ -106,21 +115,18 @@ class StateInput:
         self._reader = JointStateReader(joint_names)
         self._rate_warned = False
         self._lock = threading.Lock()       # the side thread's reading against reset()
-        if not lockstep:                    # states in their own thread: the loop only ticks
-            self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS, self._on_state,
-                                   max_bytes, "state", self.warn, prefault=True)
-            self._sub = None
-        else:                               # lockstep: the answer is the state's callback
-            self._side = None
-            self._sub = node.create_subscription(
-                JointState, topics.JOINT_STATES,
-                capped(JointState, max_bytes, "state", self._on_state, self.warn), QOS, raw=True)
+        self._serial, self._closing, self._resets = serial, False, 0
+        self._parked = None                 # lockstep: (msg, read, steady ns) while inactive
+        self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
+                               self._on_state if serial is None else self._on_state_serial,
+                               max_bytes, "state", self.warn, prefault=True)
         self.reset()
 
     def reset(self):
         """A fresh start: no state yet, a new velocity estimate, the stamp gate reset (after
         a state being read, if any)."""
         with self._lock:
+            self._resets += 1
             self.velocity = VelocityEstimate(self.velocity_cutoff)
             self.latest = None
             self._restarts = self._taken_restarts = 0
@@ -130,8 +136,8 @@ class StateInput:
     @property
     def errors(self):
         """Failed takes, buffer allocations and callback exceptions of the side thread, by
-        kind (none in lockstep, where the executor takes)."""
-        return {} if self._side is None else self._side.errors
+        kind."""
+        return self._side.errors
 
     # the latest valid state, each field read from one load of ``latest`` (None: none yet)
     q = property(lambda self: getattr(self.latest, "q", None))
@@ -155,12 +161,15 @@ class StateInput:
             self._taken = sample
         return sample
 
+    @property
+    def thread(self):
+        """The native id of the side thread (lockstep: the thread of the answers)."""
+        return self._side.native_id
+
     def close(self):
-        """Stop the side thread or destroy the subscription (cleanup)."""
-        if self._side is not None:
-            self._side.close()
-        else:
-            self.node.destroy_subscription(self._sub)
+        """Stop the side thread (cleanup; a state waiting for the node's lock is dropped)."""
+        self._closing = True
+        self._side.close()
 
     def _restart(self, stamp):
         """The stream restarted (a simulator or driver restart): start over from it (the
@@ -182,6 +191,34 @@ class StateInput:
                 f"state period {gap * 1e3:.3f} ms differs from h = {h * 1e3:.3f} ms "
                 "(set 'rate' to 1/dt of the simulator)")
 
+    def _on_state_serial(self, msg):
+        """Lockstep: read the state, then judge and answer it holding the node's lock. A
+        state read while active is not answered after a reset (a deactivation and the
+        activation that follows); one that comes while inactive is kept, the latest only,
+        for :meth:`answer_parked` at the activation (a simulator started as the controller
+        is configured sends its first state before the controller is active)."""
+        running, resets = self.is_running(), self._resets
+        try:
+            read = self._reader.read(msg)
+        except StateRejected as err:
+            return self.warn(err.kind, str(err))
+        if acquire(self._serial, lambda: self._closing):
+            try:
+                if not self.is_running():
+                    self._parked = (msg, read, time.monotonic_ns())
+                elif self._resets == resets or not running:
+                    self._answer(msg, *read)
+            finally:
+                self._serial.release()
+
+    def answer_parked(self):
+        """Lockstep, at the activation (holding the node's lock): answer the latest state that
+        came while inactive, if it came within the watchdog's ``state_timeout``."""
+        parked, self._parked = self._parked, None
+        if parked is not None \
+                and time.monotonic_ns() - parked[2] <= self.watchdog.state_timeout * 1e9:
+            self._answer(parked[0], *parked[1])
+
     def _on_state(self, msg):
         if not self.is_running():
             return
@@ -189,6 +226,9 @@ class StateInput:
             q, qd = self._reader.read(msg)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
+        self._answer(msg, q, qd)
+
+    def _answer(self, msg, q, qd):
         with self._lock:
             answer = self._hand_over(msg, q, qd)
         if answer is not None:              # lockstep: the step, out of the lock

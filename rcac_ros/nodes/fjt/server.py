@@ -24,10 +24,12 @@ The behaviour is that of ros2_controllers' joint_trajectory_controller (JTC, Jaz
   it ``goal_time_tolerance`` s after the end aborts (``GOAL_TOLERANCE_VIOLATED``) and holds.
 * **Cancel.** Accepted for the running goal: the controller holds, the goal ends CANCELED.
 
-Everything runs in the node's single-threaded executor: the goal, cancel and accepted
-callbacks, the control step that calls :meth:`FollowJointTrajectoryServer.update`, and the
-execute coroutine, which only waits for the outcome that ``update`` (or a cancel, a newer
-goal, :meth:`FollowJointTrajectoryServer.abort`) decides.
+The goal, cancel and accepted callbacks run in the node's executor, the control step that
+calls :meth:`FollowJointTrajectoryServer.update` in the executor (timer mode) or in the state
+input's thread (lockstep), one at a time (the node's lock,
+:mod:`rcac_ros.nodes.runtime.serial`). The execute coroutine only waits for the outcome
+that ``update`` (or a cancel, a newer goal, :meth:`FollowJointTrajectoryServer.abort`)
+decides; a guard condition wakes the executor to finish it at once.
 """
 
 from builtin_interfaces.msg import Duration as DurationMsg, Time as TimeMsg
@@ -108,6 +110,8 @@ class FollowJointTrajectoryServer:
         self._goal = None           # the running goal
         self._started = {}          # goal id -> its _Goal, until its execute task takes it
         self._log = node.get_logger()
+        # set with an outcome: the executor, perhaps waiting, resumes the execute task now
+        self._wake = node.create_guard_condition(lambda: None)
         self._server = ActionServer(node, FollowJointTrajectory, name,
                                     execute_callback=self._execute,
                                     goal_callback=self._on_goal,
@@ -172,6 +176,7 @@ class FollowJointTrajectoryServer:
             self._sink.hold()
         result = FollowJointTrajectory.Result(error_code=code, error_string=text)
         g.outcome.set_result((state, result))
+        self._wake.trigger()
         if state == "aborted":      # (one call site per severity: rclpy insists)
             self._log.warning(f"FollowJointTrajectory goal aborted: {text}")
         else:
@@ -222,6 +227,7 @@ class FollowJointTrajectoryServer:
         """Abort the running goal (the caller holds or stops) and remove the action server."""
         self.abort("the controller stopped")
         self._server.destroy()
+        self._node.destroy_guard_condition(self._wake)
 
 
 def create_server(node, sink, **kwargs):

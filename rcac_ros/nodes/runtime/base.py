@@ -197,19 +197,6 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
-def _realtime(node):
-    """Apply the node's opt-in real-time options (its ``realtime`` attribute, a
-    :class:`~rcac_ros.nodes.runtime.realtime.RealtimeOptions`) to this thread (the loop's)
-    and, for the priority, to the process's other threads."""
-    options = getattr(node, "realtime", None)
-    if options is None or not options.any:
-        return None
-    rt = Realtime(options, warn=node.get_logger().warning)
-    if rt.applied:
-        node.get_logger().info(f"real-time options: {', '.join(rt.applied)}")
-    return rt
-
-
 #: s a node stays after its shutdown transition, serving its executor, so that DDS delivers
 #: what it wrote last (the transition's answer)
 SHUTDOWN_LINGER = 0.5
@@ -255,7 +242,7 @@ def run(node_factory, prog, args=None):
     try:
         node = node_factory()
         gcwatch.WATCH.install()             # the collector's pauses, in the diagnostics
-        rt = _realtime(node)
+        rt = Realtime.for_node(node)
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         spinning = True

@@ -50,8 +50,8 @@ class SideInput:
     Parameters
     ----------
     owner : rclpy.node.Node
-        The node whose topic it is (the name is resolved in its namespace: ``~/x`` stays
-        ``/<owner>/x``, remappings of the owner do not apply).
+        The node whose topic it is: the name is resolved and remapped as the owner's
+        (``~/x`` is ``/<owner>/x``).
     msg_type, topic, qos :
         As for ``create_subscription``.
     callback : callable
@@ -73,14 +73,15 @@ class SideInput:
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject,
                  prefault=False):
-        if topic.startswith("~/"):      # the owner's private topic, not this side node's
-            topic = owner.resolve_topic_name(topic, only_expand=True)
-        self.topic = topic
+        # the owner's name, namespace and remappings (its own, and the process's), once: the
+        # side node applies no rule of its own
+        self.topic = topic = owner.resolve_topic_name(topic)
         self.node = Node(f"{owner.get_name()}_{what}_input", namespace=owner.get_namespace(),
                          context=owner.context, start_parameter_services=False,
-                         enable_rosout=False)
+                         enable_rosout=False, use_global_arguments=False)
         self.subscription = self.node.create_subscription(
             msg_type, topic, lambda _: None, qos, raw=True)
+        self._closed = False
 
         def on_oversize(nbytes):
             try:
@@ -98,7 +99,8 @@ class SideInput:
 
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,
-                                 f"{what} input", owner.get_logger(), prefault=prefault)
+                                 f"{what} input", owner.get_logger(), prefault=prefault,
+                                 events=self.subscription.event_handlers)
 
     @property
     def errors(self):
@@ -106,7 +108,15 @@ class SideInput:
         (``RawReader.errors``)."""
         return self._reader.errors
 
+    @property
+    def native_id(self):
+        """The thread's native id."""
+        return self._reader.native_id
+
     def close(self):
-        """Stop the thread and destroy the helper node."""
+        """Stop the thread and destroy the helper node (once)."""
+        if self._closed:
+            return
+        self._closed = True
         self._reader.close()
         self.node.destroy_node()

@@ -44,8 +44,7 @@ RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
 ERROR_BACKOFF = 0.001
 #: the wait for a sample, ns (also the longest a failed shrink waits for its next attempt)
 WAIT_NS = 50_000_000
-#: s before the reader's loop starts again after it raised (a lasting fault is retried at
-#: 10 Hz, not spun)
+#: s before the reader's loop starts again after it raised (a lasting fault: 10 Hz, no spin)
 RESTART_BACKOFF = 0.1
 
 
@@ -121,6 +120,9 @@ class RawReader:
         ones are (the thread's other samples then wait less behind it).
     name : str
         The thread's name (and the prefix of its log lines).
+    events : sequence of rclpy.event_handler.EventHandler
+        The subscription's (``subscription.event_handlers``: incompatible QoS or type, logged),
+        served in this thread's wait set; an executor's beside it spun (rmw_fastrtps).
     log : logger
         ``log.error(text)``: the first error of each kind (see :attr:`errors`).
 
@@ -144,9 +146,10 @@ class RawReader:
     HOLD = 33_554_432
 
     def __init__(self, subscription, context, on_bytes, on_oversize, cap, name, log,
-                 hold=HOLD, prefault=False):
+                 hold=HOLD, prefault=False, events=()):
         self._rcl, self._rcutils = _libraries()
         self._sub = subscription
+        self._events = list(events)
         self._context = context
         self._on_bytes, self._on_oversize, self._cap = on_bytes, on_oversize, cap
         self._bound = max(cap, self.KEEP, hold)
@@ -171,6 +174,11 @@ class RawReader:
         if ret == RCL_RET_OK and self._prefault:    # mapped now, not during a sample's copy
             ctypes.memset(msg.buffer, 0, self._size)
         return ret
+
+    @property
+    def native_id(self):
+        """The thread's native id (its scheduling: :mod:`~rcac_ros.nodes.runtime.realtime`)."""
+        return self._thread.native_id
 
     @property
     def capacity(self):
@@ -241,6 +249,15 @@ class RawReader:
                     if self._msg.buffer_capacity > self._bound:
                         self._shrink()
 
+    def _on_event(self, event):
+        """A QoS event of the subscription: its handler's callback, as an executor's."""
+        try:
+            if (data := event.take_data()):
+                event.callback(data)
+        except Exception as err:    # noqa: BLE001 -- the input must keep flowing
+            self._error("callback", "an event callback raised; the reader goes on:\n"
+                        + traceback.format_exc().rstrip(), type(err))
+
     def _run(self):
         """The thread: serve the subscription; a loop that raised is logged with its
         traceback, counted (``"thread"``) and started again after :data:`RESTART_BACKOFF`."""
@@ -257,15 +274,20 @@ class RawReader:
 
     def _serve(self):
         """Wait and take until stopped (a new wait set each time the loop starts)."""
-        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, self._context.handle)
+        wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, len(self._events), self._context.handle)
         while not self._stop.is_set() and self._context.ok():
             with self._sub.handle, self._context.handle:
                 wait_set.clear_entities()
                 wait_set.add_subscription(self._sub.handle)
+                for event in self._events:
+                    event.add_to_wait_set(wait_set)
                 wait_set.wait(WAIT_NS)                  # without the lock
             if self._sub.handle.pointer in wait_set.get_ready_entities("subscription") \
                     and self._take_all():
                 self._stop.wait(ERROR_BACKOFF)  # a lasting error does not spin the thread
+            for event in self._events:
+                if event.is_ready(wait_set):
+                    self._on_event(event)
             if self._msg.buffer_capacity > self._bound:     # a failed shrink: again
                 self._shrink()
 

@@ -18,12 +18,15 @@ always runs from the law's last effort.
 
 Its clock across threads (doc/failsafe.md, "Watchdog clock"). The watchdog keeps two
 times: ``tick_ns`` and the arrival of the latest valid state, which it does not store but
-reads through ``state_received()``. Every method of :class:`Watchdog` runs in the thread
-that runs the control step: in lockstep mode and on ``/clock`` the executor's (the state's
-callback, the ticks and the steady timer of :meth:`check` are its callbacks), on the deadline
-loop of timer mode the node's main thread, which serves the executor between its ticks. So
-``tick_ns``, ``tripped``, ``trips`` and the spells are written and read by one thread. The
-only time written by another thread is the arrival of a state in timer mode: the state
+reads through ``state_received()``. In lockstep mode every method of :class:`Watchdog` runs
+holding the node's lock (:mod:`rcac_ros.nodes.runtime.serial`): the answers in the state
+input's thread, :meth:`check` in the watchdog's thread, the rest in the executor's
+callbacks; one at a time, so nothing is read while it is written. In timer mode they run in
+the thread that runs the control step: on ``/clock`` the executor's (the ticks and the
+steady timer of :meth:`check` are its callbacks), on the deadline loop the node's main
+thread, which serves the executor between its ticks. So ``tick_ns``, ``tripped``, ``trips``
+and the spells are written and read by one thread. The only time written by another thread
+is the arrival of a state in timer mode: the state
 input's side thread stamps it (steady clock) into a new immutable
 :class:`~rcac_ros.nodes.controller.state_input.Sample` together with the state, and hands it
 over by one reference assignment; ``state_received()`` reads that reference once and the
@@ -96,7 +99,8 @@ class Watchdog:
 
     @property
     def check_period(self):
-        """s between two :meth:`check` calls of the steady timer (lockstep, timer on /clock)."""
+        """s between two :meth:`check` calls of the steady timer (lockstep: the watchdog's
+        thread; timer mode on /clock)."""
         return min(self.state_timeout / 2.0, 0.01)
 
     # ------------------------------------------------------------------ staleness
