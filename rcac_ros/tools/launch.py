@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 from rcac_ros.errors import ConfigError, RcacError
 
@@ -209,3 +210,50 @@ def shut_down(children, executor=None, ctx=None):
     if ctx is not None:
         ctx.try_shutdown()
     return codes
+
+
+def wait_until_active(node, executor, name, timeout=30.0, alive=None):
+    """Spin until the lifecycle node ``name`` reports ``active`` (its ``get_state`` service).
+
+    A managed node's publishers exist from its configure, so seeing them is not enough to
+    start what it answers: the controller activates once its kernels are loaded, which a
+    loaded machine can delay by seconds, and a lockstep simulator started before then
+    steps on without answers.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The tool's node (the client is made on it and destroyed before returning).
+    executor : rclpy.executors.Executor
+        Executor ``node`` was added to.
+    name : str
+        The lifecycle node's name (``/name/get_state``).
+    timeout : float
+        Seconds to wait.
+    alive : callable, optional
+        Called while waiting; waiting stops (returning False) when it returns False.
+
+    Returns
+    -------
+    bool
+        True once the node is active, False on timeout or when ``alive()`` turned False.
+    """
+    from lifecycle_msgs.msg import State
+    from lifecycle_msgs.srv import GetState
+
+    client = node.create_client(GetState, f"/{name}/get_state")
+    deadline = time.monotonic() + timeout
+    future = None
+    try:
+        while time.monotonic() < deadline and (alive is None or alive()):
+            if future is None and client.service_is_ready():
+                future = client.call_async(GetState.Request())
+            if future is not None and future.done():
+                result = future.result()
+                if result is not None and result.current_state.id == State.PRIMARY_STATE_ACTIVE:
+                    return True
+                future = None
+            executor.spin_once(timeout_sec=0.02)
+        return False
+    finally:
+        node.destroy_client(client)

@@ -144,6 +144,24 @@ def test_an_error_in_configure_leaves_it_unconfigured_and_says_why():
         ctrl.wait(timeout=30.0)
 
 
+def test_the_tools_wait_for_the_activation_not_for_the_publishers():
+    """The publishers of a configured, inactive controller are visible; the tools' wait
+    (what the demo does before starting a lockstep simulator) holds until the activation."""
+    from rcac_ros.tools.launch import wait_until_active
+    with managed_controller("autostart:=false") as (ex, probe, ctrl, lc):
+        assert not wait_until_active(probe, ex, "rcac_controller", timeout=0.5)
+        assert lc.transition(Transition.TRANSITION_CONFIGURE)
+        assert spin_until(ex, lambda: probe.subs["efforts"].get_publisher_count() > 0,
+                          timeout=60.0)
+        assert not wait_until_active(probe, ex, "rcac_controller", timeout=1.0)
+        assert not wait_until_active(probe, ex, "rcac_controller", timeout=30.0,
+                                     alive=lambda: False)
+        assert lc.transition(Transition.TRANSITION_ACTIVATE)
+        assert wait_until_active(probe, ex, "rcac_controller", timeout=30.0)
+        assert lc.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+        ctrl.wait(timeout=30.0)
+
+
 def test_autostart_is_active_in_one_step_and_shutdown_from_active():
     with managed_controller("state_timeout:=1.0") as (ex, probe, ctrl, lc):
         assert spin_until(ex, lambda: lc.state() == State.PRIMARY_STATE_ACTIVE, timeout=30.0)

@@ -22,7 +22,7 @@ from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.args import positive_float
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
-    StopFlag
+    StopFlag, wait_until_active
 from rcac_ros.tools.bags.record import BagRecorder, format_counts
 
 
@@ -140,6 +140,11 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             if not recorder.wait_for_publishers(executor, ctrl_topics, start_timeout, all_alive):
                 check("while starting")
                 raise NodeFailed(f"the controller's topics were not discovered within "
+                                 f"{start_timeout:g} s (see {children[0].log_path})")
+            if not wait_until_active(recorder.node, executor, topics.CONTROLLER_NODE,
+                                     start_timeout, all_alive):
+                check("while starting")
+                raise NodeFailed(f"the controller did not become active within "
                                  f"{start_timeout:g} s (see {children[0].log_path})")
             children.append(Child("simulator", node_command("simulator", overrides=sim_over),
                                   env, os.path.join(logs, "simulator.log")))
