@@ -28,8 +28,8 @@ def test_short_demo(tmp_path):
     with Reader(out / "bag") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     steps = int(round(2.0 / 0.002))
-    # the demo waits until the recorder has matched the controller before starting the
-    # simulator, so the controller's topics hold every step; joint_states and /clock may
+    # the demo waits until the recorder has matched the controller and the controller is
+    # active before starting the simulator, so the controller's topics hold every step; joint_states and /clock may
     # start late on a loaded machine (the recorder discovers the simulator as it starts)
     for name in ("parameter_estimates", "tracking_error", "prediction_error",
                  "desired_state"):
