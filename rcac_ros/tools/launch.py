@@ -212,7 +212,7 @@ def shut_down(children, executor=None, ctx=None):
     return codes
 
 
-def wait_until_active(node, executor, name, timeout=30.0, alive=None):
+def wait_until_active(node, executor, name, timeout=30.0, alive=None, resend=0.5):
     """Spin until the lifecycle node ``name`` reports ``active`` (its ``get_state`` service).
 
     A managed node's publishers exist from its configure, so seeing them is not enough to
@@ -232,6 +232,8 @@ def wait_until_active(node, executor, name, timeout=30.0, alive=None):
         Seconds to wait.
     alive : callable, optional
         Called while waiting; waiting stops (returning False) when it returns False.
+    resend : float
+        Seconds after which an unanswered request is dropped and sent again.
 
     Returns
     -------
@@ -243,11 +245,17 @@ def wait_until_active(node, executor, name, timeout=30.0, alive=None):
 
     client = node.create_client(GetState, f"/{name}/get_state")
     deadline = time.monotonic() + timeout
-    future = None
+    future, sent = None, 0.0
     try:
         while time.monotonic() < deadline and (alive is None or alive()):
+            now = time.monotonic()
+            if future is not None and not future.done() and now - sent > resend:
+                # a request sent before the server's reply writer matched this client is
+                # answered into the void (DDS discovery is per endpoint): ask again
+                client.remove_pending_request(future)
+                future = None
             if future is None and client.service_is_ready():
-                future = client.call_async(GetState.Request())
+                future, sent = client.call_async(GetState.Request()), now
             if future is not None and future.done():
                 result = future.result()
                 if result is not None and result.current_state.id == State.PRIMARY_STATE_ACTIVE:

@@ -221,3 +221,33 @@ def test_description_topic_waits_unconfigured_then_both_nodes_use_it():
     answers = [d for lab, d in probe.efforts if "stamp=" in lab]
     assert answers
     assert {d.shape for d in answers} == {(3,)}
+
+
+def test_the_tools_wait_asks_again_when_a_reply_is_lost():
+    """A reply lost on the way (the server's reply writer not yet matched to the client)
+    leaves a request unanswered for good; the wait asks again instead of timing out."""
+    from rclpy.callback_groups import ReentrantCallbackGroup
+    from rclpy.node import Node
+    from rclpy.task import Future
+
+    from rcac_ros.tools.launch import wait_until_active
+    calls = []
+    never = Future()
+
+    async def get_state(request, response):
+        calls.append(request)
+        if len(calls) == 1:
+            await never                                  # this reply never leaves
+        response.current_state = State(id=State.PRIMARY_STATE_ACTIVE, label="active")
+        return response
+
+    with ros_context() as (ctx, ex):
+        server = Node("lossy", context=ctx)
+        server.create_service(GetState, "/lossy/get_state", get_state,
+                              callback_group=ReentrantCallbackGroup())
+        probe = Node("waiter", context=ctx)
+        ex.add_node(server)
+        ex.add_node(probe)
+        assert wait_until_active(probe, ex, "lossy", timeout=20.0, resend=0.5)
+        assert len(calls) >= 2
+        never.cancel()

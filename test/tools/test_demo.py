@@ -29,8 +29,9 @@ def test_short_demo(tmp_path):
         counts = {c.topic: c.msgcount for c in reader.connections}
     steps = int(round(2.0 / 0.002))
     # the demo waits until the recorder has matched the controller and the controller is
-    # active before starting the simulator, so the controller's topics hold every step; joint_states and /clock may
-    # start late on a loaded machine (the recorder discovers the simulator as it starts)
+    # active before starting the simulator, so the controller's topics hold every step;
+    # joint_states and /clock may start late on a loaded machine (the recorder discovers
+    # the simulator as it starts)
     for name in ("parameter_estimates", "tracking_error", "prediction_error",
                  "desired_state"):
         assert counts[f"/rcac_controller/{name}"] == steps + 1, name
