@@ -6,7 +6,11 @@ Each block is one equation of doc/design.md §3-4 over one link, reading the pac
 
 import math
 
+import numba
 import numpy as np
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
 from ._jit import njit
 
 from ._packing import CONST_COLS, GAIN_K_D, I_ERR, LAMBDA, S_LINK
@@ -55,6 +59,92 @@ def packed_views(data, filt):
     ``filt[:, n]`` (layout: :mod:`rcac_ros.core._packing`)."""
     n = data.shape[0] - 1
     return n, data[:n, :CONST_COLS], data[:n, CONST_COLS:], data[n], filt[:, n]
+
+
+@intrinsic
+def unmanaged(typingctx, arr):
+    """``arr`` itself (the same data, shape, strides and type) without its reference count.
+
+    An array or a view of one carries a pointer to its owner's reference count, and numba
+    counts it up and down (an atomic operation each way, and a barrier to the compiler)
+    wherever the kernel binds it to a name: every inlined helper taking an array, at every
+    link, channel and step. A view of the array this returns carries none, so none of that
+    runs: the compiled arithmetic is the same, in the same order.
+
+    It must not outlive ``arr``: the kernel takes it of an array its caller holds (an
+    argument) and uses it, and the views of it, only while that call runs. It is never
+    returned, stored or given to Python.
+    """
+    if not isinstance(arr, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(arr)(context, builder, value=args[0])
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+        ary.parent = cgutils.get_null_value(ary.parent.type)
+        return ary._getvalue()
+    return arr(arr), codegen
+
+
+@intrinsic
+def _address(typingctx, arr, start):
+    """The address of ``arr``'s element ``start`` (counted in its data, C order)."""
+    if not (isinstance(arr, types.Array) and arr.layout == "C"
+            and isinstance(start, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(arr)(context, builder, value=args[0])
+        return builder.gep(ary.data, [args[1]])
+    return types.CPointer(arr.dtype)(arr, start), codegen
+
+
+@njit(cache=True, inline="always")
+def unmanaged_block(arr, start, shape):
+    """Elements ``start ...`` of a C-contiguous ``arr`` as a C-contiguous array of ``shape``
+    (``arr.ravel()[start:start + size].reshape(shape)``), without a reference count.
+
+    As :func:`unmanaged`: the block must not outlive ``arr`` (the kernel takes it of an
+    array its caller holds, for the length of that call), and ``start`` plus the block's
+    size must not exceed ``arr.size`` (not checked).
+    """
+    return numba.carray(_address(arr, start), shape)
+
+
+@njit(cache=True, inline="always")
+def unmanaged_views(data, filt):
+    """:func:`packed_views`, unmanaged (:func:`unmanaged_block`) and C-contiguous: ``n``, the
+    per-link constants, the per-link state, the scalars ``data[n]`` and the channels.
+
+    The per-link blocks are the rows of ``data`` at their first column (constants: 0, state:
+    ``CONST_COLS``), each as wide as a whole row, so that their columns are at fixed
+    offsets: ``const[i, k]`` is ``data[i, k]`` and ``state[i, k]`` is ``data[i, CONST_COLS +
+    k]``; likewise ``chan[c, k]`` is ``filt[c, n, k]``. Only the columns of each block are
+    read (those of :mod:`rcac_ros.core._packing`); past them a row runs into the next block
+    (the last channel's, past the end of ``filt``), which is never read through it. ``data``
+    and ``filt`` must outlive the views (the kernel's arguments, for the length of its call).
+    """
+    n = data.shape[0] - 1
+    width = data.shape[1]
+    m, rows, cols = filt.shape[0], filt.shape[1], filt.shape[2]
+    return (n, unmanaged_block(data, 0, (n, width)),
+            unmanaged_block(data, CONST_COLS, (n, width)),
+            unmanaged_block(data, n * width, (width,)),
+            unmanaged_block(filt, n * cols, (m, rows * cols)))
+
+
+if numba.config.DISABLE_JIT:      # the kernels as Python (the operation count): plain views
+    def unmanaged(arr):                                                   # noqa: F811
+        """:func:`unmanaged` run as Python: ``arr`` itself."""
+        return arr
+
+    def unmanaged_block(arr, start, shape):                               # noqa: F811
+        """:func:`unmanaged_block` run as Python: a view of ``arr``'s elements."""
+        return arr.reshape(-1)[start:start + math.prod(shape)].reshape(shape)
+
+    def unmanaged_views(data, filt):                                      # noqa: F811
+        """:func:`unmanaged_views` run as Python: :func:`packed_views`' (the same columns)."""
+        return packed_views(data, filt)
 
 
 def input_error(scal, n, values):

@@ -14,10 +14,10 @@ The paper's law also runs a fused body, bit for bit the same results and faster
 import math
 
 import numpy as np
-from ._jit import kernel
+from ._jit import kernel, njit
 
-from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, packed_views, reference_motion, \
-    rejects_input
+from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, reference_motion, \
+    rejects_input, unmanaged, unmanaged_block, unmanaged_views
 from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
                        I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
@@ -33,39 +33,58 @@ from .spatial import P0, transform_force_T
 
 #: general_law's: rcac_step_kernel passes data, filt as jdata, jfilt (same types)
 GENERAL_SIGNATURE = (f"{VEC}(float64[:, ::1], float64[:, :, ::1], float64[:, ::1], "
-                     f"float64[:, :, ::1], boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+                     f"float64[:, :, ::1], boolean, {VEC}, {VEC}, {VEC}, {VEC}, {VEC}, {VEC})")
+
+
+@njit(cache=True, inline="always")
+def scratch(data, filt, joint):
+    """:func:`general_law`'s scratch for the law of ``data``, ``filt``: with n links and m
+    channels, ``41 n + 148`` and, for the implicit solve, ``m (m + 2)`` with the joint terms,
+    else ``m (m + 29)``."""
+    n, m = data.shape[0] - 1, filt.shape[0]
+    return np.empty(n * 41 + 148 + m * (m + (2 if joint else 29)), data.dtype)
 
 
 @kernel(GENERAL_SIGNATURE)
-def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
+def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
     """The one body of :func:`rcac_step_kernel` and :func:`friction_step_kernel`: one control
     period of eqs 18-24, any channels, any option of the adaptation step, with joint i's
     terms of doc/design.md §7 (``jdata``, ``jfilt``) when ``joint`` is true, else without
-    them (``jdata``, ``jfilt`` unread). Returns tau (empty on bad input, code in scal[I_ERR]).
+    them (``jdata``, ``jfilt`` unread). ``work``: :func:`scratch`'s. Returns tau (empty on
+    bad input, code in scal[I_ERR]).
 
     Compiled once, with ``joint`` a run-time flag (``GENERAL_SIGNATURE``), and called, not
     inlined, by both entries: inlined into each with ``joint`` a constant, the body compiles
     twice for no measurable gain per step.
+
+    Every array it reads or writes, and every view of one, is unmanaged
+    (:func:`~rcac_ros.core._blocks.unmanaged`, :func:`~rcac_ros.core._blocks.unmanaged_views`:
+    C-contiguous rows, so that each column is at a fixed offset): the links' and channels'
+    helpers, inlined at every link, then count no references. All are arguments, held by
+    the entry for the length of the call; ``tau`` alone is allocated here.
     """
-    n, const, state, scal, chan = packed_views(data, filt)
+    data, filt = unmanaged(data), unmanaged(filt)
+    jdata, jfilt = unmanaged(jdata), unmanaged(jfilt)
+    q, qd, q_d, qd_d, qdd_d = unmanaged(q), unmanaged(qd), unmanaged(q_d), unmanaged(qd_d), \
+        unmanaged(qdd_d)
+    n, const, state, scal, chan = unmanaged_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
     m = chan.shape[0]
-    # the implicit solve's scratch: with the joint terms, 2 + m, else 29 + m per channel
-    work = np.empty(n * 41 + 148 + m * (m + (2 if joint else 29)), q.dtype)
-    C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
-    Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
-    G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
-    R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
-    grad, Pg, t = work[41 * n + 39:41 * n + 52], work[41 * n + 52:41 * n + 65], \
-        work[41 * n + 65:41 * n + 78]
-    F = work[41 * n + 78:41 * n + 84]             # F_ri during the backward pass
-    pp = work[41 * n:41 * n + 26]                 # phi_ci, psi_ci of predict_link
-    M4 = work[41 * n + 84:41 * n + 148].reshape((4, 4, 4))   # natural geometry's 4x4s
-    o = 41 * n + 148                              # the implicit solve's scratch:
-    A = work[o:o + m * m]                         # the m x m system (flat),
-    z = work[o + m * m:o + m * (m + 1)]           # its right-hand side,
-    order = work[o + m * (m + 1):o + m * (m + 2)]  # the active channels (by first link)
+    C = unmanaged_block(work, 0, (n, 9))             # eq 10's rotations
+    Fs = unmanaged_block(work, 9 * n, (n, 6))        # Y_ri theta_hat_i
+    G = unmanaged_block(work, 15 * n, (n, 13))       # Y_ri^T s_i
+    R = unmanaged_block(work, 28 * n, (n, 13))       # theta_hat_i - h P_i (...), eq 24 step 1
+    pp = unmanaged_block(work, 41 * n, (26,))        # phi_ci, psi_ci of predict_link
+    grad = unmanaged_block(work, 41 * n + 39, (13,))
+    Pg = unmanaged_block(work, 41 * n + 52, (13,))
+    t = unmanaged_block(work, 41 * n + 65, (13,))
+    F = unmanaged_block(work, 41 * n + 78, (6,))     # F_ri during the backward pass
+    M4 = unmanaged_block(work, 41 * n + 84, (4, 4, 4))   # natural geometry's 4x4s
+    o = 41 * n + 148                                 # the implicit solve's scratch:
+    A = unmanaged_block(work, o, (m * m,))           # the m x m system (flat),
+    z = unmanaged_block(work, o + m * m, (m,))       # its right-hand side,
+    order = unmanaged_block(work, o + m * (m + 1), (m,))  # the active channels (by first link)
     coef = (scal[I_FE], scal[I_FB0], scal[I_FB1], scal[I_LAM])
     tau = np.empty(n, q.dtype)
     first = scal[I_K] == 0.0
@@ -144,9 +163,9 @@ def general_law(data, filt, jdata, jfilt, joint, q, qd, q_d, qd_d, qdd_d):
         if joint:
             implicit_solve_joint(chan, filt, state, R, jfilt, jdata, A, z, order, scal)
         else:
-            start = work[o + m * (m + 2):o + m * (m + 3)]  # their first links,
-            Wt = work[o + m * (m + 3):o + m * (m + 16)].reshape((13, m))  # W_ci, U_ci at
-            Ut = work[o + m * (m + 16):o + m * (m + 29)].reshape((13, m))  # link i, columns
+            start = unmanaged_block(work, o + m * (m + 2), (m,))  # their first links,
+            Wt = unmanaged_block(work, o + m * (m + 3), (13, m))    # W_ci, U_ci at
+            Ut = unmanaged_block(work, o + m * (m + 16), (13, m))   # link i, columns
             implicit_solve(chan, filt, state, R, A, z, order, start, Wt, Ut, scal)
     else:
         for i in range(n):
@@ -185,7 +204,8 @@ def rcac_step_kernel(data, filt, q, qd, q_d, qd_d, qdd_d):
     ``data``, ``filt`` and ``chan`` follow the layout of :mod:`rcac_ros.core._packing`:
     :func:`general_law` without the joint terms.
     """
-    return general_law(data, filt, data, filt, False, q, qd, q_d, qd_d, qdd_d)
+    return general_law(data, filt, data, filt, False, scratch(data, filt, False), q, qd, q_d,
+                       qd_d, qdd_d)
 
 
 @kernel(FRICTION_SIGNATURE, calls=(general_law,))
@@ -196,4 +216,5 @@ def friction_step_kernel(data, filt, jdata, jfilt, q, qd, q_d, qd_d, qdd_d):
     ``jfilt`` (m, n, JFILT_COLS) of :mod:`rcac_ros.core.joint_friction` hold the joint
     terms: :func:`general_law` with them. Empty on bad input (code in ``scal[I_ERR]``).
     """
-    return general_law(data, filt, jdata, jfilt, True, q, qd, q_d, qd_d, qdd_d)
+    return general_law(data, filt, jdata, jfilt, True, scratch(data, filt, True), q, qd, q_d,
+                       qd_d, qdd_d)
