@@ -12,7 +12,7 @@ The work is split in two processes that compile different kernels at the same ti
   without the joint terms) and the natural geometry's steps, the Slotine-Li law's too;
 - ``others``: everything else: the paper's law's fused kernel (Euclidean, natural, with the
   joint terms), the Slotine-Li law, dynamics, kinematics, the simulator, the
-  identifiability accumulator, the command limiter.
+  identifiability accumulator, the command limiter and the effort clip.
 
 Usage: ``python -m rcac_ros.tools.warm [--jobs N] [GROUP ...]`` (each group in its own
 process, ``N`` at a time, default 2). Prints one line per group with its time. Exit code 1 if
@@ -59,13 +59,14 @@ def warm_recursive():
 
 def warm_others():
     """Everything else: the paper's law's fused kernel, the Slotine-Li law, dynamics,
-    kinematics, the simulator, the identifiability accumulator, the command limiter."""
+    kinematics, the simulator, the identifiability accumulator, the command limiter and the
+    effort clip."""
     import numpy as np
     from rcac_ros.core import (RecursiveCompositeController, Simulator,
                                SlotineLiCompositeController, css_arm, energy, forward_dynamics,
                                forward_kinematics, inverse_dynamics, mass_matrix)
     from rcac_ros.core.identifiability import Excitation
-    from rcac_ros.nodes.safety.guards import DesiredLimiter
+    from rcac_ros.nodes.safety.guards import DesiredLimiter, EffortClip
     model = css_arm()
     _step_each(RecursiveCompositeController, model, (
         {}, {"joint_friction": True}, {"geometry": "natural"}))
@@ -80,6 +81,7 @@ def warm_others():
     Simulator(model, dt=0.002).step(z)
     Excitation(model.n, 0.002).add(np.zeros((1, model.n, 13)))
     DesiredLimiter(0.01, 0.1, 0.002, model.n).warm()
+    EffortClip(np.ones(model.n), np.arange(model.n)).warm()
 
 
 WARMERS = {"recursive": warm_recursive, "others": warm_others}

@@ -28,7 +28,7 @@ import numpy as np
 from numba.core import event
 from rcac_ros.core import RecursiveCompositeController, SlotineLiCompositeController, css_arm
 from rcac_ros.core import Simulator, forward_dynamics, inverse_dynamics, mass_matrix
-from rcac_ros.nodes.safety.guards import DesiredLimiter
+from rcac_ros.nodes.safety.guards import DesiredLimiter, EffortClip
 with event.install_recorder("numba:compile") as rec:
     m = css_arm(); z = np.zeros(m.n); q = np.full(m.n, 0.1)
     for cls, variants in ((RecursiveCompositeController, ({}, {"joint_friction": True},
@@ -45,6 +45,7 @@ with event.install_recorder("numba:compile") as rec:
     Simulator(m, dt=0.002).step(z); forward_dynamics(m, q, z, z)
     inverse_dynamics(m, q, z, z); mass_matrix(m, q)
     DesiredLimiter(0.01, 0.1, 0.002, m.n).warm()
+    EffortClip(np.ones(m.n), np.arange(m.n)).warm()
 print(len(rec.buffer))
 """
 

@@ -14,10 +14,9 @@ failures").
 import time
 import traceback
 
-import numpy as np
-
 from rcac_ros.errors import RcacError
 from rcac_ros.nodes.controller.freeze import AdaptationFreeze
+from rcac_ros.nodes.safety.guards import EffortClip
 
 
 class ControlStep:
@@ -64,7 +63,8 @@ class ControlStep:
             self._throttle.warn("step", str(err))
             tau = None
         self.counts.stepped(time.perf_counter() - start, self.config.h)
-        if tau is None or not np.all(np.isfinite(tau)):
+        verdict, tau, ordered = self.failsafe.clip(tau) if tau is not None else (-1, 0, 0)
+        if verdict == EffortClip.NON_FINITE:
             self.counts.non_finite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "
                                 "publishing the safe effort, estimates restored")
@@ -72,19 +72,17 @@ class ControlStep:
             self._outputs.effort(self.config.safe_effort, stamp)
             self._effort_sent = True
             return
-        limit = self.config.effort_limit
+        self._outputs.effort(ordered, stamp)    # the answer first; what follows does not change it
+        self._effort_sent = True
         if AdaptationFreeze.RECOVERING in self.adaptation.reasons \
-                and np.all(np.abs(tau) < limit):    # the law has the arm again: adapt
+                and verdict == EffortClip.WITHIN:   # the law has the arm again: adapt
             self.adaptation.freeze(AdaptationFreeze.RECOVERING, False)
             self.get_logger().info(
                 "adaptation again: the law's effort is within its limits "
                 f"{time.monotonic() - self._recovering_since:.3f} s after the spell")
-        tau = np.clip(tau, -limit, limit)
         self.ctrl.set_applied_torque(tau)       # the filter of eq 22 sees what was sent
         if self._lookahead is not None:
             self._lookahead.applied = tau
-        self._outputs.effort(tau[self.config.out], stamp)
-        self._effort_sent = True
         self.watchdog.controlled()
         if self.counts.steps % self.config.publish_every == 0:
             self._outputs.monitors(self.ctrl.theta_hat, self.ctrl.E, q, qd, q_d,

@@ -16,7 +16,9 @@ All four carry the same stamp (the state's in lockstep), so they pair up sample 
 
 from sensor_msgs.msg import JointState
 
+from rcac_ros.nodes.msgs.cdr import JointStateWriter
 from rcac_ros.nodes.runtime.base import QOS_MONITOR
+from rcac_ros.nodes.runtime.rclpy_private import byte_sender
 
 #: the sub-topics of ``~/controller_state``
 PARTS = ("reference", "feedback", "error", "output")
@@ -24,7 +26,8 @@ TOPIC = "~/controller_state"
 
 
 class ControllerStatePublisher:
-    """Four JointState publishers on a node, one message object each (reused).
+    """Four JointState publishers on a node, their messages written as CDR bytes
+    (:class:`~rcac_ros.nodes.msgs.cdr.JointStateWriter`).
 
     Parameters
     ----------
@@ -38,15 +41,15 @@ class ControllerStatePublisher:
     def __init__(self, node, joints, create=None):
         create = create or node.create_publisher
         self.publishers = [create(JointState, f"{TOPIC}/{part}", QOS_MONITOR) for part in PARTS]
-        self._msgs = [JointState(name=list(joints)) for _ in PARTS]
+        self._sends = [byte_sender(pub) for pub in self.publishers]
+        self._write = JointStateWriter(joints)
 
     def publish(self, stamp, q_d, qd_d, qdd_d, q, qd, tau):
-        """Publish one sample; arrays in the constructor's joint order, ``stamp`` a Time msg."""
-        ref, fb, err, out = self._msgs
-        ref.position, ref.velocity, ref.effort = q_d.tolist(), qd_d.tolist(), qdd_d.tolist()
-        fb.position, fb.velocity = q.tolist(), qd.tolist()
-        err.position, err.velocity = (q_d - q).tolist(), (qd_d - qd).tolist()
-        out.effort = tau.tolist()
-        for pub, msg in zip(self.publishers, self._msgs):
-            msg.header.stamp = stamp
-            pub.publish(msg)
+        """Publish one sample; arrays in the constructor's joint order, ``stamp`` a Time msg
+        (``sec``, ``nanosec``)."""
+        write = self._write
+        ref, fb, err, out = self._sends
+        ref(write(stamp, q_d, qd_d, qdd_d))
+        fb(write(stamp, q, qd))
+        err(write(stamp, q_d - q, qd_d - qd))
+        out(write(stamp, effort=tau))

@@ -80,7 +80,8 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
         self.config, self.ctrl = read_parameters(self, values)     # checked; nothing compiled
         cfg, log, lockstep = self.config, self.get_logger(), self.config.mode == "lockstep"
         self.adaptation = AdaptationFreeze(self.ctrl)  # set_adaptation's and starvation's
-        self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning)
+        self.failsafe = ControllerGuards(values, self.model, cfg.h, cfg.effort_limit, log.warning,
+                                         cfg.out)
         self.realtime = RealtimeOptions.from_values(values)     # applied by run()
         self._lookahead = None if values["timer.lookahead"] is None or cfg.mode != "timer" \
             else StatePredictor(self.model, values["timer.lookahead"])
@@ -89,7 +90,7 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
             state_received=lambda: self.states.received, log=log) \
             if cfg.mode == "timer" and values["starvation.delay_margin"] != 0.0 else None
         self.kernels = self.keep(KernelWarmup.close, KernelWarmup(     # beside the spinning node
-            self.ctrl, self.failsafe.limiter, log, after=[
+            self.ctrl, self.failsafe.limiter, log, after=[self.failsafe.clip.warm] + [
                 part.prepare for part in (self._starvation, self._lookahead) if part]))
         self.compile_watch = self.keep(CompileWatch.close, CompileWatch(self, log))
         self.phase_error_ns = 0

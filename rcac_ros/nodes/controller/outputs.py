@@ -2,8 +2,10 @@
 
 Arrays arrive in model order and leave in the order of the ``joints`` parameter. In
 lockstep each effort is tagged with the stamp of the state it answers
-(:func:`rcac_ros.topics.effort_label`); in timer mode one message object is reused.
-They are lifecycle publishers: silent unless the node is active.
+(:func:`rcac_ros.topics.effort_label`). The messages of each step are written as CDR bytes
+(:mod:`~rcac_ros.nodes.msgs.cdr`) and published as such
+(:func:`~rcac_ros.nodes.runtime.rclpy_private.byte_sender`). They are lifecycle
+publishers: silent unless the node is active.
 """
 
 import numpy as np
@@ -12,7 +14,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from rcac_ros import topics
+from rcac_ros.nodes.msgs import cdr
 from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR
+from rcac_ros.nodes.runtime.rclpy_private import byte_sender
 from rcac_ros.nodes.controller.controller_state import ControllerStatePublisher
 
 
@@ -57,45 +61,35 @@ class ControllerOutputs:
         self._state = ControllerStatePublisher(node, joints, create)
         self._friction = create(Float64MultiArray, topics.FRICTION_ESTIMATES, QOS_MONITOR) \
             if joint_friction else None
-        self._friction_layout = MultiArrayLayout(dim=[
-            MultiArrayDimension(label="joint", size=n, stride=3 * n),
-            MultiArrayDimension(label="armature,damping,friction", size=3, stride=3)])
-        self._theta_layout = MultiArrayLayout(dim=[
-            MultiArrayDimension(label="link", size=n, stride=13 * n),
-            MultiArrayDimension(label="parameter", size=13, stride=13)])
+        self._send_effort = byte_sender(self._effort)
+        self._send = {name: byte_sender(pub) for name, pub in (
+            ("theta", self._theta), ("e", self._e), ("es", self._es), ("track", self._track),
+            ("desired", self._desired), ("friction", self._friction)) if pub is not None}
+        self._friction_bytes = cdr.MultiArrayWriter(
+            [("joint", n, 3 * n), ("armature,damping,friction", 3, 3)])
+        self._theta_bytes = cdr.MultiArrayWriter([("link", n, 13 * n), ("parameter", 13, 13)])
         m = len(channels)
-        self._channel_layout = MultiArrayLayout(dim=[MultiArrayDimension(
-            label=topics.channels_label(channels), size=m, stride=m)])
-        self._joint_layout = MultiArrayLayout(dim=[
-            MultiArrayDimension(label="joint", size=n, stride=n)])
-        # timer mode reuses its messages (publish serialises at once)
-        self._effort_layout = effort_layout(n)
-        self._watchdog_layout = effort_layout(n, watchdog=True)
-        self._timer_msg = Float64MultiArray(layout=self._effort_layout)
-        self._desired_msg = JointState(name=list(joints))
-        #: lockstep: the last answer sent (re-sent when the same state comes again)
+        self._channel_bytes = cdr.MultiArrayWriter([(topics.channels_label(channels), m, m)])
+        self._joint_bytes = cdr.MultiArrayWriter([("joint", n, n)])
+        self._desired_bytes = cdr.JointStateWriter(joints)
+        #: lockstep: the last answer sent, its bytes (sent again when the same state comes)
         self.last_answer = None
 
     def effort(self, values, stamp=None, watchdog=False):
-        """Publish efforts given in ``joints`` order (zeros if any is NaN/Inf)."""
+        """Publish efforts given in ``joints`` order (zeros if any is NaN/Inf); tagged with
+        ``stamp`` in lockstep."""
         values = np.asarray(values, dtype=float)
-        if not np.all(np.isfinite(values)):      # never publish NaN/Inf
+        if not np.isfinite(values).all():       # never publish NaN/Inf
             values = np.zeros_like(values)
-        if not self._tagged:                     # untagged: one message object, reused
-            msg = self._timer_msg
-            msg.layout = self._watchdog_layout if watchdog else self._effort_layout
-            msg.data = values.tolist()
-            self._effort.publish(msg)
-            return
-        msg = Float64MultiArray(layout=effort_layout(self.n, stamp, watchdog),
-                                data=values.tolist())
-        self._effort.publish(msg)
-        if not watchdog:
-            self.last_answer = msg
+        data = cdr.one_dim_array(
+            topics.effort_label(stamp if self._tagged else None, watchdog), self.n, values)
+        self._send_effort(data)
+        if self._tagged and not watchdog:
+            self.last_answer = data
 
     def answer_again(self):
         """Publish the last answer again (lockstep: the same state came twice)."""
-        self._effort.publish(self.last_answer)
+        self._send_effort(self.last_answer)
 
     def destroy(self):
         """Destroy every publisher (the node's cleanup)."""
@@ -108,24 +102,17 @@ class ControllerOutputs:
         """Publish the estimates (and the joint estimates, with ``joint_friction``), E
         (channel 1's, and every channel's), the tracking error, the desired state and
         ``~/controller_state`` (arrays in model order)."""
-        out = self._out
-        self._theta.publish(Float64MultiArray(layout=self._theta_layout,
-                                              data=theta_hat.ravel().tolist()))
+        out, send = self._out, self._send
+        send["theta"](self._theta_bytes(theta_hat))
         if self._friction is not None and friction_hat is not None:
-            self._friction.publish(Float64MultiArray(layout=self._friction_layout,
-                                                     data=friction_hat.ravel().tolist()))
-        self._e.publish(Float64(data=float(E[0])))   # the first channel (joint 1 by default)
-        self._es.publish(Float64MultiArray(layout=self._channel_layout, data=E.tolist()))
-        self._track.publish(Float64MultiArray(layout=self._joint_layout,
-                                              data=(q - q_d)[out].tolist()))
-        ds = self._desired_msg
-        ds.position = q_d[out].tolist()
-        ds.velocity = qd_d[out].tolist()
-        ds.effort = qdd_d[out].tolist()
-        ds.header.stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
-        self._desired.publish(ds)
-        self._state.publish(ds.header.stamp, q_d[out], qd_d[out], qdd_d[out], q[out], qd[out],
-                            tau[out])
+            send["friction"](self._friction_bytes(friction_hat))
+        send["e"](cdr.float64(float(E[0])))     # the first channel (joint 1 by default)
+        send["es"](self._channel_bytes(E))
+        send["track"](self._joint_bytes((q - q_d)[out]))
+        stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
+        q_d, qd_d, qdd_d = q_d[out], qd_d[out], qdd_d[out]
+        send["desired"](self._desired_bytes(stamp, q_d, qd_d, qdd_d))
+        self._state.publish(stamp, q_d, qd_d, qdd_d, q[out], qd[out], tau[out])
 
     def zero_effort(self, timeout=0.5):
         """Publish one zero effort (tagged watchdog) and wait up to ``timeout`` s for delivery."""

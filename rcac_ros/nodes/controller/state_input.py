@@ -3,7 +3,8 @@
 :class:`StateInput` takes the states in its own thread
 (:class:`~rcac_ros.nodes.runtime.inputs.SideInput`) with the size cap checked on the
 serialised bytes (doc/failsafe.md), reads each message into model order
-(:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`), judges its stamp
+(:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`; from its bytes when its frame
+and names repeat the last valid state's), judges its stamp
 (:class:`~rcac_ros.nodes.safety.state_guards.StampGate`: a restart of the stream is followed, a
 stamp in the future refused), estimates the velocity when none is given and tells the
 watchdog that a valid state came. In lockstep mode the control step is the answer to the
@@ -116,10 +117,10 @@ class StateInput:
         self._rate_warned = False
         self._lock = threading.Lock()       # the side thread's reading against reset()
         self._serial, self._closing, self._resets = serial, False, 0
-        self._parked = None                 # lockstep: (msg, read, steady ns) while inactive
+        self._parked = None                 # lockstep: (stamp, q, qd, steady ns) while inactive
         self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
                                self._on_state if serial is None else self._on_state_serial,
-                               max_bytes, "state", self.warn, prefault=True)
+                               max_bytes, "state", self.warn, prefault=True, fast=self._on_known)
         self.reset()
 
     def reset(self):
@@ -140,10 +141,8 @@ class StateInput:
         return self._side.errors
 
     # the latest valid state, each field read from one load of ``latest`` (None: none yet)
-    q = property(lambda self: getattr(self.latest, "q", None))
-    qd = property(lambda self: getattr(self.latest, "qd", None))
-    stamp = property(lambda self: getattr(self.latest, "stamp", None))
-    received = property(lambda self: getattr(self.latest, "received", None))
+    q, qd, stamp, received = (property(lambda self, f=f: getattr(self.latest, f, None))
+                              for f in ("q", "qd", "stamp", "received"))
 
     def take(self):
         """The control thread, before a step: the latest valid state (a :class:`Sample`).
@@ -191,7 +190,20 @@ class StateInput:
                 f"state period {gap * 1e3:.3f} ms differs from h = {h * 1e3:.3f} ms "
                 "(set 'rate' to 1/dt of the simulator)")
 
-    def _on_state_serial(self, msg):
+    def _on_known(self, data):
+        """A state read from its bytes (``JointStateReader.read_known``); False: it is
+        deserialised and read in full (:meth:`_on_state_serial`, :meth:`_on_state`)."""
+        running, resets = self.is_running(), self._resets
+        if self._serial is None and not running:
+            return True                     # timer mode, inactive: dropped (as _on_state)
+        read = self._reader.read_known(data)
+        if read is not None and self._serial is None:
+            self._answer(*read)
+        elif read is not None:
+            self._answer_serial(running, resets, *read)
+        return read is not None
+
+    def _on_state_serial(self, msg, data=None):
         """Lockstep: read the state, then judge and answer it holding the node's lock. A
         state read while active is not answered after a reset (a deactivation and the
         activation that follows); one that comes while inactive is kept, the latest only,
@@ -199,15 +211,18 @@ class StateInput:
         is configured sends its first state before the controller is active)."""
         running, resets = self.is_running(), self._resets
         try:
-            read = self._reader.read(msg)
+            q, qd = self._reader.read(msg, data)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
+        self._answer_serial(running, resets, msg.header.stamp, q, qd)
+
+    def _answer_serial(self, running, resets, stamp, q, qd):
         if acquire(self._serial, lambda: self._closing):
             try:
                 if not self.is_running():
-                    self._parked = (msg, read, time.monotonic_ns())
+                    self._parked = (stamp, q, qd, time.monotonic_ns())
                 elif self._resets == resets or not running:
-                    self._answer(msg, *read)
+                    self._answer(stamp, q, qd)
             finally:
                 self._serial.release()
 
@@ -216,21 +231,21 @@ class StateInput:
         came while inactive, if it came within the watchdog's ``state_timeout``."""
         parked, self._parked = self._parked, None
         if parked is not None \
-                and time.monotonic_ns() - parked[2] <= self.watchdog.state_timeout * 1e9:
-            self._answer(parked[0], *parked[1])
+                and time.monotonic_ns() - parked[3] <= self.watchdog.state_timeout * 1e9:
+            self._answer(*parked[:3])
 
-    def _on_state(self, msg):
+    def _on_state(self, msg, data=None):
         if not self.is_running():
             return
         try:
-            q, qd = self._reader.read(msg)
+            q, qd = self._reader.read(msg, data)
         except StateRejected as err:
             return self.warn(err.kind, str(err))
-        self._answer(msg, q, qd)
+        self._answer(msg.header.stamp, q, qd)
 
-    def _answer(self, msg, q, qd):
+    def _answer(self, header_stamp, q, qd):
         with self._lock:
-            answer = self._hand_over(msg, q, qd)
+            answer = self._hand_over(header_stamp, q, qd)
         if answer is not None:              # lockstep: the step, out of the lock
             self.control(*answer)
 
@@ -243,10 +258,10 @@ class StateInput:
         reads a taken state beside a watchdog not yet told."""
         return self.watchdog.tripped and (last is None or last is self._taken)
 
-    def _hand_over(self, msg, q, qd):
-        """Judge a read state and hand it over (under the lock); lockstep: returns the
-        arguments of ``control``, or ``None``."""
-        stamp = stamp_ns(msg.header.stamp)
+    def _hand_over(self, header_stamp, q, qd):
+        """Judge a read state (its header's stamp, ``sec`` and ``nanosec``) and hand it over
+        (under the lock); lockstep: returns the arguments of ``control``, or ``None``."""
+        stamp = stamp_ns(header_stamp)
         now = time.monotonic_ns()           # state silence: on the steady clock, always
         lockstep = self.lockstep
         last = self.latest
@@ -280,5 +295,5 @@ class StateInput:
         self.latest = Sample(q, qd, stamp, now, self._restarts, unbroken)  # the hand-over
         if lockstep:
             t_ns = stamp if stamp > 0 else self.steps() * round(self.h * 1e9)
-            return t_ns, msg.header.stamp
+            return t_ns, header_stamp
         return None

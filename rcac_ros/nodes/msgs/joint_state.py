@@ -1,6 +1,8 @@
 """Reading a sensor_msgs/JointState into the model's joint order, and a velocity estimate.
 
-Pure numpy: no rclpy types beyond reading the message fields.
+Pure numpy: no rclpy types beyond reading the message fields. A state whose frame and joint
+names are byte-equal to those of the last valid one is read from its serialised bytes
+(:mod:`~rcac_ros.nodes.msgs.cdr`), without a message object.
 """
 
 import math
@@ -8,6 +10,7 @@ import math
 import numpy as np
 
 from rcac_ros.errors import InputError
+from rcac_ros.nodes.msgs.cdr import joint_arrays, names_layout
 
 
 def stamp_ns(stamp):
@@ -26,16 +29,43 @@ class StateRejected(InputError):
 class JointStateReader:
     """Positions and velocities of the model's joints from a JointState, by joint name.
 
-    The mapping from the message's names is cached while the names stay the same.
+    The mapping from the message's names is cached while the names stay the same, and so are
+    the serialised bytes of the frame and the names of the last valid state read with its
+    bytes (:meth:`read_known` reads a state that repeats them).
     """
 
     def __init__(self, joint_names):
         self.joint_names = tuple(joint_names)
         self._names = None      # the joint names of the last valid state ...
         self._sel = None        # ... and their indices in model order
+        self._known = None      # (frame and names bytes, their end, count, indices, spans)
 
-    def read(self, msg):
+    def read_known(self, data):
+        """``(stamp, q, qd)`` of a serialised JointState whose frame and names are byte-equal to
+        those of the last valid state read with its bytes (``stamp``: a
+        :class:`~rcac_ros.nodes.msgs.cdr.Stamp`), as :meth:`read` gives them.
+
+        ``None`` for any other, and for one that :meth:`read` would refuse (counts that do not
+        match, NaN or Inf, bytes too short): :meth:`read` judges those from the message.
+        """
+        known = self._known
+        if known is None or data[:2] != b"\x00\x01" or data[12:known[1]] != known[0] \
+                and any(data[a:b] != part for a, b, part in known[4]):
+            return None                     # (the second test: the padding bytes aside)
+        arrays = joint_arrays(data, known[1], known[2])
+        if arrays is None:
+            return None
+        stamp, position, velocity = arrays
+        sel = known[3]
+        q = position[sel]
+        qd = None if velocity is None else velocity[sel]
+        if not np.isfinite(q).all() or (qd is not None and not np.isfinite(qd).all()):
+            return None                     # NaN or Inf: read() refuses it
+        return stamp, q, qd
+
+    def read(self, msg, data=None):
         """``(q, qd)`` in model order; ``qd`` is ``None`` when the message has no velocities.
+        ``data``: the message's serialised bytes, kept for :meth:`read_known` once it is valid.
 
         Raises
         ------
@@ -65,6 +95,11 @@ class JointStateReader:
         qd = np.asarray(msg.velocity, dtype=float)[sel] if len(msg.velocity) else None
         if not np.all(np.isfinite(q)) or (qd is not None and not np.all(np.isfinite(qd))):
             raise StateRejected("nan", "JointState: NaN or Inf in position/velocity")
+        if data is not None:
+            layout = names_layout(data)
+            self._known = None if layout is None or layout[1] != m else \
+                (data[12:layout[0]], layout[0], m, np.asarray(sel),
+                 [(a, b, data[a:b]) for a, b in layout[2]])
         return q, qd
 
 

@@ -65,6 +65,10 @@ class SideInput:
     prefault : bool
         The reader's buffer allocated and mapped at its bound from the start
         (:class:`~rcac_ros.nodes.runtime.rawtake.RawReader`).
+    fast : callable, optional
+        ``fast(data)``: given each sample's bytes within the cap first; True if it took the
+        sample, else the sample is deserialised and ``callback(msg, data)`` is called
+        (without ``fast``: ``callback(msg)``).
 
     A failed take, a failed allocation of the take's buffer or an exception of ``callback``
     is counted (:attr:`errors`), the first of each kind logged with ``owner``'s logger, and
@@ -72,7 +76,7 @@ class SideInput:
     """
 
     def __init__(self, owner, msg_type, topic, qos, callback, cap, what, reject,
-                 prefault=False):
+                 prefault=False, fast=None):
         # the owner's name, namespace and remappings (its own, and the process's), once: the
         # side node applies no rule of its own
         self.topic = topic = owner.resolve_topic_name(topic)
@@ -90,12 +94,14 @@ class SideInput:
                 reject(err.kind, str(err))
 
         def on_bytes(data):
+            if fast is not None and fast(data):
+                return None
             try:
                 msg = deserialize_message(data, msg_type)
             except Exception as err:        # noqa: BLE001 -- malformed CDR from the wire
                 return reject("malformed", f"{what}: {len(data)} bytes do not deserialise "
                               f"({err})")
-            return callback(msg)
+            return callback(msg) if fast is None else callback(msg, data)
 
         sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL))
         self._reader = RawReader(self.subscription, owner.context, on_bytes, on_oversize, cap,

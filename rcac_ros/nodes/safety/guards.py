@@ -1,6 +1,6 @@
 """Guards between the wires and the controller: what a node accepts, and what it commands.
 
-Pure Python and numpy (numba for the per-step limiter), no rclpy, so that each rule is
+Pure Python and numpy (numba for the per-step limiter and clip), no rclpy, so that each rule is
 unit-tested on its own (doc/failsafe.md). The guards of the state stream in time (its stamps, its
 silences) are in :mod:`rcac_ros.nodes.safety.state_guards`.
 
@@ -12,10 +12,17 @@ silences) are in :mod:`rcac_ros.nodes.safety.state_guards`.
   or velocity limits (URDF ``<limit>``), is refused with a reason.
 * :class:`DesiredLimiter`: the desired state moves by at most a given step per control
   period, so no goal produces a jump in effort.
+* :class:`EffortClip`: the law's effort within its limits, in the command's joint order.
+
+The two per-step guards are one compiled kernel each, declared with their signature and
+compiled (or loaded from the cache) by their ``warm()``, which the node's warm-up and
+``python -m rcac_ros.tools.warm`` call. Their clip is numpy's ``clip`` element by element
+(a NaN passes through).
 """
 
-from rcac_ros.core._jit import njit
 import numpy as np
+
+from rcac_ros.core._jit import kernel, njit, ready
 
 from rcac_ros.errors import InputError
 
@@ -106,19 +113,50 @@ def _within(kind, field, values, lo, hi):
 
 
 # ------------------------------------------------------------------ desired state
-@njit(cache=True)
-def _limit_step(prev, value, step, out):
-    """``out = prev + clip(value - prev, -step, step)``; returns whether it clipped."""
+@njit(cache=True, inline="always")
+def _clip(x, lo, hi):
+    """numpy's clip of one float: ``min(max(x, lo), hi)``, a NaN ``x`` kept."""
+    if x != x:
+        return x
+    x = x if x > lo else lo
+    return x if x < hi else hi
+
+
+#: (limits rows dq, dqd, vmax, amax; previous rows q, qd; q_d; qd_d; qdd_d; out rows q, qd, qdd)
+LIMIT_SIGNATURE = "boolean(float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], " \
+    "float64[::1], float64[:, ::1])"
+
+
+@kernel(LIMIT_SIGNATURE)
+def _limit(limits, prev, q_d, qd_d, qdd_d, out):
+    """One step of :class:`DesiredLimiter`: ``out`` the limited desired state, ``prev`` set to
+    its position and velocity; returns whether a limit acted."""
+    n = q_d.shape[0]
     clipped = False
-    for i in range(value.shape[0]):
-        d = value[i] - prev[i]
-        if d > step[i]:
-            d = step[i]
+    for i in range(n):
+        d = q_d[i] - prev[0, i]
+        if d > limits[0, i]:
+            d = limits[0, i]
             clipped = True
-        elif d < -step[i]:
-            d = -step[i]
+        elif d < -limits[0, i]:
+            d = -limits[0, i]
             clipped = True
-        out[i] = prev[i] + d
+        out[0, i] = prev[0, i] + d
+        vmax = limits[2, i]
+        if abs(qd_d[i]) > vmax:
+            clipped = True
+        d = _clip(qd_d[i], -vmax, vmax) - prev[1, i]
+        if d > limits[1, i]:
+            d = limits[1, i]
+            clipped = True
+        elif d < -limits[1, i]:
+            d = -limits[1, i]
+            clipped = True
+        out[1, i] = prev[1, i] + d
+    for i in range(n):
+        prev[0, i] = out[0, i]
+        prev[1, i] = out[1, i]
+        out[2, i] = _clip(qdd_d[i], -limits[3, i], limits[3, i]) if clipped else qdd_d[i]
     return clipped
 
 
@@ -144,34 +182,80 @@ class DesiredLimiter:
         self.amax = self.dqd / h
         self.vmax = self.dq / h     # the position moves at most dq per step
         self.limited = 0            # steps at which a limit acted
-        self._q = np.empty(n)
-        self._qd = np.empty(n)
-        self._prev = None
+        self._limits = np.ascontiguousarray([self.dq, self.dqd, self.vmax, self.amax])
+        self._prev = np.empty((2, n))
+        self._started = False
 
     def reset(self):
         """Forget the previous desired state: the next one is taken as it is."""
-        self._prev = None
+        self._started = False
 
     def warm(self):
         """Compile (or load) the per-step kernel now, leaving this limiter's state as it is."""
-        z = np.zeros(self.dq.shape[0])
-        _limit_step(z, z, self.dq, np.empty_like(z))
+        ready(_limit)
 
     def __call__(self, q_d, qd_d, qdd_d):
         """The desired ``(q_d, qd_d, qdd_d)`` moved at most one step from the previous."""
-        if self._prev is None:
-            self._prev = True
-            self._q[:] = q_d
-            self._qd[:] = qd_d
+        if not self._started:
+            self._started = True
+            self._prev[0] = q_d
+            self._prev[1] = qd_d
             return q_d, qd_d, qdd_d
-        q = np.empty_like(self._q)
-        qd = np.empty_like(self._qd)
-        c1 = _limit_step(self._q, np.ascontiguousarray(q_d, float), self.dq, q)
-        c2 = _limit_step(self._qd, np.clip(qd_d, -self.vmax, self.vmax), self.dqd, qd)
-        c2 |= bool(np.any(np.abs(qd_d) > self.vmax))
-        self._q[:] = q
-        self._qd[:] = qd
-        if c1 or c2:
+        out = np.empty((3, self._prev.shape[1]))
+        if _limit(self._limits, self._prev, np.ascontiguousarray(q_d, float),
+                  np.ascontiguousarray(qd_d, float), np.ascontiguousarray(qdd_d, float), out):
             self.limited += 1
-            qdd_d = np.clip(qdd_d, -self.amax, self.amax)
-        return q, qd, qdd_d
+        return out[0], out[1], out[2]
+
+
+# ------------------------------------------------------------------ effort
+#: (tau, limit, out, clipped, ordered)
+CLIP_SIGNATURE = "int64(float64[::1], float64[::1], int64[::1], float64[::1], float64[::1])"
+
+
+@kernel(CLIP_SIGNATURE)
+def _clip_effort(tau, limit, out, clipped, ordered):
+    """``clipped = clip(tau, -limit, limit)``, ``ordered = clipped[out]``; returns -1 (nothing
+    written) if ``tau`` holds NaN or Inf, 1 if every ``|tau| < limit``, else 0."""
+    within = 1
+    for i in range(tau.shape[0]):
+        if not np.isfinite(tau[i]):
+            return -1
+        if not abs(tau[i]) < limit[i]:
+            within = 0
+    for i in range(tau.shape[0]):
+        clipped[i] = _clip(tau[i], -limit[i], limit[i])
+    for k in range(out.shape[0]):
+        ordered[k] = clipped[out[k]]
+    return within
+
+
+class EffortClip:
+    """The law's effort within ``+-limit`` (model order), and in the command's order.
+
+    Parameters
+    ----------
+    limit : ndarray (n,)
+        The effort limits (model order; inf: none).
+    out : ndarray of int (n,)
+        Model order -> command order.
+    """
+
+    #: what :meth:`__call__` says of an effort
+    NON_FINITE, CLIPPED, WITHIN = -1, 0, 1
+
+    def __init__(self, limit, out):
+        self.limit = np.array(limit, dtype=float)           # (a copy: writable, as the
+        self.out = np.array(out, dtype=np.int64)            # kernel's signature has it)
+
+    def warm(self):
+        """Compile (or load) the kernel now."""
+        ready(_clip_effort)
+
+    def __call__(self, tau):
+        """``(verdict, clipped, ordered)``: :attr:`NON_FINITE` (then the arrays are not
+        written), :attr:`WITHIN` (every ``|tau| < limit``) or :attr:`CLIPPED`; ``tau``
+        clipped to the limits (model order) and the same in the command's order."""
+        clipped, ordered = np.empty(self.limit.shape[0]), np.empty(self.out.shape[0])
+        return _clip_effort(np.ascontiguousarray(tau, float), self.limit, self.out, clipped,
+                            ordered), clipped, ordered
