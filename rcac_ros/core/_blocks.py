@@ -8,10 +8,8 @@ import math
 
 import numba
 import numpy as np
-from numba.core import cgutils, types
-from numba.extending import intrinsic
 
-from ._jit import njit
+from ._jit import address_of, njit, unmanaged
 
 from ._packing import CONST_COLS, GAIN_K_D, I_ERR, LAMBDA, S_LINK
 from rcac_ros.errors import InputError
@@ -61,44 +59,6 @@ def packed_views(data, filt):
     return n, data[:n, :CONST_COLS], data[:n, CONST_COLS:], data[n], filt[:, n]
 
 
-@intrinsic
-def unmanaged(typingctx, arr):
-    """``arr`` itself (the same data, shape, strides and type) without its reference count.
-
-    An array or a view of one carries a pointer to its owner's reference count, and numba
-    counts it up and down (an atomic operation each way, and a barrier to the compiler)
-    wherever the kernel binds it to a name: every inlined helper taking an array, at every
-    link, channel and step. A view of the array this returns carries none, so none of that
-    runs: the compiled arithmetic is the same, in the same order.
-
-    It must not outlive ``arr``: the kernel takes it of an array its caller holds (an
-    argument) and uses it, and the views of it, only while that call runs. It is never
-    returned, stored or given to Python.
-    """
-    if not isinstance(arr, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        ary = context.make_array(arr)(context, builder, value=args[0])
-        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
-        ary.parent = cgutils.get_null_value(ary.parent.type)
-        return ary._getvalue()
-    return arr(arr), codegen
-
-
-@intrinsic
-def _address(typingctx, arr, start):
-    """The address of ``arr``'s element ``start`` (counted in its data, C order)."""
-    if not (isinstance(arr, types.Array) and arr.layout == "C"
-            and isinstance(start, types.Integer)):
-        return None
-
-    def codegen(context, builder, signature, args):
-        ary = context.make_array(arr)(context, builder, value=args[0])
-        return builder.gep(ary.data, [args[1]])
-    return types.CPointer(arr.dtype)(arr, start), codegen
-
-
 @njit(cache=True, inline="always")
 def unmanaged_block(arr, start, shape):
     """Elements ``start ...`` of a C-contiguous ``arr`` as a C-contiguous array of ``shape``
@@ -108,7 +68,7 @@ def unmanaged_block(arr, start, shape):
     array its caller holds, for the length of that call), and ``start`` plus the block's
     size must not exceed ``arr.size`` (not checked).
     """
-    return numba.carray(_address(arr, start), shape)
+    return numba.carray(address_of(arr, start), shape)
 
 
 @njit(cache=True, inline="always")

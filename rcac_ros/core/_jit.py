@@ -20,6 +20,9 @@ else ``$RCAC_CACHE_DIR/<key>``, else ``$XDG_CACHE_HOME/rcac_ros/numba/<key>`` (d
 ``~/.cache``). Where it cannot be written, a keyed directory under the system's temporary
 directory is used; where neither can, the kernels compile without a cache. numba's own
 locations (keyed on one file) are never used.
+
+The module also holds the two intrinsics that reach into numba's array structure
+(:func:`unmanaged`, :func:`address_of`): the kernels' views without reference counts.
 """
 
 import hashlib
@@ -28,7 +31,8 @@ import tempfile
 import threading
 
 import numba
-from numba.core import caching
+from numba.core import caching, cgutils, types
+from numba.extending import intrinsic
 
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -172,3 +176,41 @@ def is_ready(dispatcher):
 
 def _compilable(dispatcher):
     return getattr(dispatcher, "_can_compile", False)
+
+
+@intrinsic
+def unmanaged(typingctx, arr):
+    """``arr`` itself (the same data, shape, strides and type) without its reference count.
+
+    An array or a view of one carries a pointer to its owner's reference count, and numba
+    counts it up and down (an atomic operation each way, and a barrier to the compiler)
+    wherever the kernel binds it to a name: every inlined helper taking an array, at every
+    link, channel and step. A view of the array this returns carries none, so none of that
+    runs: the compiled arithmetic is the same, in the same order.
+
+    It must not outlive ``arr``: the kernel takes it of an array its caller holds (an
+    argument) and uses it, and the views of it, only while that call runs. It is never
+    returned, stored or given to Python.
+    """
+    if not isinstance(arr, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(arr)(context, builder, value=args[0])
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+        ary.parent = cgutils.get_null_value(ary.parent.type)
+        return ary._getvalue()
+    return arr(arr), codegen
+
+
+@intrinsic
+def address_of(typingctx, arr, start):
+    """The address of ``arr``'s element ``start`` (counted in its data, C order)."""
+    if not (isinstance(arr, types.Array) and arr.layout == "C"
+            and isinstance(start, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(arr)(context, builder, value=args[0])
+        return builder.gep(ary.data, [args[1]])
+    return types.CPointer(arr.dtype)(arr, start), codegen
