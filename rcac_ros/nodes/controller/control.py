@@ -63,7 +63,8 @@ class ControlStep:
             self._throttle.warn("step", str(err))
             tau = None
         self.counts.stepped(time.perf_counter() - start, self.config.h)
-        verdict, tau, ordered = self.failsafe.clip(tau) if tau is not None else (-1, 0, 0)
+        verdict, tau, ordered = self.failsafe.clip(tau) if tau is not None \
+            else (EffortClip.NON_FINITE, None, None)
         if verdict == EffortClip.NON_FINITE:
             self.counts.non_finite += 1
             self._throttle.warn("non-finite effort", "the controller produced NaN/Inf: "

@@ -122,6 +122,16 @@ def _clip(x, lo, hi):
     return x if x < hi else hi
 
 
+@njit(cache=True, inline="always")
+def _within_step(d, step):
+    """``(clip(d, -step, step), whether it moved d)``, a NaN ``d`` kept."""
+    if d > step:
+        return step, True
+    if d < -step:
+        return -step, True
+    return d, False
+
+
 #: (limits rows dq, dqd, vmax, amax; previous rows q, qd; q_d; qd_d; qdd_d; out rows q, qd, qdd)
 LIMIT_SIGNATURE = "boolean(float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], " \
     "float64[::1], float64[:, ::1])"
@@ -134,24 +144,14 @@ def _limit(limits, prev, q_d, qd_d, qdd_d, out):
     n = q_d.shape[0]
     clipped = False
     for i in range(n):
-        d = q_d[i] - prev[0, i]
-        if d > limits[0, i]:
-            d = limits[0, i]
-            clipped = True
-        elif d < -limits[0, i]:
-            d = -limits[0, i]
-            clipped = True
+        d, hit = _within_step(q_d[i] - prev[0, i], limits[0, i])
+        clipped |= hit
         out[0, i] = prev[0, i] + d
         vmax = limits[2, i]
         if abs(qd_d[i]) > vmax:
             clipped = True
-        d = _clip(qd_d[i], -vmax, vmax) - prev[1, i]
-        if d > limits[1, i]:
-            d = limits[1, i]
-            clipped = True
-        elif d < -limits[1, i]:
-            d = -limits[1, i]
-            clipped = True
+        d, hit = _within_step(_clip(qd_d[i], -vmax, vmax) - prev[1, i], limits[1, i])
+        clipped |= hit
         out[1, i] = prev[1, i] + d
     for i in range(n):
         prev[0, i] = out[0, i]
