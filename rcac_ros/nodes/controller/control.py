@@ -73,6 +73,7 @@ class ControlStep:
             self._outputs.effort(self.config.safe_effort, stamp)
             self._effort_sent = True
             return
+        self.counts.efforts.add(time.time_ns())     # handed to DDS (the clock of its stamps)
         self._outputs.effort(ordered, stamp)    # the answer first; what follows does not change it
         self._effort_sent = True
         if AdaptationFreeze.RECOVERING in self.adaptation.reasons \

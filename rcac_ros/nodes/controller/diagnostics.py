@@ -2,7 +2,7 @@
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from rcac_ros.nodes.runtime.stats import Percentiles
+from rcac_ros.nodes.runtime.stats import PeriodHistogram, Percentiles
 
 
 class LoopCounts:
@@ -12,6 +12,7 @@ class LoopCounts:
     def __init__(self):
         self.steps = 0                  # control steps
         self.compute = Percentiles()    # the compute time of each step
+        self.efforts = PeriodHistogram()    # the law's efforts as sent (from the activation)
         self.compute_overruns = 0       # steps whose computation took longer than h
         self.late_ticks = 0             # late ticks of the ROS-time timer (timer mode, /clock)
         self.non_finite = 0             # NaN/Inf efforts (the safe effort went out instead)
@@ -71,6 +72,10 @@ def diagnostics(node, counts, rejected, starvation, inputs):
         "late_ticks": counts.late_ticks if node.loop is None else node.loop.late,
         "skipped_ticks": skipped,
         "phase_error_us": f"{node.phase_error_ns * 1e-3:.1f}",   # timer.phase_offset's lock
+        # what the controller adds to its input's jitter: the p99 period of the valid states
+        # as DDS received them, and of the law's efforts as sent (since the activation)
+        "input_period_p99_us": f"{node.states.arrivals.percentile_us(99):.0f}",
+        "effort_period_p99_us": f"{counts.efforts.percentile_us(99):.0f}",
         "watchdog": "tripped" if tripped else "ok",
         "watchdog_trips": node.watchdog.trips,
         "watchdog_replans": node.failsafe.stop.replans,

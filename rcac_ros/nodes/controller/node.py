@@ -166,6 +166,8 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
         """Activate once the kernels are ready (waits for them); FAILURE if they failed."""
         if not self.kernels.wait():
             return FAILURE
+        self.states.arrivals.reset()        # the periods of this activation
+        self.counts.efforts.reset()
         result = super().on_activate(state)
         if self.running and self.config.mode == "lockstep":
             with self.callback_lock:        # the state that came while inactive, if recent

@@ -43,6 +43,7 @@ from rcac_ros import topics
 from rcac_ros.nodes.runtime.base import QOS
 from rcac_ros.nodes.runtime.inputs import SideInput
 from rcac_ros.nodes.runtime.serial import acquire
+from rcac_ros.nodes.runtime.stats import PeriodHistogram
 from rcac_ros.nodes.msgs.joint_state import (JointStateReader, stamp_ns, StateRejected,
                                              VelocityEstimate)
 from rcac_ros.nodes.safety.state_guards import StampGate
@@ -118,6 +119,9 @@ class StateInput:
         self._lock = threading.Lock()       # the side thread's reading against reset()
         self._serial, self._closing, self._resets = serial, False, 0
         self._parked = None                 # lockstep: (stamp, q, qd, steady ns) while inactive
+        #: the periods of the valid states as DDS received them (diagnostics, from the
+        #: activation: ``input_period_p99_us``)
+        self.arrivals = PeriodHistogram()
         self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
                                self._on_state if serial is None else self._on_state_serial,
                                max_bytes, "state", self.warn, prefault=True, fast=self._on_known)
@@ -293,6 +297,7 @@ class StateInput:
         unbroken = lockstep and last is not None \
             and 0 < stamp - last.stamp <= 1.5 * self.h * 1e9
         self.latest = Sample(q, qd, stamp, now, self._restarts, unbroken)  # the hand-over
+        self.arrivals.add(self._side.received_ns)
         if lockstep:
             t_ns = stamp if stamp > 0 else self.steps() * round(self.h * 1e9)
             return t_ns, header_stamp

@@ -115,6 +115,12 @@ class SideInput:
         return self._reader.errors
 
     @property
+    def received_ns(self):
+        """The DDS receive stamp of the sample in the callback (ns, system clock;
+        ``RawReader.received_ns``)."""
+        return self._reader.received_ns
+
+    @property
     def native_id(self):
         """The thread's native id."""
         return self._reader.native_id

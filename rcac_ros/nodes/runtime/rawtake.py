@@ -137,6 +137,9 @@ class RawReader:
         and ``"thread"`` (the reader's own loop raised, outside a callback: the wait, the
         take's bookkeeping; the loop starts again with a new wait set after
         :data:`RESTART_BACKOFF`, the samples that came meanwhile waiting in DDS's queue).
+    received_ns : int
+        The DDS receive stamp (ns, system clock: that of the source stamps) of the sample
+        being handed to ``on_bytes``, and after the call of the last one; 0 before any.
     """
 
     #: bytes the buffer is allocated with, and replaced by after a sample larger than
@@ -158,6 +161,7 @@ class RawReader:
         self._logged = set()
         self._msg = _Uint8Array()
         self._info = _MessageInfo()
+        self.received_ns = 0
         self._alloc = self._rcutils.rcutils_get_default_allocator()
         self._size, self._prefault = (self._bound if prefault else self.KEEP), prefault
         if self._new_buffer(self._msg) != RCL_RET_OK:
@@ -237,6 +241,7 @@ class RawReader:
                 if ret != RCL_RET_OK:
                     return self._take_failed(ret)
                 size = self._msg.buffer_length
+                self.received_ns = self._info.received_timestamp
                 try:
                     if self._cap and size > self._cap:
                         self._on_oversize(size)

@@ -19,12 +19,16 @@ states, the effort commands and ``/diagnostics`` and measures, after a warm-up:
   periods behind; cumulative since start, warm-up included);
 * what the controller adds, as ratios of two figures of the same run, which the load of the
   machine moves together (doc/nodes.md, "Timing"): the effort period p99 over the state
-  period p99 (the simulator's own jitter as received), and the latency p50 over the one-way
+  period p99 (source stamps: the hop from the simulator to the controller counts against
+  it); the controller's own share, from its diagnostics: the p99 period of its efforts as
+  sent over that of the states as DDS received them (since its activation, warm-up
+  included); and the latency p50 over the one-way
   latency of a plain DDS ping (:mod:`rcac_ros.tools.bench.echo`, a third process that echoes
   a 7-joint JointState; half the round trip, every 20 ms).
 """
 
 import json
+import math
 import os
 import sys
 import tempfile
@@ -173,7 +177,8 @@ def analyse(probe, window_s, rate):
             ("controller", f"{topics.CONTROLLER_NODE}: control loop",
              ("deadline_misses", "late_ticks", "skipped_ticks", "compute_overruns",
               "compute_time_p50_us", "compute_time_p99_us", "watchdog_trips",
-              "gc_pause_max_ms", "gc_full_collections", "phase_error_us")),
+              "gc_pause_max_ms", "gc_full_collections", "phase_error_us",
+              "input_period_p99_us", "effort_period_p99_us")),
             ("simulator", f"{topics.SIMULATOR_NODE}: simulation",
              ("late_ticks", "skipped_ticks"))):
         status = probe.diagnostics.get(name, {})
@@ -183,6 +188,8 @@ def analyse(probe, window_s, rate):
                     out[f"{node}_{key}"] = float(status[key])
                 except ValueError:
                     pass
+    out["own_period_ratio"] = _ratio(out.get("controller_effort_period_p99_us"),
+                                     out.get("controller_input_period_p99_us"))
     out["meets_goal"] = bool(
         out["controller_rate_hz"] >= GOALS["rate_hz"]
         and out["period_p99_ms"] is not None and out["period_p99_ms"] <= GOALS["period_p99_ms"]
@@ -194,7 +201,8 @@ def analyse(probe, window_s, rate):
 
 
 def _ratio(a, b):
-    return None if a is None or b is None or b <= 0.0 else a / b
+    return None if a is None or b is None or not b > 0.0 or not math.isfinite(a / b) \
+        else a / b
 
 
 def format_table(r):
@@ -224,6 +232,8 @@ def format_table(r):
          f"{ms('ping_one_way_p50_ms')} / {ms('ping_one_way_p99_ms')}", ""),
         ("effort period p99 / state period p99", ratio("period_ratio"),
          f"<= {GOALS['period_ratio']:g}"),
+        ("the controller's own: effort sent p99 / state received p99",
+         "-" if r.get("own_period_ratio") is None else f"{r['own_period_ratio']:.3f}", ""),
         ("latency p50 / ping one way p50", ratio("latency_ratio"), ""),
         ("periods > 1.5 h", str(r["late_periods"]), ""),
         ("missing ticks (vs nominal)", str(r["missing_ticks"]), ""),

@@ -136,6 +136,8 @@ BENCH_ROS_ROWS = (
     ("effort period p99 (ms)", lambda r: _f(r["period_p99_ms"], 2)),
     ("state period p99 (ms)", lambda r: _f(r["state_period_p99_ms"], 2)),
     ("**effort p99 / state p99** (goal <= 1.1)", lambda r: _f(r["period_ratio"], 2)),
+    ("the controller's own: effort sent p99 / state received p99",
+     lambda r: _f(r.get("own_period_ratio"), 3)),
     ("state→effort latency p50 / p99 (ms)",
      lambda r: f"{_f(r['state_to_effort_latency_p50_ms'], 2)} / "
                f"{_f(r['state_to_effort_latency_p99_ms'], 2)}"),
