@@ -1,35 +1,34 @@
 """The controller's state input: ``/joint_states`` in, the latest valid ``(q, qd)`` out.
 
 :class:`StateInput` takes the states in its own thread
-(:class:`~rcac_ros.nodes.runtime.inputs.SideInput`) with the size cap checked on the
-serialised bytes (doc/failsafe.md), reads each message into model order
-(:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`; from its bytes when its frame
-and names repeat the last valid state's), judges its stamp
+(:class:`~rcac_ros.nodes.runtime.inputs.SideInput`) with the size cap checked on the serialised
+bytes (doc/failsafe.md), reads each message into model order
+(:class:`~rcac_ros.nodes.msgs.joint_state.JointStateReader`; from its bytes when its frame and
+names repeat the last valid state's), judges its stamp
 (:class:`~rcac_ros.nodes.safety.state_guards.StampGate`: a restart of the stream is followed, a
-stamp in the future refused), estimates the velocity when none is given and tells the
-watchdog that a valid state came. In lockstep mode the control step is the answer to the
-state, run in that thread as soon as the state is read.
+stamp in the future refused), estimates the velocity when none is given and tells the watchdog
+that a valid state came. In lockstep mode the control step is the answer to the state, run in
+that thread as soon as the state is read.
 
 Threads (timer mode: the states come in the side thread, the control loop runs in its own):
 
 * The side thread owns the reading: the stamp gate, the velocity estimate and the previous
   state. It hands over each valid state as one immutable :class:`Sample` (``q``, ``qd``,
-  ``stamp``, ``received``, the count of stream restarts), assigned in one statement
-  (atomic under the interpreter lock): the control thread never sees a ``q`` of one state
-  with the arrival time of another, and takes no lock on its 500 Hz path.
-* Everything else happens in the control thread, in :meth:`StateInput.take` at the start
-  of its step: the watchdog is told of the valid state, and a restart of the stream
-  restarts the motion and the filters. The side thread never writes to the watchdog or
-  to the node.
+  ``stamp``, ``received``, the count of stream restarts), assigned in one statement (atomic
+  under the interpreter lock): the control thread never sees a ``q`` of one state with the
+  arrival time of another, and takes no lock on its 500 Hz path.
+* The control thread, in :meth:`StateInput.take` at the start of its step, tells the
+  watchdog of the valid state and restarts motion and filters after a restart of the
+  stream; the side thread never writes to the watchdog or the node.
 * A lock is held by the side thread while it reads a state and by :meth:`StateInput.reset`
-  (the activation), never by the control step: a reset waits for a state being read, so
-  no state from before it survives it and the gate is never reset halfway through a check.
+  (the activation), never by the control step: a reset waits for a state being read (none
+  from before it survives it, the gate is never reset halfway through a check).
 
-In lockstep mode the side thread reads the message, then judges the state and answers it
-holding the node's lock (:class:`~rcac_ros.nodes.runtime.serial.SerialCallbacks`), which
-every callback of the node's executor and the watchdog's thread also hold: no answer runs
-beside an activation, a parameter change, a trajectory's hand-over or a watchdog check. The
-executor is out of the answer's path (doc/failsafe.md, "Known limitations").
+In lockstep mode the side thread reads the message, then judges the state and answers it holding
+the node's lock (:class:`~rcac_ros.nodes.runtime.serial.SerialCallbacks`), which every callback
+of the node's executor and the watchdog's thread also hold: no answer runs beside an activation,
+a parameter change, a trajectory's hand-over or a watchdog check. The executor is out of the
+answer's path (doc/failsafe.md, "Known limitations").
 """
 
 import threading
@@ -48,9 +47,8 @@ from rcac_ros.nodes.msgs.joint_state import (JointStateReader, stamp_ns, StateRe
                                              VelocityEstimate)
 from rcac_ros.nodes.safety.state_guards import StampGate
 
-#: a valid state as handed over: positions, velocities (model order), its stamp (ns), the
-#: steady-clock ns at which it came, the number of stream restarts so far, and (lockstep)
-#: whether it follows the last one answered by one period
+#: a valid state as handed over: q, qd (model order), its stamp (ns), the steady ns it came at,
+#: the stream restarts so far, and (lockstep) whether it follows the last answered by a period
 Sample = namedtuple("Sample", "q qd stamp received restarts unbroken")
 
 
@@ -64,8 +62,7 @@ class StateInput:
     joint_names : sequence of str
         The model's joints.
     lockstep : bool
-        Each valid state is answered as it is read (else timer mode: the loop takes the
-        latest).
+        Each valid state is answered as it is read (else timer mode: the loop takes the latest).
     h : float
         The control period, s.
     velocity_cutoff : float
@@ -97,6 +94,8 @@ class StateInput:
     ----------
     latest : Sample or None
         The latest valid state as one object (set by the side thread of timer mode).
+    arrivals : PeriodHistogram
+        The periods of the valid states as DDS received them (diagnostics).
     q, qd : ndarray (n,) or None
         Its positions and velocities (model order); ``qd`` measured or estimated.
     stamp : int or None
@@ -119,8 +118,6 @@ class StateInput:
         self._lock = threading.Lock()       # the side thread's reading against reset()
         self._serial, self._closing, self._resets = serial, False, 0
         self._parked = None                 # lockstep: (stamp, q, qd, steady ns) while inactive
-        #: the periods of the valid states as DDS received them (diagnostics, from the
-        #: activation: ``input_period_p99_us``)
         self.arrivals = PeriodHistogram()
         self._side = SideInput(node, JointState, topics.JOINT_STATES, QOS,
                                self._on_state if serial is None else self._on_state_serial,
@@ -186,13 +183,11 @@ class StateInput:
 
     def _warn_rate(self, stamp):
         """Lockstep: once, if the state period is not the control period ``h``."""
-        h = self.h
-        gap = (stamp - self.stamp) * 1e-9
+        h, gap = self.h, (stamp - self.stamp) * 1e-9
         if abs(gap - h) > 0.01 * h:
             self._rate_warned = True
-            self.log.warning(
-                f"state period {gap * 1e3:.3f} ms differs from h = {h * 1e3:.3f} ms "
-                "(set 'rate' to 1/dt of the simulator)")
+            self.log.warning(f"state period {gap * 1e3:.3f} ms differs from h = "
+                             f"{h * 1e3:.3f} ms (set 'rate' to 1/dt of the simulator)")
 
     def _on_known(self, data):
         """A state read from its bytes (``JointStateReader.read_known``); False: it is

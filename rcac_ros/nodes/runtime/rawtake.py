@@ -2,32 +2,29 @@
 
 rclpy's take (``Subscription.take_message``, also with ``raw=True``) copies the sample out of
 DDS while it holds the interpreter lock: a 24 MB JointState stalls every other thread of the
-process for the length of the copy (doc/failsafe.md, "Oversized inputs"). Fast DDS cannot
-drop such a sample by size for a type with unbounded sequences (its reader limit is the
-type's bound). :class:`RawReader` therefore waits and takes through ``rcl`` with
-:mod:`ctypes`, which releases the lock for the length of each foreign call: the copy out of
-DDS runs beside the control thread, and the size is checked on the taken buffer before any
-Python object is built from it.
+process for the length of the copy (doc/failsafe.md, "Oversized inputs"). Fast DDS cannot drop
+such a sample by size for a type with unbounded sequences (its reader limit is the type's
+bound). :class:`RawReader` therefore waits and takes through ``rcl`` with :mod:`ctypes`, which
+releases the lock for the length of each foreign call: the copy out of DDS runs beside the
+control thread, and the size is checked on the taken buffer before any Python object is built
+from it.
 
-The serialised-message buffer is reused between takes; ``rcl`` grows it to the size of the
-sample taken. A buffer grown by a sample of up to ``max(cap, KEEP, hold)`` bytes (``hold``
-default :attr:`RawReader.HOLD`, 32 MiB) is kept, so the next large sample is copied into
-pages already mapped instead of fresh ones that the kernel must fault in and zero while the
-valid samples queued behind it wait; after a larger sample the buffer is replaced by one of
-its initial size, so between takes the reader holds at most that bound. The initial size is
-``KEEP`` bytes, or the bound with ``prefault`` (the controller's state input): then the
-pages are touched at once, 32 MiB resident from the start, and the first large sample is
-not slower than the later ones (doc/failsafe.md, "Oversized inputs"). The
-new buffer is allocated before the large one is freed: if that allocation fails (a machine
-short of memory), the failure is counted, the reader keeps the large buffer and takes into
-it, and tries again after the next take or wait (at most 50 ms later); it is never left
-without a buffer.
+The serialised-message buffer is reused; ``rcl`` grows it to the sample's size. Grown by a
+sample of up to ``max(cap, KEEP, hold)`` bytes (``hold`` default :attr:`RawReader.HOLD`, 32
+MiB) it is kept, so the next large sample lands in pages already mapped, not fresh ones the
+kernel must fault in and zero while the samples behind it wait; after a larger one it is
+replaced by one of its initial size: between takes the reader holds at most that bound. The
+initial size is ``KEEP`` bytes, or the bound with ``prefault`` (the controller's state input:
+32 MiB touched at once, the first large sample no slower than the later ones; doc/failsafe.md,
+"Oversized inputs"). The new buffer is allocated before the large one is freed: if that fails
+(a machine short of memory), the failure is counted and the reader keeps the large buffer,
+takes into it and tries again after the next take or wait (at most 50 ms later).
 
 Errors do not stop the reader: a return code of ``rcl`` other than "taken" and "nothing to
-take", a failed allocation of the initial-size buffer, and an exception raised by a callback, are
-counted (:attr:`RawReader.errors`) and the first of each kind is logged (the exception with
-its traceback); the thread then goes on with the next sample. An exception of the reader's
-own loop (outside a callback) is counted and logged the same way and the loop starts again
+take", a failed allocation of the initial-size buffer, and an exception raised by a callback,
+are counted (:attr:`RawReader.errors`) and the first of each kind is logged (the exception with
+its traceback); the thread then goes on with the next sample. An exception of the reader's own
+loop (outside a callback) is counted and logged the same way and the loop starts again
 (doc/failsafe.md, "Thread failures"): the thread ends only when it is closed or its context
 shuts down.
 """
@@ -138,8 +135,7 @@ class RawReader:
         take's bookkeeping; the loop starts again with a new wait set after
         :data:`RESTART_BACKOFF`, the samples that came meanwhile waiting in DDS's queue).
     received_ns : int
-        The DDS receive stamp (ns, system clock: that of the source stamps) of the sample
-        being handed to ``on_bytes``, and after the call of the last one; 0 before any.
+        The DDS receive stamp (ns, system clock) of the last sample taken; 0 before any.
     """
 
     #: bytes the buffer is allocated with, and replaced by after a sample larger than
@@ -159,9 +155,7 @@ class RawReader:
         self._name, self._log = name, log
         self.errors = {"take": 0, "alloc": 0, "callback": 0, "thread": 0}
         self._logged = set()
-        self._msg = _Uint8Array()
-        self._info = _MessageInfo()
-        self.received_ns = 0
+        self._msg, self._info, self.received_ns = _Uint8Array(), _MessageInfo(), 0
         self._alloc = self._rcutils.rcutils_get_default_allocator()
         self._size, self._prefault = (self._bound if prefault else self.KEEP), prefault
         if self._new_buffer(self._msg) != RCL_RET_OK:

@@ -5,13 +5,14 @@ law's model class: the Panda of example-robot-data with armature 0.1 kg m^2, dam
 N m s/rad and Coulomb friction 0.5 N m (``tanh(qd / v_c)``, v_c = 0.1 rad/s) on every joint,
 the values of the MuJoCo scenario of ``rcac compare``. The law is the recursive composite
 law with ``joint_friction=True`` and every channel (``channels="all"``), starting from zero
-joint estimates; the links are the URDF's (known, or adapting from it with
-``--adapt-links``). The desired motion excites every joint in both directions: a sinusoid
-of 0.4 rad per joint about the "ready" posture, 0.35-0.55 Hz (peak speeds 0.9-1.4 rad/s).
+joint estimates; the links are the URDF's, the last adapting from it as in the payload demo
+(every one with ``--adapt-links``). The desired motion excites every joint in both
+directions: a sinusoid of 0.4 rad per joint about the "ready" posture, 0.35-0.55 Hz (peak
+speeds 0.9-1.4 rad/s).
 
 Known limit: joint 1's armature and link 1's inertia about the joint 1 axis enter the
 dynamics only as their sum (the base joint's axis is fixed), so with ``--adapt-links`` the
-armature of joint 1 is not identifiable alone; the default keeps the links known.
+armature of joint 1 is not identifiable alone; by default only the last link adapts.
 
 Writes ``metrics.json`` and ``friction_estimates.png`` (estimates against the truth).
 """
@@ -106,7 +107,7 @@ def run(args):
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "metrics.json"), "w", encoding="utf-8") as f:
         json.dump(report, f, indent=2)
-    links = "links adapting" if args.adapt_links else "links known"
+    links = "links adapting" if args.adapt_links else "last link adapting"
     plot(t, hist, truth, os.path.join(args.out, "friction_estimates.png"),
          f"Panda, built-in simulator with tanh friction: joint estimates ({links}, "
          f"channels='all', {args.duration:g} s)")

@@ -136,7 +136,7 @@ BENCH_ROS_ROWS = (
     ("effort period p99 (ms)", lambda r: _f(r["period_p99_ms"], 2)),
     ("state period p99 (ms)", lambda r: _f(r["state_period_p99_ms"], 2)),
     ("**effort p99 / state p99** (goal <= 1.1)", lambda r: _f(r["period_ratio"], 2)),
-    ("the controller's own: effort sent p99 / state received p99",
+    ("controller's own: sent / received p99",
      lambda r: _f(r.get("own_period_ratio"), 3)),
     ("state→effort latency p50 / p99 (ms)",
      lambda r: f"{_f(r['state_to_effort_latency_p50_ms'], 2)} / "
@@ -220,7 +220,8 @@ def render_friction(d):
              "met" if d["met"][term] else "**missed**"] for term in d["worst_relative_error"]]
     return (table(["joint term", "worst relative error over the 7 joints", "goal", ""], rows)
             + f"\n\nRMS tracking error {fmt(d['rms_error_rad'])} rad over "
-            f"{fmt(d['duration_s'])} s; links {'adapting' if d['adapt_links'] else 'known'}.")
+            f"{fmt(d['duration_s'])} s; "
+            f"{'every link' if d['adapt_links'] else 'the last link'} adapting.")
 
 
 #: the columns of ``rcac compare``'s tables that doc/results.md shows (the JSON has them all)
@@ -376,9 +377,7 @@ def render_capture(d):
             + (f" and released at {settings['release_s']:g} s" if settings.get("release_s")
                else "") + f" of a {settings['duration_s']:g} s run; the paper's motion "
             + ("at full speed" if settings["slowdown"] == 1.0 else
-               f"{settings['slowdown']:.2f} times slower") + ". Offline columns: the effort "
-            "the law asked for (the plant applies it clipped to the preset's limits, as the "
-            "ROS run's simulator does).")
+               f"{settings['slowdown']:.2f} times slower") + ".")
     parts = [head] + [capture_table(columns, phase).rstrip() for phase in phases]
     if d.get("mass_table"):
         parts.append("Over payload masses, the default law offline, the motion slowed for each "

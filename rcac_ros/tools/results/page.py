@@ -42,8 +42,8 @@ HEADER = """# Measured results
 edit those, not this page -->
 
 Every measured figure of the documentation under the command that produced it (date UTC,
-load average, git revision), from `doc/results/NAME.json`, with the plots of the same run.
-Timings depend on the load (cost goals are ratios timed side by side), tracking and
+load average before → after, git revision), from `doc/results/NAME.json`, with the plots of
+the same run. Timings depend on the load (cost goals are ratios timed side by side), tracking and
 estimates do not. Refresh: `python -m rcac_ros.tools.results record NAME`, `make results`.
 """
 
@@ -135,8 +135,10 @@ def provenance_line(record, machine=None):
     parts = [f"`{record['command']}`", record["date"].removesuffix(" UTC")]
     if record["machine"] != machine:
         parts.append(record["machine"])
-    if "load_average" in record:
-        parts.append(f"load {record['load_average']}")
+    if "load_average" in record:            # "0.9 before, 0.7 after" -> "0.9 → 0.7"
+        before, sep, after = str(record["load_average"]).partition(" before, ")
+        load = f"{before} → {after.removesuffix(' after')}" if sep else record["load_average"]
+        parts.append(f"load {load}")
     parts.append(f"git {record['revision']}")
     if "wall_time_s" in record:
         parts.append(f"{record['wall_time_s']:g} s wall")

@@ -76,8 +76,9 @@ SOURCES = {
     "bench_ros_modes": Source(
         "Timing over ROS, per controller mode",
         "Simulator (real time), controller and a DDS ping (a process echoing a JointState), "
-        "per controller mode. What counts: effort period p99 / state period p99 (goal <= 1.1), "
-        "latency p50 / the ping's one-way p50 (doc/nodes.md, \"Timing\").",
+        "per controller mode. What counts: effort period p99 / state period p99 (source "
+        "stamps, goal <= 1.1; the controller's own from its diagnostics, the hop left out), "
+        "latency p50 / the ping's one-way p50 (doc/tools.md).",
         render_bench_ros_modes, shown="make readme-bench"),
     "startup": Source(
         "Start-up, with and without the compiled kernels",
@@ -99,7 +100,7 @@ SOURCES = {
         render_payload, ["rcac", "payload-demo", "--quiet", "--out", "{out}"], "metrics.json",
         plots=("payload_summary.png", "link7_estimates.png")),
     "friction": Source(
-        "Joint friction and rotor inertia learnt, links known",
+        "Joint friction and rotor inertia learnt, the last link adapting",
         "The Panda on the built-in simulator with armature 0.1 kg m^2, damping 0.5 N m s/rad "
         "and tanh friction 0.5 N m on every joint, the law `channels=\"all\"` with "
         "`joint_friction=True` from zero joint estimates (doc/tools.md, "
@@ -205,7 +206,9 @@ SOURCES = {
         "A payload captured over ROS 2",
         "The CSS arm in zero gravity, both nodes over ROS 2 in lockstep; the simulator's "
         "`payload.*` set at run time, the controller not told (`rcac capture-demo`); the "
-        "same offline for four laws, and the default law over payload masses.",
+        "same offline for four laws (their columns: the effort the law asked for, applied "
+        "clipped to the preset's limits as in the ROS run), and the default law over payload "
+        "masses.",
         render_capture, ["rcac", "capture-demo", "--quiet", "--mass-table", "--out", "{out}"],
         "capture.json", plots=("capture_ros.png", "capture_laws.png")),
     "capture_release": Source(
