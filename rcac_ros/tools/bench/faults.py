@@ -145,7 +145,7 @@ def _start_nodes(run, case, spec, controller, simulator, rate, domain, log_dir):
     from rclpy.node import Node
 
     from rcac_ros.tools.launch import init_context
-    from rcac_ros.tools.launch import Child, node_command, NodeFailed
+    from rcac_ros.tools.launch import Child, node_command, NodeFailed, wait_until_active
 
     h, env = run.h, run.env
     ctrl_over = dict(controller, mode="timer", rate=float(rate), monitor_decimation=10)
@@ -171,6 +171,11 @@ def _start_nodes(run, case, spec, controller, simulator, rate, domain, log_dir):
     if not run.spin_for(60.0, lambda: all(s.get_publisher_count() for s in probe.subs[:2])
                         and (relay is None or relay.forwarded > 0), "while starting"):
         raise NodeFailed(f"{case}: the nodes did not connect (logs in {log_dir})")
+    # its publishers exist from the configure; it answers once active (kernels loaded)
+    if not wait_until_active(node, run.executor, topics.CONTROLLER_NODE, 60.0,
+                             alive=run.ctrl.alive):
+        raise NodeFailed(f"{case}: the controller did not become active within 60 s:\n"
+                         f"{run.ctrl.tail()}")
 
 
 def _run_windows(run, spec, duration, soak, verbose):

@@ -39,7 +39,7 @@ import numpy as np
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
-    shut_down, StopFlag
+    shut_down, StopFlag, wait_until_active
 from rcac_ros.tools.runs.metrics import percentiles
 from rcac_ros.tools.warm import warm_once
 
@@ -356,6 +356,12 @@ def run_ros_bench(duration=60.0, json_path=None, rate=500.0, warmup=3.0, start_t
                       f"logs {log_dir})", flush=True)
             spin_until(lambda: probe.matched() and probe.latest_state_recv is not None,
                        start_timeout, "while starting")
+            # the controller's publishers exist from its configure; it answers once active
+            if not wait_until_active(probe.node, executor, topics.CONTROLLER_NODE,
+                                     start_timeout, alive=children[0].alive):
+                raise NodeFailed(f"the controller did not become active within "
+                                 f"{start_timeout:g} s; last lines of "
+                                 f"{children[0].log_path}:\n{children[0].tail()}")
             t_warm = time.monotonic() + warmup
             spin_until(lambda: time.monotonic() >= t_warm, warmup + 10.0, "during warm-up")
             if verbose:
