@@ -24,7 +24,7 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .natural_step import LANE_ROWS, LANES, natural_gain_rows, retract_links
+from .natural_step import LANE_ROWS, LANES, natural_gain_rows, retract_lanes
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FOLLOW_TIME, FRICTION_SIGNATURE,
                              JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
@@ -236,7 +236,7 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
         state[i, TAU] = tau[i]
         state[i, Q_PREV] = q[i]
     if natural:
-        retract_links(data)                           # doc/design.md §8
+        retract_lanes(data, Pg)                       # doc/design.md §8
     scal[I_K] += 1.0
     return tau
 

@@ -6,7 +6,9 @@
   (:func:`natural_ls_factor`) or the barrier metric (:func:`barrier_factor`);
 - :func:`natural_gain_rows`: the same for every link of the paper's law (the fused kernel),
   with the barrier metric :data:`LANES` links side by side (:func:`barrier_lanes`);
-- :func:`retract_links`: every link's step made consistent (:mod:`rcac_ros.core.retraction`).
+- :func:`retract_links`: every link's step made consistent (:mod:`rcac_ros.core.retraction`);
+  :func:`retract_lanes` the same in the fused law, the barrier metric's whole steps tried
+  :data:`LANES` links side by side (:func:`short_lanes`).
 
 These are compiled once and called, not inlined, by the kernels of every law that has the
 natural geometry (compile time; a call per link costs nothing measurable per step).
@@ -18,10 +20,10 @@ from ._jit import njit
 from ._packing import (BAR_F, BAR_Q, CONST_COLS, FILT_COLS, I_BARRIER_C, I_H, I_RETRACT_MIN,
                        LINK_COLS, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_HAT,
                        THETA_PREV, U_ROW, W_ROW)
-from .pseudo_inertia import (inverse_cholesky4, inverse_ldl_entries,
-                             natural_gain_apply, pseudo_entries, pseudo_inertia_into,
+from .pseudo_inertia import (inverse_cholesky4, inverse_ldl_entries, natural_gain_apply,
+                             positive_definite4, pseudo_entries, pseudo_inertia_into,
                              whitened_into)
-from .retraction import retract, retract_short
+from .retraction import FLOOR, NU_RATIO, retract, retract_short
 
 
 #: the natural geometry's gain in :func:`natural_gain_step` (doc/design.md §8): the log-det
@@ -151,6 +153,96 @@ def retract_links(data):
         else:
             a = retract(d, so + THETA_PREV, d, so + THETA_HAT)
         a_min = min(a_min, a)
+    d[n * LINK_COLS + I_RETRACT_MIN] = a_min
+
+
+#: the rows of the shortened retraction's lane buffer (:func:`short_lanes`): J_hat's 10
+#: entries, ``J(theta_lin)``'s 10 and its nu (3), then the whole step's 13 parameters and
+#: whether it passed (1 or 0)
+R_J, R_E, R_NU, R_OUT, R_WHOLE = 0, 10, 20, 23, 36
+RETRACT_ROWS = 37
+
+
+@njit(cache=True, error_model="numpy")
+def short_lanes(X):
+    """The first try of :func:`~rcac_ros.core.retraction.retract_short` (the whole step, ``a
+    = 1``) for :data:`LANES` links side by side in the lane buffer ``X`` (rows :data:`R_J`
+    ..., row r of lane l at ``X[LANES r + l]``): its result and whether it passed (the
+    step finite and ``J+ - FLOOR tr(J+) 1 - J_hat / 2`` positive definite), in the same
+    operations, so the same numbers; a lane that did not pass is left to
+    :func:`~rcac_ros.core.retraction.retract_short` itself (:func:`retract_lanes`). The
+    compiler runs the lanes in one vector (numpy's error model: no division checks)."""
+    for l in range(X.size // RETRACT_ROWS):
+        j00, j11, j22, j33 = X[l], X[LANES + l], X[2 * LANES + l], X[3 * LANES + l]
+        j01, j02, j12 = X[4 * LANES + l], X[5 * LANES + l], X[6 * LANES + l]
+        j03, j13, j23 = X[7 * LANES + l], X[8 * LANES + l], X[9 * LANES + l]
+        e = LANES * R_E + l
+        d00, d11 = X[e] - j00, X[e + LANES] - j11
+        d22, d33 = X[e + 2 * LANES] - j22, X[e + 3 * LANES] - j33
+        d01, d02, d12 = X[e + 4 * LANES] - j01, X[e + 5 * LANES] - j02, X[e + 6 * LANES] - j12
+        d03, d13, d23 = X[e + 7 * LANES] - j03, X[e + 8 * LANES] - j13, X[e + 9 * LANES] - j23
+        n0, n1, n2 = X[LANES * R_NU + l], X[LANES * (R_NU + 1) + l], X[LANES * (R_NU + 2) + l]
+        total = d00 + d11 + d22 + d33 + d01 + d02 + d12 + d03 + d13 + d23 + n0 + n1 + n2
+        a = 1.0
+        f = FLOOR * (j00 + j11 + j22 + j33 + a * (d00 + d11 + d22 + d33))
+        whole = positive_definite4(0.5 * j00 + a * d00 - f, 0.5 * j11 + a * d11 - f,
+                                   0.5 * j22 + a * d22 - f, 0.5 * j33 + a * d33 - f,
+                                   0.5 * j01 + a * d01, 0.5 * j02 + a * d02,
+                                   0.5 * j12 + a * d12, 0.5 * j03 + a * d03,
+                                   0.5 * j13 + a * d13, 0.5 * j23 + a * d23)
+        whole = whole & (total - total == 0.0)          # the step is finite
+        j00, j11, j22, j33 = j00 + a * d00, j11 + a * d11, j22 + a * d22, j33 + a * d33
+        j01, j02, j12 = j01 + a * d01, j02 + a * d02, j12 + a * d12
+        j03, j13, j23 = j03 + a * d03, j13 + a * d13, j23 + a * d23
+        bound = NU_RATIO * (j00 + j11 + j22 + j33)
+        n0 = min(max(n0, -bound), bound)
+        n1 = min(max(n1, -bound), bound)
+        n2 = min(max(n2, -bound), bound)
+        a0, a1, a2 = j00 - n0, j11 - n1, j22 - n2       # theta_from_entries, lane by lane
+        o = LANES * R_OUT + l
+        X[o], X[o + LANES], X[o + 2 * LANES], X[o + 3 * LANES] = j33, j03, j13, j23
+        X[o + 4 * LANES], X[o + 5 * LANES], X[o + 6 * LANES] = n0, n1, n2
+        X[o + 7 * LANES], X[o + 8 * LANES], X[o + 9 * LANES] = j01, j02, j12
+        X[o + 10 * LANES], X[o + 11 * LANES], X[o + 12 * LANES] = a1 + a2, a0 + a2, a0 + a1
+        X[LANES * R_WHOLE + l] = 1.0 if whole else 0.0
+
+
+@njit(cache=True)
+def retract_lanes(data, X):
+    """:func:`retract_links` in the fused law: with the metric ``"barrier"`` the whole
+    steps of :data:`LANES` links at a time tried side by side (:func:`short_lanes`, ``X``
+    its lane buffer, at least :data:`RETRACT_ROWS` x :data:`LANES`), a link whose whole
+    step does not pass by :func:`~rcac_ros.core.retraction.retract_short` itself: the
+    results of :func:`retract_links`, bit for bit."""
+    n = data.shape[0] - 1
+    d = data.reshape(data.size)
+    if not d[n * LINK_COLS + I_BARRIER_C] > 0.0:
+        retract_links(data)
+        return
+    a_min = 1.0
+    for g0 in range(0, n, LANES):
+        m = min(LANES, n - g0)
+        for l in range(LANES):
+            so = (g0 + min(l, m - 1)) * LINK_COLS + CONST_COLS
+            j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, so + THETA_PREV)
+            X[l], X[LANES + l], X[2 * LANES + l], X[3 * LANES + l] = j00, j11, j22, j33
+            X[4 * LANES + l], X[5 * LANES + l], X[6 * LANES + l] = j01, j02, j12
+            X[7 * LANES + l], X[8 * LANES + l], X[9 * LANES + l] = j03, j13, j23
+            j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, so + THETA_HAT)
+            e = LANES * R_E + l
+            X[e], X[e + LANES], X[e + 2 * LANES], X[e + 3 * LANES] = j00, j11, j22, j33
+            X[e + 4 * LANES], X[e + 5 * LANES], X[e + 6 * LANES] = j01, j02, j12
+            X[e + 7 * LANES], X[e + 8 * LANES], X[e + 9 * LANES] = j03, j13, j23
+            for k in range(3):
+                X[LANES * (R_NU + k) + l] = d[so + THETA_HAT + 4 + k]
+        short_lanes(X[:RETRACT_ROWS * LANES])
+        for l in range(m):
+            so = (g0 + l) * LINK_COLS + CONST_COLS
+            if X[LANES * R_WHOLE + l] != 0.0:
+                for k in range(13):
+                    d[so + THETA_HAT + k] = X[LANES * (R_OUT + k) + l]
+            else:
+                a_min = min(a_min, retract_short(d, so + THETA_PREV, d, so + THETA_HAT))
     d[n * LINK_COLS + I_RETRACT_MIN] = a_min
 
 

@@ -17,8 +17,9 @@ from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, cs
 from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR, STATE_COLS,
                                     THETA_HAT)
 from rcac_ros.core.natural_step import (L_CK, L_F, L_G, L_P_NU, L_PG, L_Q, L_U, L_W, LANE_ROWS,
-                                        LANES, barrier_apply, barrier_factor, barrier_lanes,
-                                        natural_ls_apply, natural_ls_factor)
+                                        LANES, RETRACT_ROWS, barrier_apply, barrier_factor,
+                                        barrier_lanes, natural_ls_apply, natural_ls_factor,
+                                        retract_lanes, retract_links)
 from rcac_ros.core.model import PAPER_GAINS
 from rcac_ros.core.pseudo_inertia import BARRIER_C, barrier_blocks, default_start, nu_gain
 from rcac_ros.core.retraction import FLOOR, HALVINGS, NU_RATIO, retract_short
@@ -277,6 +278,39 @@ def test_shortened_retraction_is_the_longest_halved_step_above_half_of_j():
     th = model.theta()[0]
     out = th + np.r_[np.nan, np.zeros(12)]
     assert retract_short(th, 0, out, 0) == 0.0 and np.array_equal(out, th)
+
+
+def test_retraction_in_lanes_is_the_per_link_one_bit_for_bit():
+    """``retract_lanes`` (the fused law's: whole steps tried LANES links side by side, the
+    others by ``retract_short``) against ``retract_links`` (link by link) on 11 links (two
+    groups, the second padded), random bodies and steps from 1e-3 to 1e3 times J's size,
+    some not finite: every parameter and the smallest step length, bit for bit; runs with
+    every step whole and runs with steps shortened."""
+    from rcac_ros.core._packing import I_BARRIER_C, I_RETRACT_MIN, THETA_PREV, new_data
+    rng = np.random.default_rng(12)
+    model = random_chain(rng, 11)
+    whole = shortened = 0
+    for trial in range(60):
+        data = new_data(model.n)
+        data[model.n, I_BARRIER_C] = 1000.0
+        for i, th in enumerate(model.theta() * rng.uniform(0.2, 2.0, (model.n, 1))):
+            step = rng.normal(size=13) * np.abs(th).max() * 10.0 ** rng.uniform(-3, 3)
+            if trial % 2 == 0:          # J+ = (1 + u) J_hat: every step whole
+                step = rng.uniform(-0.4, 0.4) * th
+            elif rng.uniform() < 0.05:
+                step[rng.integers(13)] = rng.choice([np.nan, np.inf, -np.inf])
+            data[i, CONST_COLS + THETA_PREV:CONST_COLS + THETA_PREV + 13] = th
+            data[i, CONST_COLS + THETA_HAT:CONST_COLS + THETA_HAT + 13] = th + step
+        want = data.copy()
+        retract_links(want)
+        got = data.copy()
+        X = np.full(RETRACT_ROWS * LANES, np.nan)
+        retract_lanes(got, X)
+        assert np.array_equal(got, want, equal_nan=True)
+        a = want[model.n, I_RETRACT_MIN]
+        whole += a == 1.0
+        shortened += a < 1.0
+    assert whole > 5 and shortened > 5
 
 
 @pytest.mark.parametrize("c", [100.0, 1e3, 1e4])
