@@ -24,7 +24,7 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .natural_step import LANE_ROWS, LANES, natural_gain_rows, retract_lanes
+from .natural_step import LANES, RETRACT_ROWS, natural_gain_rows, retract_lanes
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FOLLOW_TIME, FRICTION_SIGNATURE,
                              JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
@@ -80,8 +80,8 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     n, const, state, scal, chan = packed_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
-    # natural: P_eff G_i, or the barrier metric's lane buffer (natural_gain_rows)
-    work = np.empty(n * 41 + 6 + (LANE_ROWS * LANES if natural else 13), q.dtype)
+    # natural: P_eff G_i, or the barrier metric's retraction lanes (retract_lanes)
+    work = np.empty(n * 41 + 6 + (RETRACT_ROWS * LANES if natural else 13), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i

@@ -16,6 +16,7 @@ natural geometry (compile time; a call per link costs nothing measurable per ste
 
 import numpy as np
 
+from ._blocks import unmanaged_block
 from ._jit import njit
 from ._packing import (BAR_F, BAR_Q, CONST_COLS, FILT_COLS, I_BARRIER_C, I_H, I_RETRACT_MIN,
                        LINK_COLS, NAT_K, NAT_LS_CHOL, NAT_LS_N, NAT_P_NU, P_FACTOR, THETA_HAT,
@@ -79,47 +80,51 @@ def natural_gain_rows(data, filt, G, R, Pg):
     g = G.reshape(G.size)
     h = d[n * LINK_COLS + I_H]
     c = d[n * LINK_COLS + I_BARRIER_C]
-    if c > 0.0:         # the barrier's (H / (c k_i) + P_i^-1)^-1 on G_i and W_i, in lanes
-        barrier_rows(d, fl, g, R, h, c, n, Pg[:LANE_ROWS * LANES])
-        return
-    for i in range(n):  # k_i H^-1 and P_nu
+    if c > 0.0:         # the barrier's (H / (c k_i) + P_i^-1)^-1 on G_i and W_i
+        base = (n + 1) * FILT_COLS               # channel 0's lane buffers, past its rows
+        size = (n + LANES - 1) // LANES * LANE_ROWS * LANES
+        if filt.shape[1] * FILT_COLS >= base + size:
+            barrier_rows(d, fl, g, R, h, n, base)
+            return
+    for i in range(n):  # k_i H^-1 and P_nu, or the barrier's gain link by link
         co = i * LINK_COLS                      # link i's constants, then its state
         so = co + CONST_COLS
         fo = i * FILT_COLS                      # channel 0, link i
         for k in range(13):
             d[so + THETA_PREV + k] = d[so + THETA_HAT + k]
         k_i = d[co + NAT_K]
-        natural_gain_apply(d, so + THETA_HAT, g, 13 * i, Pg, 0, k_i, d, co + NAT_P_NU)
-        natural_gain_apply(d, so + THETA_HAT, fl, fo + W_ROW, fl, fo + U_ROW, k_i, d,
-                           co + NAT_P_NU)
+        if c > 0.0:
+            barrier_factor(d, co, d, so, c * k_i)
+            barrier_apply(d, co, d, so, g, 13 * i, Pg, 0)
+            barrier_apply(d, co, d, so, fl, fo + W_ROW, fl, fo + U_ROW)
+        else:
+            natural_gain_apply(d, so + THETA_HAT, g, 13 * i, Pg, 0, k_i, d, co + NAT_P_NU)
+            natural_gain_apply(d, so + THETA_HAT, fl, fo + W_ROW, fl, fo + U_ROW, k_i, d,
+                               co + NAT_P_NU)
         for k in range(13):
             R[i, k] = d[so + THETA_HAT + k] - h * Pg[k]
 
 
 @njit(cache=True, inline="always")
-def barrier_rows(d, fl, g, R, h, c, n, X):
+def barrier_rows(d, fl, g, R, h, n, base):
     """:func:`natural_gain_rows` with the barrier metric: the links, :data:`LANES` at a
-    time, copied into the lane buffer ``X`` (the lanes past the last link repeat it), their
-    gains ``P_mix`` applied to ``G_i`` and ``W_i`` by :func:`barrier_lanes`, and ``R_i``,
-    ``U_i`` written back; ``d``, ``fl``, ``g``: the flat views of ``data``, ``filt``, ``G``."""
+    time, in their lane buffer (one per group, from ``fl[base]`` on, its constant rows
+    filled by :func:`lane_constants`; a view without a reference count): J's entries,
+    ``G_i`` and ``W_i`` copied in (the lanes past the last link repeat it), their gains
+    ``P_mix`` applied by :func:`barrier_lanes`, and ``R_i``, ``U_i`` written back; ``d``,
+    ``fl``, ``g``: the flat views of ``data``, ``filt``, ``G``."""
+    r = R.reshape(R.size)
     for g0 in range(0, n, LANES):
         m = min(LANES, n - g0)
+        X = unmanaged_block(fl, base + g0 * LANE_ROWS, (LANE_ROWS * LANES,))
         for l in range(LANES):
             i = g0 + min(l, m - 1)
-            co = i * LINK_COLS
-            so = co + CONST_COLS
+            so = i * LINK_COLS + CONST_COLS
             fo = i * FILT_COLS
             j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, so + THETA_HAT)
             X[l], X[LANES + l], X[2 * LANES + l], X[3 * LANES + l] = j00, j11, j22, j33
             X[4 * LANES + l], X[5 * LANES + l], X[6 * LANES + l] = j01, j02, j12
             X[7 * LANES + l], X[8 * LANES + l], X[9 * LANES + l] = j03, j13, j23
-            X[LANES * L_CK + l] = c * d[co + NAT_K]
-            for k in range(55):
-                X[LANES * (L_Q + k) + l] = d[co + BAR_Q + k]
-            for k in range(30):
-                X[LANES * (L_F + k) + l] = d[co + BAR_F + k]
-            for k in range(9):
-                X[LANES * (L_P_NU + k) + l] = d[co + NAT_P_NU + k]
             for k in range(13):
                 X[LANES * (L_G + k) + l] = g[13 * i + k]
                 X[LANES * (L_W + k) + l] = fl[fo + W_ROW + k]
@@ -127,11 +132,30 @@ def barrier_rows(d, fl, g, R, h, c, n, X):
         for l in range(m):
             i = g0 + l
             so = i * LINK_COLS + CONST_COLS
-            fo = i * FILT_COLS
+            fo = i * FILT_COLS + U_ROW
             for k in range(13):
-                d[so + THETA_PREV + k] = d[so + THETA_HAT + k]
-                R[i, k] = d[so + THETA_HAT + k] - h * X[LANES * (L_PG + k) + l]
-                fl[fo + U_ROW + k] = X[LANES * (L_U + k) + l]
+                t = d[so + THETA_HAT + k]
+                d[so + THETA_PREV + k] = t
+                r[13 * i + k] = t - h * X[LANES * (L_PG + k) + l]
+                fl[fo + k] = X[LANES * (L_U + k) + l]
+
+
+def lane_constants(const, c):
+    """The lane buffers of :func:`barrier_lanes` for links with the constants ``const``
+    (n, CONST_COLS) and ``c`` (doc/design.md §8), one per :data:`LANES` links, flat: the
+    constant rows (``c k_i`` at :data:`L_CK`, ``(A P_i A^T)^-1``, ``F_i``, ``P_nu,i``)
+    filled, the lanes past the last link repeating it, the others 0. The fused law keeps
+    them past channel 0's rows of its second argument (:func:`natural_gain_rows`)."""
+    n = const.shape[0]
+    out = np.zeros(((n + LANES - 1) // LANES, LANE_ROWS, LANES))
+    for g in range(out.shape[0]):
+        for l in range(LANES):
+            i = min(g * LANES + l, n - 1)
+            out[g, L_CK, l] = c * const[i, NAT_K]
+            out[g, L_Q:L_Q + 55, l] = const[i, BAR_Q:BAR_Q + 55]
+            out[g, L_F:L_F + 30, l] = const[i, BAR_F:BAR_F + 30]
+            out[g, L_P_NU:L_P_NU + 9, l] = const[i, NAT_P_NU:NAT_P_NU + 9]
+    return out.reshape(-1)
 
 
 @njit(cache=True)
@@ -235,7 +259,7 @@ def retract_lanes(data, X):
             X[e + 7 * LANES], X[e + 8 * LANES], X[e + 9 * LANES] = j03, j13, j23
             for k in range(3):
                 X[LANES * (R_NU + k) + l] = d[so + THETA_HAT + 4 + k]
-        short_lanes(X[:RETRACT_ROWS * LANES])
+        short_lanes(unmanaged_block(X, 0, (RETRACT_ROWS * LANES,)))
         for l in range(m):
             so = (g0 + l) * LINK_COLS + CONST_COLS
             if X[LANES * R_WHOLE + l] != 0.0:
