@@ -70,10 +70,11 @@ def natural_gain_rows(data, filt, G, R, Pg):
     of ``filt``), ``G_i`` already holding ``Y_ri^T s_i - gamma W_i^T y``, and
     ``theta_hat_i`` kept for the retraction; ``P_eff`` of either metric, as
     :func:`adapt_link` computes it (doc/design.md §8). ``data``, ``filt``: the kernel's
-    packed arrays, read at plain offsets of their flat views (no per-link view); ``Pg``:
-    scratch, at least :data:`LANE_ROWS` x :data:`LANES` (the barrier metric's lane buffer,
-    :func:`barrier_rows`). Not inlined: the fused kernel calls it once per step, so its
-    Euclidean instances do not compile it (compile time)."""
+    packed arrays, read at plain offsets of their flat views (no per-link view); ``Pg``: 13
+    scratch. Not inlined: the fused kernel calls it once per step, so its Euclidean
+    instances do not compile it (compile time). Returns True if the barrier metric's lane
+    buffers were used (:func:`barrier_rows`): then ``R``, ``U`` are left there and
+    :func:`lane_update` takes the step, keeping ``theta_hat_i`` itself."""
     n = data.shape[0] - 1
     d = data.reshape(data.size)
     fl = filt.reshape(filt.size)
@@ -84,8 +85,8 @@ def natural_gain_rows(data, filt, G, R, Pg):
         base = (n + 1) * FILT_COLS               # channel 0's lane buffers, past its rows
         size = (n + LANES - 1) // LANES * LANE_ROWS * LANES
         if filt.shape[1] * FILT_COLS >= base + size:
-            barrier_rows(d, fl, g, R, h, n, base)
-            return
+            barrier_rows(d, fl, g, n, base)
+            return True
     for i in range(n):  # k_i H^-1 and P_nu, or the barrier's gain link by link
         co = i * LINK_COLS                      # link i's constants, then its state
         so = co + CONST_COLS
@@ -103,17 +104,17 @@ def natural_gain_rows(data, filt, G, R, Pg):
                                co + NAT_P_NU)
         for k in range(13):
             R[i, k] = d[so + THETA_HAT + k] - h * Pg[k]
+    return False
 
 
 @njit(cache=True, inline="always")
-def barrier_rows(d, fl, g, R, h, n, base):
+def barrier_rows(d, fl, g, n, base):
     """:func:`natural_gain_rows` with the barrier metric: the links, :data:`LANES` at a
     time, in their lane buffer (one per group, from ``fl[base]`` on, its constant rows
     filled by :func:`lane_constants`; a view without a reference count): J's entries,
-    ``G_i`` and ``W_i`` copied in (the lanes past the last link repeat it), their gains
-    ``P_mix`` applied by :func:`barrier_lanes`, and ``R_i``, ``U_i`` written back; ``d``,
-    ``fl``, ``g``: the flat views of ``data``, ``filt``, ``G``."""
-    r = R.reshape(R.size)
+    ``G_i`` and ``W_i`` copied in (the lanes past the last link repeat it), and ``P_mix
+    G_i``, ``P_mix W_i`` left there by :func:`barrier_lanes` for :func:`lane_update`;
+    ``d``, ``fl``, ``g``: the flat views of ``data``, ``filt``, ``G``."""
     for g0 in range(0, n, LANES):
         m = min(LANES, n - g0)
         X = unmanaged_block(fl, base + g0 * LANE_ROWS, (LANE_ROWS * LANES,))
@@ -129,15 +130,38 @@ def barrier_rows(d, fl, g, R, h, n, base):
                 X[LANES * (L_G + k) + l] = g[13 * i + k]
                 X[LANES * (L_W + k) + l] = fl[fo + W_ROW + k]
         barrier_lanes(X)
-        for l in range(m):
-            i = g0 + l
-            so = i * LINK_COLS + CONST_COLS
-            fo = i * FILT_COLS + U_ROW
-            for k in range(13):
-                t = d[so + THETA_HAT + k]
-                d[so + THETA_PREV + k] = t
-                r[13 * i + k] = t - h * X[LANES * (L_PG + k) + l]
-                fl[fo + k] = X[LANES * (L_U + k) + l]
+
+
+@njit(cache=True)
+def lane_update(data, filt, h, gamma):
+    """Eq 24, step 2 of the paper's law (§6's implicit solve, Sherman-Morrison) after
+    :func:`natural_gain_rows` left ``P_mix G_i`` and ``U_i = P_mix W_i^T`` in the barrier's
+    lane buffers: ``R_i = theta_hat_i - h P_mix G_i``, ``kc = h gamma W R / (1 + h gamma W
+    U)``, ``theta_hat_i`` kept for the retraction and ``theta_hat_i = R_i - kc U_i``: the
+    fused kernel's operations in its order, so its numbers, without writing R and U."""
+    n = data.shape[0] - 1
+    d = data.reshape(data.size)
+    fl = filt.reshape(filt.size)
+    base = (n + 1) * FILT_COLS
+    w_dot_r = 0.0
+    w_dot_u = 0.0
+    for i in range(n):
+        x = base + i // LANES * LANE_ROWS * LANES + i % LANES      # link i's lane
+        so = i * LINK_COLS + CONST_COLS
+        fo = i * FILT_COLS + W_ROW
+        for k in range(13):
+            r = d[so + THETA_HAT + k] - h * fl[x + LANES * (L_PG + k)]
+            w_dot_r += fl[fo + k] * r
+            w_dot_u += fl[fo + k] * fl[x + LANES * (L_U + k)]
+    kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
+    for i in range(n):
+        x = base + i // LANES * LANE_ROWS * LANES + i % LANES
+        so = i * LINK_COLS + CONST_COLS
+        for k in range(13):
+            t = d[so + THETA_HAT + k]
+            d[so + THETA_PREV + k] = t
+            d[so + THETA_HAT + k] = (t - h * fl[x + LANES * (L_PG + k)]) \
+                - kc * fl[x + LANES * (L_U + k)]
 
 
 def lane_constants(const, c):
