@@ -667,10 +667,9 @@ def barrier_lanes(X):
     :data:`LANE_ROWS` x :data:`LANES`, row r of lane l at ``X[LANES r + l]``), into the
     rows :data:`L_PG` and :data:`L_U`: the same operations (:func:`ldl_factor`,
     :func:`ldl_solve`), so the same results, bit for bit; the compiler runs the lanes in
-    one vector (numpy's error model: no division checks, the pivots are > 0). Twice, once
-    per right-hand side: the compiler vectorises a loop with at most about a dozen stores
-    (its dependence checks), and a second factorisation in vector form costs less than
-    keeping the factor in memory."""
+    one vector (numpy's error model: no division checks, the pivots are > 0). Factored
+    twice, once per right-hand side: the compiler vectorises a loop with 13 stores, not one
+    with 26 (nor the factor's 55)."""
     for l in range(X.size // LANE_ROWS):
         fac = ldl_factor(X, LANES * L_Q + l, LANES, X[LANES * L_CK + l], X[l], X[LANES + l],
                          X[2 * LANES + l], X[3 * LANES + l], X[4 * LANES + l],
