@@ -48,6 +48,7 @@ from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_GAIN, F_HAT, F_RATE, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, gains_at_start, natural_friction_start, rotor_start)
 from .least_squares import initial_factor
+from .natural_step import lane_constants
 from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
                              is_body, lambda_min, matched_gain, natural_metric_option, nu_gain)
 
@@ -246,6 +247,12 @@ class RecursiveCompositeController:
             Q, F = barrier_blocks(self.P)
             self._const[:, BAR_Q:BAR_Q + 55] = Q
             self._const[:, BAR_F:BAR_F + 30] = F.reshape(self.n, 30)
+            lanes = lane_constants(self._const, self.barrier_c)     # the fused law's
+            n, rows = self.n, -(-lanes.size // FILT_COLS)
+            buf = np.zeros((self._buf.shape[0], n + 1 + rows, FILT_COLS))
+            buf[:, :n + 1] = self._buf
+            buf[0, n + 1:].reshape(-1)[:lanes.size] = lanes
+            self._buf, self._filt, self._chan = buf, buf[:, :n], buf[:, n, :CHAN_COLS]
 
     def _joint_terms(self, friction_hat0, P_friction, m):
         """The joint terms' arrays (doc/design.md §7): gains, v_c, initial estimates.

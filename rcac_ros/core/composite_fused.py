@@ -24,7 +24,8 @@ from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_CO
                        I_G, I_GAMMA, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_LEAK, I_NATURAL,
                        I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV, PSI_F,
                        PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
-from .natural_step import natural_gain_rows, retract_links
+from .natural_step import (LANES, RETRACT_ROWS, lane_update, natural_gain_rows,
+                           retract_lanes)
 from .channels import axis_terms, filter_step, filtered_output
 from .joint_friction import (F_GAIN, F_HAT, F_R, F_SQ, F_VC, F_Y, FOLLOW_TIME, FRICTION_SIGNATURE,
                              JPHI_F, JPHI_PREV, JPSI_F, JPSI_PREV, JU, JW, rotor)
@@ -80,13 +81,14 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
     n, const, state, scal, chan = packed_views(data, filt)
     if rejects_input(scal, n, q, qd, q_d, qd_d, qdd_d):
         return np.empty(0, q.dtype)
-    work = np.empty(n * 41 + 19, q.dtype)
+    # natural: P_eff G_i, or the barrier metric's retraction lanes (retract_lanes)
+    work = np.empty(n * 41 + 6 + (RETRACT_ROWS * LANES if natural else 13), q.dtype)
     C = work[:9 * n].reshape((n, 9))              # eq 10's rotations
     Fs = work[9 * n:15 * n].reshape((n, 6))       # Y_ri theta_hat_i
     G = work[15 * n:28 * n].reshape((n, 13))      # Y_ri^T s_i
     R = work[28 * n:41 * n].reshape((n, 13))      # theta_hat_i - h P_i (...), eq 24 step 1
     F = work[41 * n:41 * n + 6]                   # F_ri during the backward pass
-    Pg = work[41 * n + 6:41 * n + 19]             # natural: P_eff G_i
+    Pg = work[41 * n + 6:]                        # natural: P_eff G_i (13), lanes
     tau = np.empty(n, q.dtype)
     lam, h, gamma = scal[I_LAM], scal[I_H], scal[I_GAMMA]
     fe, fb0, fb1 = scal[I_FE], scal[I_FB0], scal[I_FB1]
@@ -208,34 +210,41 @@ def paper_law(data, filt, jdata, jfilt, joint, natural, q, qd, q_d, qd_d, qdd_d)
             state[i, Q_PREV] = q[i]
         scal[I_K] += 1.0
         return tau
+    lanes = False
     if natural:      # eq 24, step 1 with P_eff(theta_hat_i) (doc/design.md §8), one call
-        natural_gain_rows(data, filt, G, R, Pg)
-    # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
-    # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
-    w_dot_r = 0.0
-    w_dot_u = 0.0
-    for i in range(n):
-        for k in range(13):
-            w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
-            w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
-    if joint:
-        for k in range(3):
-            w_dot_r += jfilt[0, 0, JW + k] * jdata[0, F_R + k]
-            w_dot_u += jfilt[0, 0, JW + k] * jfilt[0, 0, JU + k]
-    kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
-    if joint:
+        lanes = natural_gain_rows(data, filt, G, R, Pg)
+    if natural and lanes:           # step 2 from the barrier's lane buffers: the same numbers
+        lane_update(data, filt, h, gamma)
         for i in range(n):
+            state[i, TAU] = tau[i]
+            state[i, Q_PREV] = q[i]
+    else:
+        # eq 24, step 2, implicit (Sherman-Morrison, O(n)):
+        # theta_hat+ = R - h gamma U (W R) / (1 + h gamma W U)
+        w_dot_r = 0.0
+        w_dot_u = 0.0
+        for i in range(n):
+            for k in range(13):
+                w_dot_r += filt[0, i, W_ROW + k] * R[i, k]
+                w_dot_u += filt[0, i, W_ROW + k] * filt[0, i, U_ROW + k]
+        if joint:
             for k in range(3):
-                jdata[i, F_HAT + k] = jdata[i, F_R + k]
-        for k in range(3):
-            jdata[0, F_HAT + k] -= kc * jfilt[0, 0, JU + k]
-    for i in range(n):
-        for k in range(13):
-            state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
-        state[i, TAU] = tau[i]
-        state[i, Q_PREV] = q[i]
+                w_dot_r += jfilt[0, 0, JW + k] * jdata[0, F_R + k]
+                w_dot_u += jfilt[0, 0, JW + k] * jfilt[0, 0, JU + k]
+        kc = h * gamma * w_dot_r / (1.0 + h * gamma * w_dot_u)
+        if joint:
+            for i in range(n):
+                for k in range(3):
+                    jdata[i, F_HAT + k] = jdata[i, F_R + k]
+            for k in range(3):
+                jdata[0, F_HAT + k] -= kc * jfilt[0, 0, JU + k]
+        for i in range(n):
+            for k in range(13):
+                state[i, THETA_HAT + k] = R[i, k] - kc * filt[0, i, U_ROW + k]
+            state[i, TAU] = tau[i]
+            state[i, Q_PREV] = q[i]
     if natural:
-        retract_links(data)                           # doc/design.md §8
+        retract_lanes(data, Pg)                       # doc/design.md §8
     scal[I_K] += 1.0
     return tau
 

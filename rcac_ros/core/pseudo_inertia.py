@@ -206,6 +206,74 @@ def inverse_entries(l00, l10, l11, l20, l21, l22, l30, l31, l32, l33):
 
 
 @njit(cache=True, inline="always")
+def positive_definite4(a00, a11, a22, a33, a01, a02, a12, a03, a13, a23):
+    """True if the symmetric 4x4 with these 10 entries is positive definite: every pivot of
+    its ``L D L^T`` (L unit lower) > 0, the verdict of :func:`cholesky_entries` up to
+    rounding (the same elimination without its square roots). Three divisions."""
+    if not a00 > 0.0:
+        return False
+    r0 = 1.0 / a00
+    l10, l20, l30 = a01 * r0, a02 * r0, a03 * r0
+    d1 = a11 - a01 * l10
+    if not d1 > 0.0:
+        return False
+    r1 = 1.0 / d1
+    u21, u31 = a12 - a02 * l10, a13 - a03 * l10
+    l21 = u21 * r1
+    d2 = a22 - a02 * l20 - u21 * l21
+    if not d2 > 0.0:
+        return False
+    u32 = a23 - a03 * l20 - u31 * l21
+    return a33 - a03 * l30 - u31 * (u31 * r1) - u32 * (u32 / d2) > 0.0
+
+
+@njit(cache=True, inline="always")
+def inverse_ldl_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23):
+    """``J^-1`` of the symmetric 4x4 with these 10 entries (the order of
+    :func:`pseudo_entries`) by ``J = L D L^T`` (L unit lower), ``J^-1 = M^T D^-1 M``,
+    ``M = L^-1``: four divisions, no square root. ``(ok, k00, k01, k02, k03, k11, k12, k13,
+    k22, k23, k33)``, the upper triangle of the inverse; ``ok``: every pivot > 0 (J positive
+    definite, the verdict of :func:`cholesky_entries` up to rounding), else the entries are
+    0."""
+    k00 = k01 = k02 = k03 = k11 = k12 = k13 = k22 = k23 = k33 = 0.0
+    if not j00 > 0.0:
+        return False, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
+    r0 = 1.0 / j00
+    l10, l20, l30 = j01 * r0, j02 * r0, j03 * r0
+    d1 = j11 - j01 * l10
+    if not d1 > 0.0:
+        return False, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
+    r1 = 1.0 / d1
+    u21, u31 = j12 - j02 * l10, j13 - j03 * l10
+    l21, l31 = u21 * r1, u31 * r1
+    d2 = j22 - j02 * l20 - u21 * l21
+    if not d2 > 0.0:
+        return False, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
+    r2 = 1.0 / d2
+    u32 = j23 - j03 * l20 - u31 * l21
+    l32 = u32 * r2
+    d3 = j33 - j03 * l30 - u31 * l31 - u32 * l32
+    if not d3 > 0.0:
+        return False, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
+    r3 = 1.0 / d3
+    m10, m21, m32 = -l10, -l21, -l32                  # M = L^-1 (unit lower)
+    m20 = -l20 - l21 * m10
+    m31 = -l31 - l32 * m21
+    m30 = -l30 - l31 * m10 - l32 * m20
+    k33 = r3                                          # (M^T D^-1 M)_pq, k >= max(p, q)
+    k23, k13, k03 = r3 * m32, r3 * m31, r3 * m30
+    a20, a21 = r2 * m20, r2 * m21
+    a10 = r1 * m10
+    k22 = r2 + m32 * k23
+    k12 = a21 + m32 * k13
+    k02 = a20 + m32 * k03
+    k11 = r1 + m21 * a21 + m31 * k13
+    k01 = a10 + m21 * a20 + m31 * k03
+    k00 = r0 + m10 * a10 + m20 * a20 + m30 * k03
+    return True, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
+
+
+@njit(cache=True, inline="always")
 def natural_gain_apply(th, o, g, go, out, oo, k, Pnu, po):
     """``out[oo:oo+13] = P_eff(theta_hat) g[go:go+13]`` (module docstring, doc/design.md §8).
 

@@ -15,7 +15,8 @@ O(1) per link: 4x4 products and one 4x4 Cholesky factorisation.
 import math
 
 from ._jit import njit
-from .pseudo_inertia import cholesky_entries, inverse_entries, pseudo_entries, theta_from_entries
+from .pseudo_inertia import (cholesky_entries, inverse_entries, positive_definite4, pseudo_entries,
+                             theta_from_entries)
 
 
 #: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
@@ -153,9 +154,11 @@ def retract_short(old, oo, new, on):
     """The barrier metric's retraction: the Euclidean step ``old -> new``, shortened.
 
     ``J+ = J_hat + a Delta`` with ``a`` the largest of 1, 1/2, 1/4, ... (at most
-    :data:`HALVINGS` halvings) for which ``J+ - FLOOR tr(J+) 1 >= 1/2 J_hat`` passes a
-    Cholesky factorisation: no direction of ``J_hat`` loses more than half of itself in a
-    step, and J+ clears the floor. One 4x4 factorisation when the step is kept whole.
+    :data:`HALVINGS` halvings) for which ``J+ - FLOOR tr(J+) 1 - 1/2 J_hat`` is positive
+    definite (the pivots of its ``L D L^T``,
+    :func:`~rcac_ros.core.pseudo_inertia.positive_definite4`): no direction of ``J_hat``
+    loses more than half of itself in a step, and J+ clears the floor. One 4x4
+    factorisation (three divisions) when the step is kept whole.
     ``J_hat = J(old)`` must be positive definite; a step that is not finite, or that no
     halving makes pass, is not taken (``a = 0``: J kept, nu moves). ``nu`` is clipped as
     in :func:`retract`. Returns ``a``.
@@ -170,10 +173,10 @@ def retract_short(old, oo, new, on):
         return 0.0
     for h in range(HALVINGS):
         f = FLOOR * (j00 + j11 + j22 + j33 + a * (d00 + d11 + d22 + d33))
-        if cholesky_entries(0.5 * j00 + a * d00 - f, 0.5 * j11 + a * d11 - f,
-                            0.5 * j22 + a * d22 - f, 0.5 * j33 + a * d33 - f,
-                            0.5 * j01 + a * d01, 0.5 * j02 + a * d02, 0.5 * j12 + a * d12,
-                            0.5 * j03 + a * d03, 0.5 * j13 + a * d13, 0.5 * j23 + a * d23)[0]:
+        if positive_definite4(0.5 * j00 + a * d00 - f, 0.5 * j11 + a * d11 - f,
+                              0.5 * j22 + a * d22 - f, 0.5 * j33 + a * d33 - f,
+                              0.5 * j01 + a * d01, 0.5 * j02 + a * d02, 0.5 * j12 + a * d12,
+                              0.5 * j03 + a * d03, 0.5 * j13 + a * d13, 0.5 * j23 + a * d23):
             break
         a *= 0.5
     else:

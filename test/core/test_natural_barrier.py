@@ -16,8 +16,10 @@ from chains import random_chain
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core._packing import (BAR_F, BAR_Q, CONST_COLS, NAT_P_NU, P_FACTOR, STATE_COLS,
                                     THETA_HAT)
-from rcac_ros.core.natural_step import (barrier_apply, barrier_factor, natural_ls_apply,
-                                        natural_ls_factor)
+from rcac_ros.core.natural_step import (L_CK, L_F, L_G, L_P_NU, L_PG, L_Q, L_U, L_W, LANE_ROWS,
+                                        LANES, RETRACT_ROWS, barrier_apply, barrier_factor,
+                                        barrier_lanes, natural_ls_apply, natural_ls_factor,
+                                        retract_lanes, retract_links)
 from rcac_ros.core.model import PAPER_GAINS
 from rcac_ros.core.pseudo_inertia import BARRIER_C, barrier_blocks, default_start, nu_gain
 from rcac_ros.core.retraction import FLOOR, HALVINGS, NU_RATIO, retract_short
@@ -122,6 +124,51 @@ def test_the_kernel_gain_is_numpys_solve_and_below_p():
                                 assert g @ out <= g @ P @ g * (1.0 + 1e-12)   # P_mix <= P
     assert worst_residual < 1e-15 and worst > 0.0
     assert np.mean(np.array(errors) < 1e-12) > 0.5
+
+
+def test_the_lanes_are_the_per_link_kernel_bit_for_bit():
+    """``barrier_lanes`` (LANES links side by side, the fused law's path) against
+    ``barrier_factor`` and ``barrier_apply`` per link (the general kernel's path) on random
+    bodies, full random gains, k, c and right-hand sides over many scales: the same
+    numbers, bit for bit (the same operations in the same order), and the solve of
+    ``P_mix^-1 out = g`` (numpy) within 1e-9."""
+    from rcac_ros.core.pseudo_inertia import pseudo_inertia
+    rng = np.random.default_rng(8)
+    slots = ((0, 0), (1, 1), (2, 2), (3, 3), (0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3))
+    X = np.empty(LANE_ROWS * LANES)
+    lane = lambda row, l: LANES * row + l                      # noqa: E731
+    bodies = random_chain(np.random.default_rng(1), LANES).theta()
+    want = []
+    for l, theta in enumerate(bodies):
+        Y = rng.normal(size=(13, 13))
+        P = Y @ Y.T + np.eye(13) * 10.0 ** rng.uniform(-2, 2)
+        ck = 10.0 ** rng.uniform(-3, 4)
+        row = np.zeros(CONST_COLS)
+        st = np.zeros(STATE_COLS)
+        st[THETA_HAT:THETA_HAT + 13] = theta
+        Q, F = barrier_blocks(P[None])
+        row[BAR_Q:BAR_Q + 55], row[BAR_F:BAR_F + 30] = Q[0], F[0].ravel()
+        row[NAT_P_NU:NAT_P_NU + 9] = nu_gain(P[None])[0].ravel()
+        g, w = rng.normal(size=(2, 13)) * 10.0 ** rng.uniform(-3, 3, (2, 1))
+        barrier_factor(row, 0, st, 0, ck)
+        out = np.empty((2, 13))
+        barrier_apply(row, 0, st, 0, g, 0, out[0], 0)
+        barrier_apply(row, 0, st, 0, w, 0, out[1], 0)
+        want.append(out)
+        J = pseudo_inertia(theta)
+        for k, (i, j) in enumerate(slots):
+            X[lane(k, l)] = J[i, j]
+        X[lane(L_CK, l)] = ck
+        for base, v in ((L_Q, Q[0]), (L_F, F[0].ravel()), (L_P_NU, row[NAT_P_NU:NAT_P_NU + 9]),
+                        (L_G, g), (L_W, w)):
+            X[lane(base + np.arange(len(v)), l)] = v
+        M = np.linalg.inv(p_mix(theta, 1.0, ck, P))
+        for x, z in zip((g, w), out):
+            assert np.linalg.norm(M @ z - x) <= 1e-9 * np.linalg.norm(M, 2) * np.linalg.norm(z)
+    barrier_lanes(X)
+    for l, out in enumerate(want):
+        assert np.array_equal(X[lane(L_PG + np.arange(13), l)], out[0])
+        assert np.array_equal(X[lane(L_U + np.arange(13), l)], out[1])
 
 
 def step_args(n, rng):
@@ -231,6 +278,39 @@ def test_shortened_retraction_is_the_longest_halved_step_above_half_of_j():
     th = model.theta()[0]
     out = th + np.r_[np.nan, np.zeros(12)]
     assert retract_short(th, 0, out, 0) == 0.0 and np.array_equal(out, th)
+
+
+def test_retraction_in_lanes_is_the_per_link_one_bit_for_bit():
+    """``retract_lanes`` (the fused law's: whole steps tried LANES links side by side, the
+    others by ``retract_short``) against ``retract_links`` (link by link) on 11 links (two
+    groups, the second padded), random bodies and steps from 1e-3 to 1e3 times J's size,
+    some not finite: every parameter and the smallest step length, bit for bit; runs with
+    every step whole and runs with steps shortened."""
+    from rcac_ros.core._packing import I_BARRIER_C, I_RETRACT_MIN, THETA_PREV, new_data
+    rng = np.random.default_rng(12)
+    model = random_chain(rng, 11)
+    whole = shortened = 0
+    for trial in range(60):
+        data = new_data(model.n)
+        data[model.n, I_BARRIER_C] = 1000.0
+        for i, th in enumerate(model.theta() * rng.uniform(0.2, 2.0, (model.n, 1))):
+            step = rng.normal(size=13) * np.abs(th).max() * 10.0 ** rng.uniform(-3, 3)
+            if trial % 2 == 0:          # J+ = (1 + u) J_hat: every step whole
+                step = rng.uniform(-0.4, 0.4) * th
+            elif rng.uniform() < 0.05:
+                step[rng.integers(13)] = rng.choice([np.nan, np.inf, -np.inf])
+            data[i, CONST_COLS + THETA_PREV:CONST_COLS + THETA_PREV + 13] = th
+            data[i, CONST_COLS + THETA_HAT:CONST_COLS + THETA_HAT + 13] = th + step
+        want = data.copy()
+        retract_links(want)
+        got = data.copy()
+        X = np.full(RETRACT_ROWS * LANES, np.nan)
+        retract_lanes(got, X)
+        assert np.array_equal(got, want, equal_nan=True)
+        a = want[model.n, I_RETRACT_MIN]
+        whole += a == 1.0
+        shortened += a < 1.0
+    assert whole > 5 and shortened > 5
 
 
 @pytest.mark.parametrize("c", [100.0, 1e3, 1e4])
