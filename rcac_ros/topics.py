@@ -71,12 +71,15 @@ DEPTH = 10
 MONITOR_DEPTH = 1000
 
 
-def qos(depth=DEPTH, reliable=True):
-    """A keep-last ``rclpy.qos.QoSProfile`` (rclpy is imported only when this is called)."""
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+def qos(depth=DEPTH, reliable=True, transient_local=False):
+    """A keep-last ``rclpy.qos.QoSProfile`` (rclpy is imported only when this is called);
+    ``transient_local``: a late reader gets the writer's last ``depth`` messages."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE if reliable
-                      else ReliabilityPolicy.BEST_EFFORT)
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient_local
+                      else DurabilityPolicy.VOLATILE)
 
 
 # ------------------------------------------------------------------ effort tag

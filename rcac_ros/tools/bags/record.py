@@ -132,7 +132,9 @@ class BagRecorder:
     -----
     Subscriptions are reliable. A topic whose publishers all offer best-effort is
     re-subscribed best-effort when they are discovered (a reliable subscription
-    would not match them), as ``ros2 bag record`` adapts its QoS.
+    would not match them), as ``ros2 bag record`` adapts its QoS. The simulator's
+    ``~/payload`` (transient local, depth 10) is read transient local: a recorder that
+    matches it after its first message (the payload at start) still records that one.
 
     A publisher's keep-last history bounds how far behind a reliable subscriber may fall:
     the package publishes efforts and ``/clock`` with keep-last 10, so a recorder that is
@@ -160,6 +162,8 @@ class BagRecorder:
             ReliabilityPolicy.BEST_EFFORT: topics.qos(depth, reliable=False),
         }
         self._best_effort = ReliabilityPolicy.BEST_EFFORT
+        self._latched = {topics.resolve(topics.PAYLOAD, topics.SIMULATOR_NODE):
+                         topics.qos(10, transient_local=True)}
         self.use_sim_time = bool(use_sim_time)
         self.t0 = time.monotonic()
         self.node = Node(node_name, context=context, parameter_overrides=[
@@ -203,8 +207,8 @@ class BagRecorder:
         callback = functools.partial(self._on_message, name)  # (data, info)
         events = self._events(matched=functools.partial(self._on_matched, name))
         self._subs[name] = self.node.create_subscription(
-            _msg_class(self._types[name]), name, callback, self._qos[reliability], raw=True,
-            event_callbacks=events)
+            _msg_class(self._types[name]), name, callback,
+            self._latched.get(name, self._qos[reliability]), raw=True, event_callbacks=events)
 
     def _on_matched(self, name, info):
         if info.current_count > 0 and name not in self.matched_at:
