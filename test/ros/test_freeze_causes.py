@@ -17,6 +17,9 @@ from std_srvs.srv import SetBool
 from failsafe_harness import controller, session, state_driver, wait
 
 DIAG = "rcac_controller: control loop"
+#: s to wait for the guard's recovery: recover_after (5 s) once the delay is back within the
+#: margin, which other jobs on a loaded machine can postpone
+RECOVERY = 90.0
 
 
 def status(probe):
@@ -78,7 +81,7 @@ def test_the_operators_freeze_and_the_guards_are_two_causes_in_both_orders():
         assert wait(lambda: "starved" in frozen_by(probe)
                     and int(status(probe)["starved_spells"]) > spells, timeout=10.0)
         assert set_adaptation(client, False).startswith("adaptation frozen")
-        assert wait(lambda: len(overs(probe)) > recovered, timeout=30.0)
+        assert wait(lambda: len(overs(probe)) > recovered, timeout=RECOVERY)
         assert "adaptation still frozen (by set_adaptation)" in overs(probe)[-1]
         # the operator's cause outlasts the guard's recovery (a loaded machine may starve
         # the process again meanwhile: "starved" beside it)
@@ -96,7 +99,7 @@ def test_the_operators_freeze_and_the_guards_are_two_causes_in_both_orders():
         # (a spell of safe effort during the starving may hold "recovering" beside it)
         message = set_adaptation(client, True)
         assert "still frozen by" in message and "the starvation guard" in message, message
-        assert wait(lambda: len(overs(probe)) > recovered, timeout=30.0)
+        assert wait(lambda: len(overs(probe)) > recovered, timeout=RECOVERY)
         assert "adaptation again" in overs(probe)[-1], overs(probe)
         assert fresh(probe, "adaptation_frozen_by", "none", timeout=60.0)
         assert status(probe)["adaptation"] == "on"
