@@ -42,9 +42,10 @@ def test_histogram_edges():
 
 
 def test_the_controller_reports_its_input_and_effort_periods():
-    """States every 4 ms with every tenth gap 12 ms: the p99 of both periods is a 12 ms gap
-    (10 % of them), not a 4 ms one; the slack is the scheduling of two processes."""
-    gaps = [12 if k % 10 == 9 else 4 for k in range(400)]
+    """States every 4 ms with every tenth gap 40 ms: the p99 of both periods is one of the
+    40 ms gaps (10 % of them), not a 4 ms one; the band around it is the scheduling of two
+    processes on a loaded machine."""
+    gaps = [40 if k % 10 == 9 else 4 for k in range(400)]
     stamps = list(np.cumsum([MS] + [g * MS for g in gaps]))
     name = "rcac_controller: control loop"
     with session() as probe, controller(probe):
@@ -57,4 +58,4 @@ def test_the_controller_reports_its_input_and_effort_periods():
         values = probe.diagnostics[name]
     for key in ("input_period_p99_us", "effort_period_p99_us"):
         p99_ms = float(values[key]) * 1e-3
-        assert 10.0 <= p99_ms <= 16.0, (key, values[key])
+        assert 30.0 <= p99_ms <= 60.0, (key, values[key])

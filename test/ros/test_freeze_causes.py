@@ -91,10 +91,10 @@ def test_the_operators_freeze_and_the_guards_are_two_causes_in_both_orders():
 
         # operator (still frozen), then guard, then the operator's resume during starvation:
         # the guard's freeze holds until its recovery
-        spells, recovered = int(status(probe)["starved_spells"]), len(overs(probe))
+        recovered = len(overs(probe))
         starve(proc)
-        assert wait(lambda: {"starved", "user"} <= frozen_by(probe)
-                    and int(status(probe)["starved_spells"]) > spells, timeout=10.0)
+        probe.diagnostics.pop(DIAG, None)  # (a loaded machine may have starved it already)
+        assert wait(lambda: {"starved", "user"} <= frozen_by(probe), timeout=10.0)
         # within recover_after (5 s) of the starving's end: the guard still holds its cause
         # (a spell of safe effort during the starving may hold "recovering" beside it)
         message = set_adaptation(client, True)
