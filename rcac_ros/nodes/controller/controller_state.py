@@ -17,7 +17,7 @@ All four carry the same stamp (the state's in lockstep), so they pair up sample 
 from sensor_msgs.msg import JointState
 
 from rcac_ros.nodes.msgs.cdr import JointStateWriter
-from rcac_ros.nodes.runtime.base import QOS_KEPT
+from rcac_ros.nodes.runtime.base import QOS_MONITOR
 from rcac_ros.nodes.runtime.rclpy_private import byte_sender
 
 #: the sub-topics of ``~/controller_state``
@@ -40,7 +40,7 @@ class ControllerStatePublisher:
 
     def __init__(self, node, joints, create=None):
         create = create or node.create_publisher
-        self.publishers = [create(JointState, f"{TOPIC}/{part}", QOS_KEPT) for part in PARTS]
+        self.publishers = [create(JointState, f"{TOPIC}/{part}", QOS_MONITOR) for part in PARTS]
         self._sends = [byte_sender(pub) for pub in self.publishers]
         self._write = JointStateWriter(joints)
 

@@ -15,7 +15,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiA
 
 from rcac_ros import topics
 from rcac_ros.nodes.msgs import cdr
-from rcac_ros.nodes.runtime.base import QOS, QOS_KEPT
+from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR
 from rcac_ros.nodes.runtime.rclpy_private import byte_sender
 from rcac_ros.nodes.controller.controller_state import ControllerStatePublisher
 
@@ -53,13 +53,13 @@ class ControllerOutputs:
         self._tagged = tagged
         create = node.create_lifecycle_publisher
         self._effort = create(Float64MultiArray, topics.EFFORT_COMMANDS, QOS)
-        self._theta = create(Float64MultiArray, topics.PARAMETER_ESTIMATES, QOS_KEPT)
-        self._e = create(Float64, topics.PREDICTION_ERROR, QOS_KEPT)
-        self._es = create(Float64MultiArray, topics.PREDICTION_ERRORS, QOS_KEPT)
-        self._track = create(Float64MultiArray, topics.TRACKING_ERROR, QOS_KEPT)
-        self._desired = create(JointState, topics.DESIRED_STATE, QOS_KEPT)
+        self._theta = create(Float64MultiArray, topics.PARAMETER_ESTIMATES, QOS_MONITOR)
+        self._e = create(Float64, topics.PREDICTION_ERROR, QOS_MONITOR)
+        self._es = create(Float64MultiArray, topics.PREDICTION_ERRORS, QOS_MONITOR)
+        self._track = create(Float64MultiArray, topics.TRACKING_ERROR, QOS_MONITOR)
+        self._desired = create(JointState, topics.DESIRED_STATE, QOS_MONITOR)
         self._state = ControllerStatePublisher(node, joints, create)
-        self._friction = create(Float64MultiArray, topics.FRICTION_ESTIMATES, QOS_KEPT) \
+        self._friction = create(Float64MultiArray, topics.FRICTION_ESTIMATES, QOS_MONITOR) \
             if joint_friction else None
         self._send_effort = byte_sender(self._effort)
         self._send = {name: byte_sender(pub) for name, pub in (

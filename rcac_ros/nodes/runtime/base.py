@@ -40,10 +40,6 @@ from rcac_ros.nodes.runtime.stats import Throttle
 QOS = topics.qos()
 #: reliable, keep-last 1000: the topics a recorder or a test reads
 QOS_MONITOR = topics.qos(topics.MONITOR_DEPTH)
-#: the same, transient local: the controller's monitors. DDS matches each side on its own: a
-#: writer that has not yet matched a reader its reader-side peer already sees would drop what
-#: it publishes meanwhile; a transient-local reader (``rcac record``) gets it at the match
-QOS_KEPT = topics.qos(topics.MONITOR_DEPTH, transient_local=True)
 
 
 # ------------------------------------------------------------------ parameters

@@ -133,8 +133,8 @@ class BagRecorder:
     Subscriptions are reliable. A topic whose publishers all offer best-effort is
     re-subscribed best-effort when they are discovered (a reliable subscription
     would not match them), as ``ros2 bag record`` adapts its QoS. The simulator's
-    ``~/payload`` (depth 10) and the controller's monitors (depth 1000) are transient local
-    and read so: a recorder that matches their writer late still gets what came before.
+    ``~/payload`` (transient local, depth 10) is read transient local: a recorder that
+    matches it after its first message (the payload at start) still records that one.
 
     A publisher's keep-last history bounds how far behind a reliable subscriber may fall:
     the package publishes efforts and ``/clock`` with keep-last 10, so a recorder that is
@@ -164,9 +164,6 @@ class BagRecorder:
         self._best_effort = ReliabilityPolicy.BEST_EFFORT
         self._latched = {topics.resolve(topics.PAYLOAD, topics.SIMULATOR_NODE):
                          topics.qos(10, transient_local=True)}
-        self._latched.update({   # the controller's monitors (nodes/runtime/base.py, QOS_KEPT)
-            name: topics.qos(depth, transient_local=True) for name, _ in
-            recorded_topics(controller_node) if name.startswith(f"/{controller_node}/")})
         self.use_sim_time = bool(use_sim_time)
         self.t0 = time.monotonic()
         self.node = Node(node_name, context=context, parameter_overrides=[
