@@ -255,6 +255,16 @@ def short_lanes(X):
         X[LANES * R_WHOLE + l] = 1.0 if whole else 0.0
 
 
+@njit(cache=True, inline="always")
+def lane_entries(X, e, d, o):
+    """J's 10 entries of the estimates at ``d[o:o + 13]`` into lane rows 0-9 from ``X[e]``
+    (``X[e + k LANES]``, the order of :func:`~rcac_ros.core.pseudo_inertia.pseudo_entries`)."""
+    j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, o)
+    X[e], X[e + LANES], X[e + 2 * LANES], X[e + 3 * LANES] = j00, j11, j22, j33
+    X[e + 4 * LANES], X[e + 5 * LANES], X[e + 6 * LANES] = j01, j02, j12
+    X[e + 7 * LANES], X[e + 8 * LANES], X[e + 9 * LANES] = j03, j13, j23
+
+
 @njit(cache=True)
 def retract_lanes(data, X):
     """:func:`retract_links` in the fused law: with the metric ``"barrier"`` the whole
@@ -272,15 +282,8 @@ def retract_lanes(data, X):
         m = min(LANES, n - g0)
         for l in range(LANES):
             so = (g0 + min(l, m - 1)) * LINK_COLS + CONST_COLS
-            j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, so + THETA_PREV)
-            X[l], X[LANES + l], X[2 * LANES + l], X[3 * LANES + l] = j00, j11, j22, j33
-            X[4 * LANES + l], X[5 * LANES + l], X[6 * LANES + l] = j01, j02, j12
-            X[7 * LANES + l], X[8 * LANES + l], X[9 * LANES + l] = j03, j13, j23
-            j00, j11, j22, j33, j01, j02, j12, j03, j13, j23 = pseudo_entries(d, so + THETA_HAT)
-            e = LANES * R_E + l
-            X[e], X[e + LANES], X[e + 2 * LANES], X[e + 3 * LANES] = j00, j11, j22, j33
-            X[e + 4 * LANES], X[e + 5 * LANES], X[e + 6 * LANES] = j01, j02, j12
-            X[e + 7 * LANES], X[e + 8 * LANES], X[e + 9 * LANES] = j03, j13, j23
+            lane_entries(X, l, d, so + THETA_PREV)
+            lane_entries(X, LANES * R_E + l, d, so + THETA_HAT)
             for k in range(3):
                 X[LANES * (R_NU + k) + l] = d[so + THETA_HAT + 4 + k]
         short_lanes(unmanaged_block(X, 0, (RETRACT_ROWS * LANES,)))
