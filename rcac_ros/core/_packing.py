@@ -85,7 +85,9 @@ I_LEAK = 23         #: sigma_0 of the leakage toward theta_0 (0: none)
 I_NATURAL = 24      #: 1: natural geometry, estimates kept consistent (doc/design.md §8)
 I_RETRACT_MIN = 25  #: the smallest step length a of the retraction at the last step
 I_BARRIER_C = 26    #: natural geometry, metric "barrier": c of P_mix (0: "log_det"), §8
-SCAL_LEN = 27
+I_JOINT_LS = 27     #: 1: the joint terms' gain is least squares (doc/design.md §7)
+I_JOINT_FORGET = 28  #: lambda_0 of the joint terms' bounded-gain forgetting, 1/s
+SCAL_LEN = 29
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 

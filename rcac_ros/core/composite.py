@@ -35,9 +35,9 @@ from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CHAN_COLS,
                        CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT,
                        I_BARRIER_C, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT,
-                       I_K, I_LEAK, I_NATURAL, I_PROJECT, I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0,
-                       NAT_K, NAT_P_NU, P_FACTOR, S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains,
-                       block, new_data)
+                       I_JOINT_FORGET, I_JOINT_LS, I_K, I_LEAK, I_NATURAL, I_PROJECT,
+                       I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K, NAT_P_NU, P_FACTOR,
+                       S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block, new_data)
 from ._validate import as_array, joint_values, projection_bounds, scalar
 from .channels import channel_codes, parse_channels
 from ._jit import is_ready, ready
@@ -45,8 +45,9 @@ from .composite_kernels import friction_step_kernel, rcac_step_kernel
 from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction_step,
                               paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
-from .joint_friction import (F_GAIN, F_HAT, F_RATE, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
+from .joint_friction import (F_GAIN, F_HAT, F_LS, F_RATE, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
                              friction_gain, gains_at_start, natural_friction_start, rotor_start)
+from .law_options import FRICTION_FORGETTING, friction_adaptation_option
 from .least_squares import initial_factor
 from .natural_step import lane_constants
 from .pseudo_inertia import (barrier_blocks, bregman_log_det, check_body, initial_estimates,
@@ -143,6 +144,14 @@ class RecursiveCompositeController:
         measured ``q``, growing with the largest armature estimate (doc/design.md §7
         "Joint terms without per-arm tuning"). Any ``P_friction``: the joint's feedback
         grows with the rotor (:func:`~rcac_ros.core.joint_friction.rotor`).
+    friction_adaptation : {None, "gradient", "least_squares"}
+        The joint terms' gain: ``"gradient"`` (the default, ``None``): ``P_friction``
+        fixed; ``"least_squares"`` (Euclidean geometry only): a 3x3 least-squares gain per
+        joint from ``P_friction`` down, with bounded-gain forgetting that keeps it
+        ``<= P_friction`` (doc/design.md §7 "Least squares on the joint terms").
+    friction_forgetting : float
+        ``lambda_0`` (1/s) of the joint terms' bounded-gain forgetting (least squares),
+        default :data:`~rcac_ros.core.law_options.FRICTION_FORGETTING`.
 
     Raises
     ------
@@ -160,6 +169,7 @@ class RecursiveCompositeController:
                  forgetting=0.0, P_max=None, dead_zone_s=0.0, dead_zone_E=0.0,
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
                  joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
+                 friction_adaptation=None, friction_forgetting=FRICTION_FORGETTING,
                  geometry="euclidean", natural_gain=None, natural_metric=None,
                  barrier_c=None):
         self.model = model
@@ -186,6 +196,7 @@ class RecursiveCompositeController:
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
         self._geometry(geometry, natural_gain, theta_hat0)
+        self._joint_adaptation(friction_adaptation, friction_forgetting)
         self._metric(natural_metric, barrier_c)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
@@ -237,6 +248,17 @@ class RecursiveCompositeController:
                                                         self.model.joint_terms(), InputError)
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
+
+    def _joint_adaptation(self, friction_adaptation, friction_forgetting):
+        """The joint terms' gain (doc/design.md §7): least squares or the fixed diagonal."""
+        self.friction_adaptation = friction_adaptation_option(
+            friction_adaptation, self.geometry)
+        self.friction_forgetting = scalar(friction_forgetting, "friction_forgetting",
+                                          GainError, minimum=0.0)
+        if not self.joint_friction:
+            return
+        self._scal[I_JOINT_LS] = 1.0 if self.friction_adaptation == "least_squares" else 0.0
+        self._scal[I_JOINT_FORGET] = self.friction_forgetting
 
     def _metric(self, natural_metric, barrier_c):
         """The natural geometry's metric (doc/design.md §8): ``c`` into the scalars."""
@@ -562,6 +584,19 @@ class RecursiveCompositeController:
             return self.P.copy()
         S = self._state[:, P_FACTOR:P_FACTOR + 169].reshape(self.n, 13, 13)
         return S @ S.transpose(0, 2, 1)
+
+    @property
+    def friction_gain(self):
+        """The joint terms' gain ``P_f,i`` in use, (n, 3, 3): the diagonal ``P_friction``
+        (as grown by the rotor), or least squares (doc/design.md §7); None without
+        ``joint_friction``."""
+        if not self.joint_friction:
+            return None
+        if self.friction_adaptation == "gradient":
+            return np.array([np.diag(g) for g in self._jdata[:, F_GAIN:F_GAIN + 3]])
+        T = self._jdata[:, F_LS:F_LS + 9].reshape(self.n, 3, 3)
+        r = np.sqrt(self._jdata[:, F_GAIN:F_GAIN + 3])
+        return r[:, :, None] * (T @ T.transpose(0, 2, 1)) * r[:, None, :]
 
     @property
     def adapted(self):

@@ -19,15 +19,16 @@ from ._jit import kernel, njit
 from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, reference_motion, \
     rejects_input, unmanaged, unmanaged_block, unmanaged_views
 from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
-                       I_G, I_H, I_IMPLICIT, I_K, I_KD_DIAG, I_LAM, I_NATURAL, I_PROJECT,
-                       I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, THETA_HAT)
+                       I_G, I_H, I_IMPLICIT, I_JOINT_LS, I_K, I_KD_DIAG, I_LAM, I_NATURAL,
+                       I_PROJECT, I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU,
+                       THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
 from .natural_step import retract_links
 from .channels import close_channels, predict_link, start_channels
 from .joint_friction import (F_CAP, F_GAIN, F_HAT, F_K, F_PREV, F_R, F_SQ, F_VC, F_Y,
                              FOLLOW_TIME, FRICTION_SIGNATURE, adapt_joint, follow_gain,
                              implicit_solve_joint, predict_joint, retract_term, rotor,
-                             term_gain)
+                             term_gain, update_joint_least_squares)
 from .regressor import reference_wrench, regressor_terms
 from .spatial import P0, transform_force_T
 
@@ -176,6 +177,8 @@ def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
                     jdata[i, F_HAT + k] = jdata[i, F_R + k]
     if not frozen and scal[I_ADAPT] != ADAPT_GRADIENT:
         update_least_squares(chan, filt, const, state, scal, grad, Pg)
+    if joint and not frozen and scal[I_JOINT_LS] != 0.0:
+        update_joint_least_squares(chan, jfilt, jdata, scal, grad)     # doc/design.md §7
     if not frozen and scal[I_PROJECT] != 0.0:
         project(const, state)
         if joint:

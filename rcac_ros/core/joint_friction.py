@@ -40,9 +40,10 @@ from ._jit import njit
 from ._validate import numeric
 from rcac_ros.errors import GainError
 from ._blocks import VEC, cholesky_solve
-from ._packing import (CH_ACTIVE, CH_E, CH_JOINT, CH_Y, I_GAMMA, I_H, I_IMPLICIT, POWER,
-                       THETA_HAT, U_ROW, W_ROW)
+from ._packing import (CH_ACTIVE, CH_E, CH_JOINT, CH_Y, I_GAMMA, I_H, I_IMPLICIT,
+                       I_JOINT_FORGET, I_JOINT_LS, POWER, THETA_HAT, U_ROW, W_ROW)
 from .channels import channel_start, filter_step
+from .least_squares import potter_update
 
 # ---- joint j: jdata[j, :] ------------------------------------------------------------------
 F_HAT = 0           #: theta_f_hat_j = (armature, damping, friction) estimates (3)
@@ -59,7 +60,8 @@ F_AREF = 24         #: a_ref,j: the largest a_fb,j so far (>= 0)
 F_BASE = 25         #: P_f,j at a_ref,j = 0 (3)
 F_GROW = 28         #: dP_f,j / da_ref,j (3): beta rho_q,j w with the default gain, else 0
 F_AFB = 31          #: a_fb,j: the armature estimate (>= 0) low-passed over FOLLOW_TIME
-JOINT_COLS = 32
+F_LS = 32           #: least squares: T_j, P_f,j = G^1/2 T_j T_j^T G^1/2, G = diag(P_f,j) (9)
+JOINT_COLS = 41
 
 # ---- channel c, joint j: jfilt[c, j, :] ----------------------------------------------------
 JPHI_F = 0          #: phi_f^f (3)
@@ -206,24 +208,120 @@ def retract_term(v, op, on):
 
 
 @njit(cache=True, inline="always")
+def ls_gain_times(jrow, x0, x1, x2):
+    """``P_f,j x = G^1/2 T T^T G^1/2 x``: joint j's least-squares gain (:data:`F_LS`),
+    ``G = diag(P_f,j)`` its diagonal gain (doc/design.md §7)."""
+    S = F_LS
+    r0, r1, r2 = (math.sqrt(jrow[F_GAIN]), math.sqrt(jrow[F_GAIN + 1]),
+                  math.sqrt(jrow[F_GAIN + 2]))
+    x0, x1, x2 = r0 * x0, r1 * x1, r2 * x2
+    t0 = jrow[S] * x0 + jrow[S + 3] * x1 + jrow[S + 6] * x2
+    t1 = jrow[S + 1] * x0 + jrow[S + 4] * x1 + jrow[S + 7] * x2
+    t2 = jrow[S + 2] * x0 + jrow[S + 5] * x1 + jrow[S + 8] * x2
+    return (r0 * (jrow[S] * t0 + jrow[S + 1] * t1 + jrow[S + 2] * t2),
+            r1 * (jrow[S + 3] * t0 + jrow[S + 4] * t1 + jrow[S + 5] * t2),
+            r2 * (jrow[S + 6] * t0 + jrow[S + 7] * t1 + jrow[S + 8] * t2))
+
+
+@njit(cache=True, inline="always")
+def largest_eigenvalue(a00, a01, a02, a11, a12, a22):
+    """The largest eigenvalue of a symmetric 3x3 matrix, closed form (O. K. Smith,
+    Comm. ACM 4(4), 1961: the trigonometric solution of the characteristic cubic)."""
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    if p1 == 0.0:
+        return max(a00, a11, a22)
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
+    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
+           + a02 * (a01 * a12 - b11 * a02))
+    r = min(max(det / (2.0 * p * p * p), -1.0), 1.0)
+    return q + 2.0 * p * math.cos(math.acos(r) / 3.0)
+
+
+@njit(cache=True, inline="always")
+def row_dot(T, a, b):
+    """``(T T^T)_ab`` of a row-major 3x3 ``T``."""
+    return T[3 * a] * T[3 * b] + T[3 * a + 1] * T[3 * b + 1] + T[3 * a + 2] * T[3 * b + 2]
+
+
+@njit(cache=True, inline="always")
+def joint_forgetting(T, h, lambda_0):
+    """Bounded-gain forgetting of the normalised factor ``T`` (``Q = T T^T``): ``T /=
+    sqrt(beta)``, ``beta = max(exp(-h lambda_f), mu)``, ``lambda_f = lambda_0 (1 - mu)``,
+    ``mu = lambda_max(Q)``; so ``Q <= I`` after the step: ``P_f,j <= diag(P_f,j)``."""
+    mu = largest_eigenvalue(row_dot(T, 0, 0), row_dot(T, 0, 1), row_dot(T, 0, 2),
+                            row_dot(T, 1, 1), row_dot(T, 1, 2), row_dot(T, 2, 2))
+    beta = max(math.exp(-h * lambda_0 * max(0.0, 1.0 - mu)), mu)
+    if beta != 1.0:
+        scale = 1.0 / math.sqrt(beta)
+        for k in range(9):
+            T[k] *= scale
+
+
+@njit(cache=True, inline="always")
+def joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, k):
+    """Term k of ``Y_f,i^T s_qi + gamma sum_c W_f,ci^T E_c`` (implicit: ``- gamma sum_c
+    W_f,ci^T y_c``; the solve adds the rest), over the active channels that see joint i."""
+    g = jrow[F_Y + k] * jrow[F_SQ] if tracking else 0.0
+    for c in range(chan.shape[0]):
+        if chan[c, CH_ACTIVE] == 0.0 or not sees(chan[c, CH_JOINT], i):
+            continue
+        if implicit:
+            g -= gamma * jfilt[c, i, JW + k] * chan[c, CH_Y]
+        else:
+            g += gamma * jfilt[c, i, JW + k] * chan[c, CH_E]
+    return g
+
+
+@njit(cache=True, inline="always")
 def adapt_joint(chan, jfilt, i, jrow, scal, tracking):
     """Eq 24, step 1, joint i's terms: ``R_f,i = theta_f_hat_i - h P_f,i (Y_f,i^T s_qi
-    + prediction part)``, and ``U_f,ci = P_f,i W_f,ci^T`` for the implicit solve."""
+    + prediction part)``, and ``U_f,ci = P_f,i W_f,ci^T`` for the implicit solve; ``P_f,i``
+    the diagonal gain, or the least-squares gain ``S S^T`` (``scal[I_JOINT_LS]``)."""
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
-    for k in range(3):
-        g = jrow[F_Y + k] * jrow[F_SQ] if tracking else 0.0
-        for c in range(chan.shape[0]):
-            if chan[c, CH_ACTIVE] == 0.0 or not sees(chan[c, CH_JOINT], i):
-                continue
-            if implicit:
-                g -= gamma * jfilt[c, i, JW + k] * chan[c, CH_Y]
-            else:
-                g += gamma * jfilt[c, i, JW + k] * chan[c, CH_E]
-        jrow[F_R + k] = jrow[F_HAT + k] - h * jrow[F_GAIN + k] * g
+    g0 = joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, 0)
+    g1 = joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, 1)
+    g2 = joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, 2)
+    if scal[I_JOINT_LS] != 0.0:
+        p0, p1, p2 = ls_gain_times(jrow, g0, g1, g2)
+        jrow[F_R] = jrow[F_HAT] - h * p0
+        jrow[F_R + 1] = jrow[F_HAT + 1] - h * p1
+        jrow[F_R + 2] = jrow[F_HAT + 2] - h * p2
         if implicit:
             for c in range(chan.shape[0]):
+                jfilt[c, i, JU], jfilt[c, i, JU + 1], jfilt[c, i, JU + 2] = ls_gain_times(
+                    jrow, jfilt[c, i, JW], jfilt[c, i, JW + 1], jfilt[c, i, JW + 2])
+        return
+    jrow[F_R] = jrow[F_HAT] - h * jrow[F_GAIN] * g0
+    jrow[F_R + 1] = jrow[F_HAT + 1] - h * jrow[F_GAIN + 1] * g1
+    jrow[F_R + 2] = jrow[F_HAT + 2] - h * jrow[F_GAIN + 2] * g2
+    if implicit:
+        for c in range(chan.shape[0]):
+            for k in range(3):
                 jfilt[c, i, JU + k] = jrow[F_GAIN + k] * jfilt[c, i, JW + k]
+
+
+@njit(cache=True, inline="always")
+def update_joint_least_squares(chan, jfilt, jdata, scal, f):
+    """The joint terms' least-squares gain (doc/design.md §7): per joint,
+    ``d/dt P_f,i^-1 = -lambda_f P_f,i^-1 + gamma sum_c W_f,ci^T W_f,ci`` over the active
+    channels that see it: Potter's update of the normalised factor ``T_i`` with the rows
+    ``G^1/2 W_f,ci^T`` (:func:`~rcac_ros.core.least_squares.potter_update`), then
+    :func:`joint_forgetting`. ``f``: 9 scratch entries."""
+    h = scal[I_H]
+    hg = h * scal[I_GAMMA]
+    for i in range(jdata.shape[0]):
+        jrow = jdata[i]
+        T = jrow[F_LS:F_LS + 9]
+        if hg > 0.0:
+            for c in range(chan.shape[0]):
+                if chan[c, CH_ACTIVE] != 0.0 and sees(chan[c, CH_JOINT], i):
+                    for k in range(3):
+                        f[6 + k] = math.sqrt(jrow[F_GAIN + k]) * jfilt[c, i, JW + k]
+                    potter_update(T, f[6:9], hg, f[0:3], f[3:6])
+        joint_forgetting(T, h, scal[I_JOINT_FORGET])
 
 
 @njit(cache=True, inline="always")
@@ -387,7 +485,8 @@ def rotor_start(jdata, P, grow, rate, natural):
     """Joint data for the rotor (:func:`rotor`) from the current estimates: ``a_ref`` the
     armature estimate (>= 0), the base gain ``P`` and its growth ``grow`` ((n, 3) each),
     the rotor's rates ``rate`` (n,), the gain ``P + grow a_ref`` (natural geometry: the cap,
-    and the natural gain matched to it at the estimates)."""
+    and the natural gain matched to it at the estimates; least squares: the factor of the
+    gain, which restarts there)."""
     a = np.maximum(jdata[:, F_HAT], 0.0)
     jdata[:, F_AREF] = a
     jdata[:, F_AFB] = a
@@ -396,6 +495,7 @@ def rotor_start(jdata, P, grow, rate, natural):
     jdata[:, F_GROW:F_GROW + 3] = grow
     gain = P + grow * a[:, None]
     jdata[:, F_GAIN:F_GAIN + 3] = gain
+    jdata[:, F_LS:F_LS + 9] = np.eye(3).ravel()       # least squares: P_f(0) = the gain
     if natural:
         jdata[:, F_CAP:F_CAP + 3] = gain
         jdata[:, F_K:F_K + 3] = friction_natural_gain(gain, jdata[:, F_HAT:F_HAT + 3])

@@ -9,7 +9,9 @@ controllers use the same functions and values (:mod:`rcac_ros.core.channels` and
   :func:`parse_channels`;
 - ``barrier_c``: the metric ``"barrier"`` of the natural geometry (doc/design.md §8),
   :data:`BARRIER_C` and :data:`BARRIER_C_MIN`;
-- ``P_friction``: the joint terms' gain (doc/design.md §7), default :data:`P_FRICTION`.
+- ``P_friction``: the joint terms' gain (doc/design.md §7), default :data:`P_FRICTION`;
+- ``friction_adaptation``, ``friction_forgetting``: least squares on the joint terms
+  (doc/design.md §7), :func:`friction_adaptation_option`, :data:`FRICTION_FORGETTING`.
 """
 
 import numpy as np
@@ -25,6 +27,12 @@ BARRIER_C_MIN = 1e-6
 #: default ``P_friction``: the joint terms' gain scaled from each joint's feedback at the
 #: first posture (:func:`rcac_ros.core.joint_friction.feedback_scaled_gain`)
 P_FRICTION = "feedback"
+
+#: the joint terms' gains: fixed (the default) or least squares
+FRICTION_ADAPTATIONS = ("gradient", "least_squares")
+#: default ``lambda_0`` (1/s) of the joint terms' bounded-gain forgetting: a memory of
+#: ``1 / lambda_0 = 2`` s, about one period of a manipulator's slowest motions (0.5 Hz)
+FRICTION_FORGETTING = 0.5
 
 #: The value of ``channels`` that gives every joint.
 ALL = "all"
@@ -83,3 +91,24 @@ def parse_channels(value, n):
     if dup:
         raise GainError(f"channels: listed twice: {', '.join(dup)}")
     return tuple(out)
+
+
+def friction_adaptation_option(value, geometry):
+    """Validate ``friction_adaptation`` for ``geometry``; None gives the default,
+    ``"gradient"``. ``"least_squares"`` only in the Euclidean geometry (the natural one's
+    joint terms adapt in the positive orthant's geometry, doc/design.md §8).
+
+    Raises
+    ------
+    GainError
+        One line naming ``friction_adaptation`` and the value.
+    """
+    if value is None:
+        return "gradient"
+    if value not in FRICTION_ADAPTATIONS:
+        raise GainError(f"friction_adaptation: expected 'least_squares' or 'gradient', "
+                        f"got {value!r}")
+    if value == "least_squares" and geometry == "natural":
+        raise GainError("friction_adaptation: 'least_squares' needs geometry='euclidean' "
+                        "(the natural geometry's joint terms use 'gradient', doc/design.md §8)")
+    return value

@@ -18,7 +18,8 @@ Square-root form. The controller keeps a factor ``S_i`` with ``P_i = S_i S_i^T``
 ``S S^T`` is a Gram matrix, so P stays symmetric; each factor ``I - c f f^T`` has the
 eigenvalue ``(1/h + sqrt(alpha/h)) / (alpha + sqrt(alpha/h)) > 0`` along f, so P stays
 positive definite, whatever the rounding. Cost per link and channel: three 13x13
-products, O(m n) per step.
+products, O(m n) per step. The joint terms' least-squares gain (doc/design.md §7) uses the
+same step 1 on a 3x3 factor.
 """
 
 import math
@@ -51,13 +52,16 @@ def apply_factored(S, o, x, out, t):
 def potter_update(S, w, h, f, Sf):
     """Step 1: ``S`` becomes the factor of ``(S S^T)^-1 + h w^T w`` (one channel row w).
 
-    ``f`` and ``Sf`` are 13-entry scratch rows.
+    ``S``: the d x d factor, row-major (d^2 entries), d the length of ``w`` (13 for a
+    link, 3 for a joint's terms, doc/design.md §7); ``f`` and ``Sf`` are scratch rows of
+    at least d entries.
     """
+    d = w.shape[0]
     ff = 0.0
-    for c in range(13):
+    for c in range(d):
         acc = 0.0
-        for r in range(13):
-            acc += S[13 * r + c] * w[r]
+        for r in range(d):
+            acc += S[d * r + c] * w[r]
         f[c] = acc
         ff += acc * acc
     if ff == 0.0:
@@ -65,14 +69,14 @@ def potter_update(S, w, h, f, Sf):
     r_inv = 1.0 / h
     alpha = r_inv + ff
     coef = 1.0 / (alpha + math.sqrt(alpha * r_inv))
-    for r in range(13):
+    for r in range(d):
         acc = 0.0
-        for c in range(13):
-            acc += S[13 * r + c] * f[c]
+        for c in range(d):
+            acc += S[d * r + c] * f[c]
         Sf[r] = coef * acc
-    for r in range(13):
-        for c in range(13):
-            S[13 * r + c] -= Sf[r] * f[c]
+    for r in range(d):
+        for c in range(d):
+            S[d * r + c] -= Sf[r] * f[c]
 
 
 @njit(cache=True)

@@ -1,0 +1,134 @@
+"""Least squares on the joint terms (doc/design.md §7): the 3x3 information update, the
+diagonal law without information, the trace bound, freezing, and the identification."""
+
+import numpy as np
+import pytest
+from chains import frictional_chain, worst_difference
+
+from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, SinusoidTrajectory
+from rcac_ros.core.composite_kernels import friction_step_kernel
+from rcac_ros.core.least_squares import potter_update
+
+
+def test_potter_update_of_a_3x3_factor_is_the_information_update():
+    """The joints' 3x3 factor: S S^T after the update equals inv(inv(P) + h w^T w)."""
+    rng = np.random.default_rng(41)
+    f, Sf = np.empty(3), np.empty(3)
+    for _ in range(30):
+        A = rng.normal(size=(3, 3))
+        P = A @ A.T + 0.1 * np.eye(3)
+        S = np.linalg.cholesky(P).ravel().copy()
+        w, h = rng.normal(size=3) * 10.0, 0.002
+        potter_update(S, w, h, f, Sf)
+        P1 = S.reshape(3, 3) @ S.reshape(3, 3).T
+        ref = np.linalg.inv(np.linalg.inv(P) + h * np.outer(w, w))
+        assert np.allclose(P1, ref, rtol=1e-10, atol=1e-13 * np.abs(ref).max())
+
+
+def laws(gamma, **options):
+    model, q0, traj = frictional_chain()
+    gains = dict(K_D=30.0, P=1.0, gamma=gamma, lam=20.0, channels="all", joint_friction=True,
+                 friction_hat0=np.zeros((5, 3)), P_friction=(0.5, 5.0, 5.0))
+    gains.update(options)
+    ls = RecursiveCompositeController(model, friction_adaptation="least_squares", **gains)
+    fixed = RecursiveCompositeController(model, friction_adaptation="gradient", **gains)
+    return ls, fixed, model, q0, traj
+
+
+def test_without_information_least_squares_is_the_diagonal_law():
+    """gamma = 0 (the direct law): no channel informs the gain, so P_f stays P_friction and
+    both laws give the same efforts and estimates (to rounding of sqrt(P)^2)."""
+    ls, fixed, model, q0, traj = laws(0.0)
+    gains = []
+    worst = worst_difference(ls, fixed, model, q0, traj,
+                             each_step=lambda c: gains.append(ls.friction_gain))
+    assert worst < 1e-12, worst
+    expected = np.array([np.diag((0.5, 5.0, 5.0))] * 5)
+    assert np.allclose(gains[-1], expected, rtol=1e-14, atol=0.0)
+    assert ls._entry is friction_step_kernel      # never the paper law's fused body
+
+
+@pytest.mark.parametrize("forgetting", [0.0, 5.0])
+def test_information_lowers_the_gain_never_above_P_friction(forgetting):
+    """With the channels the gain falls below P_friction (in the Loewner order) and, with
+    forgetting too, never rises above it; the two laws differ."""
+    ls, fixed, model, q0, traj = laws(0.5, friction_forgetting=forgetting)
+    P0 = np.diag((0.5, 5.0, 5.0))
+    lowest = []
+
+    def check(_):
+        P = ls.friction_gain
+        for Pi in P:
+            assert np.allclose(Pi, Pi.T, rtol=0.0, atol=1e-15 * np.abs(Pi).max())
+            assert np.linalg.eigvalsh(Pi).min() > 0.0
+            assert np.linalg.eigvalsh(P0 - Pi).min() > -1e-13 * 5.0
+        lowest.append(np.trace(P, axis1=1, axis2=2).min())
+
+    worst = worst_difference(ls, fixed, model, q0, traj, each_step=check)
+    assert min(lowest) < 0.99 * 10.5               # the information lowered it
+    assert worst > 1e-3
+
+
+def test_largest_eigenvalue_of_a_symmetric_3x3():
+    """The closed form against numpy's eigvalsh, diagonal and repeated eigenvalues too."""
+    from rcac_ros.core.joint_friction import largest_eigenvalue
+    rng = np.random.default_rng(42)
+    cases = [np.diag((1.0, 1.0, 1.0)), np.diag((0.2, 3.0, 1.0)),
+             np.eye(3) - 0.5 * np.outer((1, 1, 1), (1, 1, 1)) / 3.0]
+    for _ in range(200):
+        A = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3, 3)
+        cases.append(A @ A.T)
+    for A in cases:
+        got = largest_eigenvalue(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
+        ref = np.linalg.eigvalsh(A).max()
+        assert got == pytest.approx(ref, rel=1e-12, abs=1e-14 * np.abs(A).max())
+
+
+def test_a_frozen_law_holds_its_joint_gain():
+    ls, _, model, q0, traj = laws(0.5)
+    sim = Simulator(model, q0=q0)
+    for k in range(300):
+        sim.step(ls.step(sim.q, sim.qd, *traj(k * 0.002)))
+    ls.set_adaptation(False)
+    P, fh = ls.friction_gain, ls.friction_hat
+    for k in range(300, 600):
+        sim.step(ls.step(sim.q, sim.qd, *traj(k * 0.002)))
+    assert np.array_equal(ls.friction_gain, P) and np.array_equal(ls.friction_hat, fh)
+
+
+@pytest.mark.parametrize("options, match", [
+    (dict(friction_adaptation="newton"), "friction_adaptation: expected"),
+    (dict(friction_adaptation="least_squares", geometry="natural"), "needs geometry"),
+    (dict(friction_forgetting=-1.0), "friction_forgetting"),
+])
+def test_bad_options_are_one_line_errors(options, match):
+    model, _, _ = frictional_chain()
+    with pytest.raises(GainError, match=match):
+        RecursiveCompositeController(model, joint_friction=True, **options)
+
+
+def test_the_panda_learns_its_joint_terms_with_its_links_known():
+    """``rcac friction-demo``'s plant and motion, every link known, every channel, 20 s from
+    zero joint estimates: least squares brings every armature and damping within the demo's
+    10 % and every Coulomb term within its 15 % (tools.md, friction-demo)."""
+    from rcac_ros.tools.demos.friction import AMPLITUDE, FREQUENCY, GOALS, P_FRICTION, TRUTH
+    from rcac_ros.tools.runs.scenarios import GAINS, READY, find_panda_urdf, gains_for, \
+        load_panda
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data not installed")
+    rigid = load_panda()
+    plant = rigid.replace(armature=TRUTH[0], damping=TRUTH[1], friction=TRUTH[2])
+    gains = gains_for(rigid, **GAINS)
+    gains["P"][-1] = gains["P"][0]                 # every link known (the fixed law's gain)
+    ctrl = RecursiveCompositeController(rigid, channels="all", joint_friction=True,
+                                        P_friction=P_FRICTION,
+                                        friction_adaptation="least_squares", **gains)
+    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    q0, qd0, _ = traj(0.0)
+    sim = Simulator(plant, dt=ctrl.h, q0=q0, qd0=qd0)
+    for k in range(int(round(20.0 / ctrl.h))):
+        sim.step(ctrl.step(sim.q, sim.qd, *traj(k * ctrl.h)))
+        ctrl.set_applied_torque(sim.applied)
+    truth = plant.joint_terms()
+    worst = (np.abs(ctrl.friction_hat - truth) / truth).max(axis=0)
+    assert np.all(worst <= np.array(GOALS)), worst
