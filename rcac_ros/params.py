@@ -232,6 +232,13 @@ CONTROLLER = _robot("controller") + (
           "adaptation gains of the joint terms (armature, damping, friction), 3 values > 0 "
           "(unset: each joint's scaled from its feedback at the first state, growing with "
           "its rotor, doc/design.md §7)"),
+    Param("friction_adaptation", "string", "gradient",
+          "gain of the joint terms: 'gradient' (P_friction fixed) or 'least_squares' (from "
+          "P_friction down, geometry 'euclidean'; doc/design.md §7)",
+          choices=("gradient", "least_squares")),
+    Param("friction_forgetting", "double", 0.5,
+          "friction_adaptation 'least_squares': forgetting rate lambda_0, 1/s",
+          lo=0.0, hi=BIG),
     Param("trajectory", "string", "paper",
           "desired motion: 'paper' (built-in Section 4 motion) or 'topic' (~/joint_trajectory)",
           choices=("paper", "topic")),

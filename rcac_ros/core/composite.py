@@ -193,10 +193,10 @@ class RecursiveCompositeController:
         self.adapting = True
         self.K_D_scale = 1.0
         self.joint_friction = bool(joint_friction)
+        self._joint_adaptation(friction_adaptation, friction_forgetting, geometry)
         if self.joint_friction:
             self._joint_terms(friction_hat0, P_friction, m)
         self._geometry(geometry, natural_gain, theta_hat0)
-        self._joint_adaptation(friction_adaptation, friction_forgetting)
         self._metric(natural_metric, barrier_c)
         self.reset(theta_hat0)
         self._leakage(leakage, leakage_bound, theta_hat0 if theta_0 is None else theta_0)
@@ -249,10 +249,9 @@ class RecursiveCompositeController:
         self._scal[I_NATURAL] = 1.0
         self._scal[I_RETRACT_MIN] = 1.0
 
-    def _joint_adaptation(self, friction_adaptation, friction_forgetting):
+    def _joint_adaptation(self, friction_adaptation, friction_forgetting, geometry):
         """The joint terms' gain (doc/design.md §7): least squares or the fixed diagonal."""
-        self.friction_adaptation = friction_adaptation_option(
-            friction_adaptation, self.geometry)
+        self.friction_adaptation = friction_adaptation_option(friction_adaptation, geometry)
         self.friction_forgetting = scalar(friction_forgetting, "friction_forgetting",
                                           GainError, minimum=0.0)
         if not self.joint_friction:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from chains import frictional_chain, worst_difference
 
-from rcac_ros.core import GainError, RecursiveCompositeController, Simulator, SinusoidTrajectory
+from rcac_ros.core import GainError, RecursiveCompositeController, Simulator
 from rcac_ros.core.composite_kernels import friction_step_kernel
 from rcac_ros.core.least_squares import potter_update
 
@@ -111,24 +111,11 @@ def test_the_panda_learns_its_joint_terms_with_its_links_known():
     """``rcac friction-demo``'s plant and motion, every link known, every channel, 20 s from
     zero joint estimates: least squares brings every armature and damping within the demo's
     10 % and every Coulomb term within its 15 % (tools.md, friction-demo)."""
-    from rcac_ros.tools.demos.friction import AMPLITUDE, FREQUENCY, GOALS, P_FRICTION, TRUTH
-    from rcac_ros.tools.runs.scenarios import GAINS, READY, find_panda_urdf, gains_for, \
-        load_panda
+    from rcac_ros.tools.demos.friction import GOALS, run_friction_demo
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf
     if find_panda_urdf() is None:
         pytest.skip("example-robot-data not installed")
-    rigid = load_panda()
-    plant = rigid.replace(armature=TRUTH[0], damping=TRUTH[1], friction=TRUTH[2])
-    gains = gains_for(rigid, **GAINS)
-    gains["P"][-1] = gains["P"][0]                 # every link known (the fixed law's gain)
-    ctrl = RecursiveCompositeController(rigid, channels="all", joint_friction=True,
-                                        P_friction=P_FRICTION,
-                                        friction_adaptation="least_squares", **gains)
-    traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
-    q0, qd0, _ = traj(0.0)
-    sim = Simulator(plant, dt=ctrl.h, q0=q0, qd0=qd0)
-    for k in range(int(round(20.0 / ctrl.h))):
-        sim.step(ctrl.step(sim.q, sim.qd, *traj(k * ctrl.h)))
-        ctrl.set_applied_torque(sim.applied)
-    truth = plant.joint_terms()
-    worst = (np.abs(ctrl.friction_hat - truth) / truth).max(axis=0)
+    _, hist, truth, _ = run_friction_demo(20.0, links_known=True, record_every=10000,
+                                          friction_adaptation="least_squares")
+    worst = (np.abs(hist[-1] - truth) / truth).max(axis=0)
     assert np.all(worst <= np.array(GOALS)), worst

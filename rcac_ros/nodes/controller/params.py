@@ -163,7 +163,8 @@ def adaptation_options(v, channels):
                 leakage=v["leakage"], leakage_bound=v["leakage_bound"],
                 geometry=v["geometry"], natural_gain=v["natural_gain"],
                 natural_metric=None if v["natural_metric"] == "auto" else v["natural_metric"],
-                barrier_c=v["barrier_c"])
+                barrier_c=v["barrier_c"], friction_adaptation=v["friction_adaptation"],
+                friction_forgetting=v["friction_forgetting"])
 
 
 def channel_names(channels):

@@ -39,15 +39,20 @@ NAMES = ("armature", "damping", "friction")
 
 
 def run_friction_demo(duration=30.0, adapt_links=False, channels="all",
-                      P_friction=P_FRICTION, record_every=25):
-    """The closed loop; returns ``(t, friction_hat history (k, n, 3), truth (n, 3), rms)``."""
+                      P_friction=P_FRICTION, record_every=25, links_known=False,
+                      friction_adaptation="gradient"):
+    """The closed loop; returns ``(t, friction_hat history (k, n, 3), truth (n, 3), rms)``.
+    ``links_known``: no link adapts (every link the URDF's, the truth)."""
     from rcac_ros.core import RecursiveCompositeController, Simulator
     rigid = load_panda()
     plant = rigid.replace(armature=TRUTH[0], damping=TRUTH[1], friction=TRUTH[2])
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
+    gains = gains_for(rigid, adapt_all=adapt_links, **GAINS)
+    if links_known:
+        gains["P"][-1] = gains["P"][0]              # the fixed law's gain: no link adapts
     ctrl = RecursiveCompositeController(
         rigid, channels=channels, joint_friction=True, P_friction=P_friction,
-        **gains_for(rigid, adapt_all=adapt_links, **GAINS))
+        friction_adaptation=friction_adaptation, **gains)
     q0, qd0, _ = traj(0.0)
     sim = Simulator(plant, dt=ctrl.h, q0=q0, qd0=qd0)
     steps = int(round(duration / ctrl.h))
@@ -94,20 +99,31 @@ def plot(t, hist, truth, path, title):
 
 def add_arguments(parser):
     parser.add_argument("--duration", type=positive_float, default=30.0, help="seconds")
-    parser.add_argument("--adapt-links", action="store_true",
-                        help="the links adapt too, from the URDF's nominal parameters")
+    links = parser.add_mutually_exclusive_group()
+    links.add_argument("--adapt-links", action="store_true",
+                       help="the links adapt too, from the URDF's nominal parameters")
+    links.add_argument("--links-known", action="store_true",
+                       help="no link adapts (the URDF's are the plant's)")
+    parser.add_argument("--friction-adaptation", choices=("gradient", "least_squares"),
+                        default="gradient", help="the joint terms' gain (doc/design.md §7)")
     parser.add_argument("--out", default="results/friction", help="output directory")
 
 
 def run(args):
-    t, hist, truth, rms = run_friction_demo(args.duration, args.adapt_links)
+    t, hist, truth, rms = run_friction_demo(args.duration, args.adapt_links,
+                                            links_known=args.links_known,
+                                            friction_adaptation=args.friction_adaptation)
     report = summarise(hist, truth)
-    report.update(duration_s=args.duration, adapt_links=args.adapt_links, rms_error_rad=rms,
-                  P_friction=list(P_FRICTION), channels="all")
+    report.update(duration_s=args.duration, adapt_links=args.adapt_links,
+                  links_known=args.links_known, friction_adaptation=args.friction_adaptation,
+                  rms_error_rad=rms, P_friction=list(P_FRICTION), channels="all")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "metrics.json"), "w", encoding="utf-8") as f:
         json.dump(report, f, indent=2)
-    links = "links adapting" if args.adapt_links else "last link adapting"
+    links = "links adapting" if args.adapt_links else \
+        "links known" if args.links_known else "last link adapting"
+    if args.friction_adaptation != "gradient":
+        links += f", joint terms by {args.friction_adaptation.replace('_', ' ')}"
     plot(t, hist, truth, os.path.join(args.out, "friction_estimates.png"),
          f"Panda, built-in simulator with tanh friction: joint estimates ({links}, "
          f"channels='all', {args.duration:g} s)")

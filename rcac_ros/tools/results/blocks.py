@@ -216,12 +216,16 @@ def render_payload(d):
 
 
 def render_friction(d):
+    links = "no link" if d.get("links_known") else \
+        "every link" if d["adapt_links"] else "the last link"
+    adaptation = d.get("friction_adaptation", "gradient")
+    by = "" if adaptation == "gradient" else f", joint terms by {adaptation.replace('_', ' ')}"
     rows = [[term, pct(d["worst_relative_error"][term]), pct(d["goals"][term]),
              "met" if d["met"][term] else "**missed**"] for term in d["worst_relative_error"]]
     return (table(["joint term", "worst relative error over the 7 joints", "goal", ""], rows)
             + f"\n\nRMS tracking error {fmt(d['rms_error_rad'])} rad over "
             f"{fmt(d['duration_s'])} s; "
-            f"{'every link' if d['adapt_links'] else 'the last link'} adapting.")
+            f"{links} adapting{by}.")
 
 
 #: the columns of ``rcac compare``'s tables that doc/results.md shows (the JSON has them all)

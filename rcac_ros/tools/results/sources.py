@@ -112,6 +112,12 @@ SOURCES = {
         "As above, every link adapting too from the URDF's nominal parameters.",
         render_friction, ["rcac", "friction-demo", "--adapt-links", "--out", "{out}"],
         "metrics.json", plots=("friction_estimates.png",)),
+    "friction_least_squares": Source(
+        "Joint friction and rotor inertia learnt by least squares, links known",
+        "As above, no link adapting, the joint terms' least-squares gain (doc/design.md §7).",
+        render_friction, ["rcac", "friction-demo", "--links-known", "--friction-adaptation",
+                          "least_squares", "--out", "{out}"],
+        "metrics.json", plots=("friction_estimates.png",)),
     "compare": Source(
         "Every adaptive law compared",
         "`rcac compare` on the paper's experiment (`paper`) and the payload run (`payload`), "
