@@ -236,6 +236,9 @@ CONTROLLER = _robot("controller") + (
           "gain of the joint terms: 'gradient' (P_friction fixed) or 'least_squares' (from "
           "P_friction down, geometry 'euclidean'; doc/design.md §7)",
           choices=("gradient", "least_squares")),
+    Param("hold_compensation", "bool", False,
+          "extrapolate each effort to the middle of the period it is held for, tau_k + "
+          "(tau_k - tau_k-1) / 2: removes the hold's half-period lag (doc/design.md §6)"),
     Param("friction_forgetting", "double", 0.5,
           "friction_adaptation 'least_squares': forgetting rate lambda_0, 1/s",
           lo=0.0, hi=BIG),

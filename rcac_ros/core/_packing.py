@@ -56,7 +56,9 @@ NAT_LS_CHOL = 203   #: natural least squares: Cholesky factor of I + S^T H S / k
 #:                     row-major); metric "barrier": the factor of H_J / (c k) + (A P A^T)^-1
 #:                     (10x10 lower, row-major, its diagonal inverted), doc/design.md §8
 NAT_LS_N = 372      #: natural least squares: the whitened J(S e_j) of S's 13 columns (13 x 10)
-STATE_COLS = 502
+TAU_FF = 502        #: hold_compensation: joint i's model torque (eq 20 without feedback) at
+#:                     the last step
+STATE_COLS = 503
 LINK_COLS = CONST_COLS + STATE_COLS
 
 # ---- scalars: data[n, :] -------------------------------------------------------------------
@@ -87,7 +89,8 @@ I_RETRACT_MIN = 25  #: the smallest step length a of the retraction at the last 
 I_BARRIER_C = 26    #: natural geometry, metric "barrier": c of P_mix (0: "log_det"), §8
 I_JOINT_LS = 27     #: 1: the joint terms' gain is least squares (doc/design.md §7)
 I_JOINT_FORGET = 28  #: lambda_0 of the joint terms' bounded-gain forgetting, 1/s
-SCAL_LEN = 29
+I_HOLD = 29         #: 1: hold_compensation (doc/design.md §6 "The hold")
+SCAL_LEN = 30
 
 ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION = 0.0, 1.0, 2.0
 

@@ -34,8 +34,8 @@ import numpy as np
 from ._blocks import INPUT_NAMES, input_error
 from ._packing import (ADAPT_GRADIENT, ADAPT_LS, ADAPT_LS_PREDICTION, BAR_F, BAR_Q, CHAN_COLS,
                        CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, FILT_COLS, GAIN_K_D, I_ADAPT,
-                       I_BARRIER_C, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_IMPLICIT,
-                       I_JOINT_FORGET, I_JOINT_LS, I_K, I_LEAK, I_NATURAL, I_PROJECT,
+                       I_BARRIER_C, I_DZ_E, I_DZ_S, I_E, I_ERR, I_FORGET, I_FROZEN, I_HOLD,
+                       I_IMPLICIT, I_JOINT_FORGET, I_JOINT_LS, I_K, I_LEAK, I_NATURAL, I_PROJECT,
                        I_RETRACT_MIN, I_TRACKING, I_Y, LEAK_M0, NAT_K, NAT_P_NU, P_FACTOR,
                        S_LINK, TAU, THETA_HAT, TRACE_MAX, W_ROW, Gains, block, new_data)
 from ._validate import as_array, joint_values, projection_bounds, scalar
@@ -152,6 +152,12 @@ class RecursiveCompositeController:
     friction_forgetting : float
         ``lambda_0`` (1/s) of the joint terms' bounded-gain forgetting (least squares),
         default :data:`~rcac_ros.core.law_options.FRICTION_FORGETTING`.
+    hold_compensation : bool
+        False (default): :meth:`step` returns eq 20's torque ``tau_k``. True: eq 20's model
+        torque (without feedback) extrapolated to the middle of the period the zero-order
+        hold keeps it, ``tau_k + (m_k - m_k-1) / 2``, which removes the hold's half-period
+        lag and the O(h) tracking error it causes (doc/design.md §6 "The hold"); the
+        paper's law then runs the general kernel.
 
     Raises
     ------
@@ -170,8 +176,8 @@ class RecursiveCompositeController:
                  theta_bounds=None, leakage=0.0, leakage_bound=0.0, theta_0=None,
                  joint_friction=False, friction_hat0=None, P_friction=P_FRICTION,
                  friction_adaptation=None, friction_forgetting=FRICTION_FORGETTING,
-                 geometry="euclidean", natural_gain=None, natural_metric=None,
-                 barrier_c=None):
+                 hold_compensation=False, geometry="euclidean", natural_gain=None,
+                 natural_metric=None, barrier_c=None):
         self.model = model
         n = model.n
         gains = Gains(model, K_D, Lambda, P, gamma, lam, h)
@@ -192,6 +198,8 @@ class RecursiveCompositeController:
         self._chan[:, CH_JOINT] = channel_codes(self.channels)
         self.adapting = True
         self.K_D_scale = 1.0
+        self.hold_compensation = bool(hold_compensation)
+        self._scal[I_HOLD] = 1.0 if self.hold_compensation else 0.0
         self.joint_friction = bool(joint_friction)
         self._joint_adaptation(friction_adaptation, friction_forgetting, geometry)
         if self.joint_friction:
@@ -435,7 +443,9 @@ class RecursiveCompositeController:
         Returns
         -------
         tau : ndarray, shape (n,)
-            The joint torques of eq 20 (before any effort limit: the caller clips).
+            The joint torques of eq 20 (before any effort limit: the caller clips);
+            its model torque extrapolated to the middle of the hold with
+            ``hold_compensation``.
 
         Raises
         ------
@@ -503,6 +513,7 @@ class RecursiveCompositeController:
 
         For a gap in the measurements (a watchdog trip): the filters start again as at
         t = 0 (``phi^f = phi``, ``psi^f = 0``, ``y = 0``), so ``E`` is exact from there on.
+        With ``hold_compensation`` the next torque is not extrapolated (no last one).
         """
         self._scal[I_K] = 0.0
 

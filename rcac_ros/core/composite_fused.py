@@ -20,10 +20,10 @@ from ._jit import kernel, njit
 from ._blocks import RCAC_SIGNATURE, feedback_wrench, packed_views, reference_motion, \
     rejects_input
 from ._packing import (ADAPT_GRADIENT, CH_ACTIVE, CH_E, CH_JOINT, CH_Y, CONST_COLS, GAIN_P,
-                       I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN, I_G,
-                       I_GAMMA, I_H, I_IMPLICIT, I_JOINT_LS, I_K, I_KD_DIAG, I_LAM, I_LEAK,
-                       I_NATURAL, I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F,
-                       PHI_PREV, PSI_F, PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
+                       I_ADAPT, I_DZ_E, I_DZ_S, I_E, I_FB0, I_FB1, I_FE, I_FROZEN, I_G, I_GAMMA,
+                       I_H, I_HOLD, I_IMPLICIT, I_JOINT_LS, I_K, I_KD_DIAG, I_LAM, I_LEAK,
+                       I_NATURAL, I_PROJECT, I_P_DIAG, I_TRACKING, I_Y, LAMBDA, PHI_F, PHI_PREV,
+                       PSI_F, PSI_PREV, Q_PREV, S_LINK, TAU, THETA_HAT, U_ROW, W_ROW)
 from .natural_step import (LANES, RETRACT_ROWS, lane_update, natural_gain_rows,
                            retract_lanes)
 from .channels import axis_terms, filter_step, filtered_output
@@ -41,7 +41,8 @@ def paper_options(chan, scal):
     choosing compiles nothing."""
     return (chan.shape[0] == 1 and chan[0, CH_JOINT] == 0.0 and scal[I_ADAPT] == ADAPT_GRADIENT
             and scal[I_IMPLICIT] != 0.0 and scal[I_DZ_S] <= 0.0 and scal[I_DZ_E] <= 0.0
-            and scal[I_PROJECT] == 0.0 and scal[I_LEAK] <= 0.0 and scal[I_JOINT_LS] == 0.0)
+            and scal[I_PROJECT] == 0.0 and scal[I_LEAK] <= 0.0 and scal[I_JOINT_LS] == 0.0
+            and scal[I_HOLD] == 0.0)
 
 
 def is_paper_law(chan, scal):

@@ -18,9 +18,9 @@ from ._jit import kernel, njit
 
 from ._blocks import RCAC_SIGNATURE, VEC, feedback_wrench, reference_motion, \
     rejects_input, unmanaged, unmanaged_block, unmanaged_views
-from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN,
-                       I_G, I_H, I_IMPLICIT, I_JOINT_LS, I_K, I_KD_DIAG, I_LAM, I_NATURAL,
-                       I_PROJECT, I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU,
+from ._packing import (ADAPT_GRADIENT, CONST_COLS, I_ADAPT, I_FE, I_FB0, I_FB1, I_FROZEN, I_G,
+                       I_H, I_HOLD, I_IMPLICIT, I_JOINT_LS, I_K, I_KD_DIAG, I_LAM, I_NATURAL,
+                       I_PROJECT, I_RETRACT_MIN, I_TRACKING, LAMBDA, Q_PREV, S_LINK, TAU, TAU_FF,
                        THETA_HAT)
 from .adaptation import adapt_link, implicit_solve, project, tracking_active, update_least_squares
 from .natural_step import retract_links
@@ -133,12 +133,20 @@ def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
     scal[I_TRACKING] = 1.0 if tracking else 0.0
     for k in range(6):
         F[k] = 0.0
+    hold = scal[I_HOLD] != 0.0
+    ff = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)               # hold: the model's wrench alone
     for i in range(n - 1, -1, -1):
         if i < n - 1:
             F[0], F[1], F[2], F[3], F[4], F[5] = transform_force_T(
                 C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1], const[i + 1, P0 + 2], F[0],
                 F[1], F[2], F[3], F[4], F[5])
         feedback_wrench(const, state, Fs, i, kd_diag, F)                    # eq 19b
+        if hold:
+            if i < n - 1:
+                ff = transform_force_T(C, i + 1, const[i + 1, P0], const[i + 1, P0 + 1],
+                                       const[i + 1, P0 + 2], *ff)
+            ff = (ff[0] + Fs[i, 0], ff[1] + Fs[i, 1], ff[2] + Fs[i, 2], ff[3] + Fs[i, 3],
+                  ff[4] + Fs[i, 4], ff[5] + Fs[i, 5])
         if not frozen:
             adapt_link(const, state, chan, filt, i, G, scal, tracking, R, grad, Pg, t, M4)
         if joint:
@@ -158,6 +166,15 @@ def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
                 adapt_joint(chan, jfilt, i, jrow, scal, tracking)
         else:
             tau[i] = F[5]                                                          # eq 20
+        if hold:                                # doc/design.md §6, "The hold"
+            model = ff[5]
+            if joint:
+                jrow = jdata[i]
+                model += (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                          + jrow[F_Y + 2] * jrow[F_HAT + 2])
+            if not first:
+                tau[i] += 0.5 * (model - state[i, TAU_FF])
+            state[i, TAU_FF] = model
     if frozen:
         pass
     elif scal[I_IMPLICIT] != 0.0:

@@ -164,7 +164,8 @@ def adaptation_options(v, channels):
                 geometry=v["geometry"], natural_gain=v["natural_gain"],
                 natural_metric=None if v["natural_metric"] == "auto" else v["natural_metric"],
                 barrier_c=v["barrier_c"], friction_adaptation=v["friction_adaptation"],
-                friction_forgetting=v["friction_forgetting"])
+                friction_forgetting=v["friction_forgetting"],
+                hold_compensation=v["hold_compensation"])
 
 
 def channel_names(channels):

@@ -4,11 +4,12 @@ The plant is the built-in simulator with the joint terms of doc/design.md §7 in
 law's model class: the Panda of example-robot-data with armature 0.1 kg m^2, damping 0.5
 N m s/rad and Coulomb friction 0.5 N m (``tanh(qd / v_c)``, v_c = 0.1 rad/s) on every joint,
 the values of the MuJoCo scenario of ``rcac compare``. The law is the recursive composite
-law with ``joint_friction=True`` and every channel (``channels="all"``), starting from zero
+law with ``joint_friction=True``, every channel (``channels="all"``) and
+``hold_compensation=True`` (``--no-hold-compensation``: the plain hold), starting from zero
 joint estimates; the links are the URDF's, the last adapting from it as in the payload demo
-(every one with ``--adapt-links``). The desired motion excites every joint in both
-directions: a sinusoid of 0.4 rad per joint about the "ready" posture, 0.35-0.55 Hz (peak
-speeds 0.9-1.4 rad/s).
+(every one with ``--adapt-links``, none with ``--links-known``). The desired motion excites
+every joint in both directions: a sinusoid of 0.4 rad per joint about the "ready" posture,
+0.35-0.55 Hz (peak speeds 0.9-1.4 rad/s).
 
 Known limit: joint 1's armature and link 1's inertia about the joint 1 axis enter the
 dynamics only as their sum (the base joint's axis is fixed), so with ``--adapt-links`` the
@@ -17,6 +18,7 @@ armature of joint 1 is not identifiable alone; by default only the last link ada
 Writes ``metrics.json`` and ``friction_estimates.png`` (estimates against the truth).
 """
 
+import argparse
 import json
 import os
 
@@ -40,7 +42,7 @@ NAMES = ("armature", "damping", "friction")
 
 def run_friction_demo(duration=30.0, adapt_links=False, channels="all",
                       P_friction=P_FRICTION, record_every=25, links_known=False,
-                      friction_adaptation="gradient"):
+                      friction_adaptation="gradient", hold_compensation=True):
     """The closed loop; returns ``(t, friction_hat history (k, n, 3), truth (n, 3), rms)``.
     ``links_known``: no link adapts (every link the URDF's, the truth)."""
     from rcac_ros.core import RecursiveCompositeController, Simulator
@@ -52,7 +54,8 @@ def run_friction_demo(duration=30.0, adapt_links=False, channels="all",
         gains["P"][-1] = gains["P"][0]              # the fixed law's gain: no link adapts
     ctrl = RecursiveCompositeController(
         rigid, channels=channels, joint_friction=True, P_friction=P_friction,
-        friction_adaptation=friction_adaptation, **gains)
+        friction_adaptation=friction_adaptation, hold_compensation=hold_compensation,
+        **gains)
     q0, qd0, _ = traj(0.0)
     sim = Simulator(plant, dt=ctrl.h, q0=q0, qd0=qd0)
     steps = int(round(duration / ctrl.h))
@@ -106,16 +109,21 @@ def add_arguments(parser):
                        help="no link adapts (the URDF's are the plant's)")
     parser.add_argument("--friction-adaptation", choices=("gradient", "least_squares"),
                         default="gradient", help="the joint terms' gain (doc/design.md §7)")
+    parser.add_argument("--hold-compensation", action=argparse.BooleanOptionalAction,
+                        default=True, help="efforts extrapolated to the middle of their "
+                        "hold (doc/design.md §6; default on)")
     parser.add_argument("--out", default="results/friction", help="output directory")
 
 
 def run(args):
     t, hist, truth, rms = run_friction_demo(args.duration, args.adapt_links,
                                             links_known=args.links_known,
-                                            friction_adaptation=args.friction_adaptation)
+                                            friction_adaptation=args.friction_adaptation,
+                                            hold_compensation=args.hold_compensation)
     report = summarise(hist, truth)
     report.update(duration_s=args.duration, adapt_links=args.adapt_links,
                   links_known=args.links_known, friction_adaptation=args.friction_adaptation,
+                  hold_compensation=args.hold_compensation,
                   rms_error_rad=rms, P_friction=list(P_FRICTION), channels="all")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "metrics.json"), "w", encoding="utf-8") as f:
@@ -124,6 +132,8 @@ def run(args):
         "links known" if args.links_known else "last link adapting"
     if args.friction_adaptation != "gradient":
         links += f", joint terms by {args.friction_adaptation.replace('_', ' ')}"
+    if not args.hold_compensation:
+        links += ", plain hold"
     plot(t, hist, truth, os.path.join(args.out, "friction_estimates.png"),
          f"Panda, built-in simulator with tanh friction: joint estimates ({links}, "
          f"channels='all', {args.duration:g} s)")

@@ -157,7 +157,7 @@ def render_page(results_dir=RESULTS_DIR):
     for name, src in SOURCES.items():
         doc = docs[name]
         out += ["", f"## {src.title}", "", src.about.strip(), "",
-                provenance_line(doc["record"], usual) + f" · `doc/results/{name}.json`", "",
+                provenance_line(doc["record"], usual) + f" · `{name}.json`", "",
                 src.render(doc["data"]).rstrip()]
         figures = doc["record"].get("figures", [])
         if figures:
