@@ -209,7 +209,9 @@ def capture_hook(at, release, payload, log):
 
     Its node reads ``/clock`` (keep-last 1) and sends the requests from a thread of its own:
     the recorder's executor may run behind the simulator (it takes every message of every
-    topic), so the sim time it has seen would send them late."""
+    topic), so the sim time it has seen would send them late. A request waits until the
+    simulator's parameter service is matched (DDS matches each side on its own, and a request
+    sent before would be lost)."""
     import threading
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -233,13 +235,22 @@ def capture_hook(at, release, payload, log):
         own.add_node(node)
         client = AsyncParameterClient(node, topics.SIMULATOR_NODE)
 
+        waiting = []
+
         def on_clock(msg):
             sim_time = msg.clock.sec + 1e-9 * msg.clock.nanosec
-            if plan and sim_time >= plan[0][0]:
-                _, request = plan.pop(0)
-                log(f"rcac capture-demo: sim {sim_time:.3f} s: setting "
-                    + ", ".join(f"{p.name}={p.value}" for p in request))
-                futures.append(client.set_parameters(request))
+            if not plan or sim_time < plan[0][0]:
+                return
+            if not client.services_are_ready():     # a request sent before the service
+                if not waiting:                       # is matched is lost: send it once
+                    waiting.append(sim_time)          # it is, late (the bag has the time)
+                    log(f"rcac capture-demo: sim {sim_time:.3f} s: waiting for "
+                        f"{topics.SIMULATOR_NODE}'s parameter service")
+                return
+            _, request = plan.pop(0)
+            log(f"rcac capture-demo: sim {sim_time:.3f} s: setting "
+                + ", ".join(f"{p.name}={p.value}" for p in request))
+            futures.append(client.set_parameters(request))
 
         node.create_subscription(ClockMsg, topics.CLOCK, on_clock, topics.qos(depth=1))
 
