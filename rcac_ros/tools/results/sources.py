@@ -103,8 +103,8 @@ SOURCES = {
         "Joint friction and rotor inertia learnt, the last link adapting",
         "The Panda on the built-in simulator with armature 0.1 kg m^2, damping 0.5 N m s/rad "
         "and tanh friction 0.5 N m on every joint, the law `channels=\"all\"` with "
-        "`joint_friction=True` from zero joint estimates (doc/tools.md, "
-        "`rcac friction-demo`).",
+        "`joint_friction=True`, `hold_compensation=True` from zero joint estimates "
+        "(doc/tools.md, `rcac friction-demo`).",
         render_friction, ["rcac", "friction-demo", "--out", "{out}"], "metrics.json",
         plots=("friction_estimates.png",)),
     "friction_adapt_links": Source(
