@@ -58,7 +58,7 @@ NAT_LS_CHOL = 203   #: natural least squares: Cholesky factor of I + S^T H S / k
 NAT_LS_N = 372      #: natural least squares: the whitened J(S e_j) of S's 13 columns (13 x 10)
 TAU_FF = 502        #: hold_compensation: joint i's model torque (eq 20 without feedback) at
 #:                     the last step
-STATE_COLS = 503
+STATE_COLS = 510    #: padded: LINK_COLS a multiple of 8, each link's row on a 64-byte line
 LINK_COLS = CONST_COLS + STATE_COLS
 
 # ---- scalars: data[n, :] -------------------------------------------------------------------
