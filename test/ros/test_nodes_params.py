@@ -137,17 +137,18 @@ def test_joint_friction_alone_scales_each_joints_gain_at_the_first_state():
 
 
 def test_controller_friction_adaptation_reaches_the_core_and_a_misuse_is_one_line():
-    """``friction_adaptation``/``friction_forgetting`` (doc/design.md §7) configure the core
-    law's joint gain; least squares in the natural geometry is refused at start-up with one
-    line naming it."""
+    """``friction_adaptation``/``friction_forgetting`` (doc/design.md §7) and
+    ``hold_compensation`` (§6) configure the core law; joint least squares in the natural
+    geometry is refused at start-up with one line naming it."""
     with ros_context() as (ctx, _):
         n = ControllerNode(context=ctx, parameter_overrides=[
             Parameter("joint_friction", value=True),
             Parameter("friction_adaptation", value="least_squares"),
-            Parameter("friction_forgetting", value=2.0)])
+            Parameter("friction_forgetting", value=2.0),
+            Parameter("hold_compensation", value=True)])
         try:
-            assert (n.ctrl.friction_adaptation, n.ctrl.friction_forgetting) == \
-                ("least_squares", 2.0)
+            assert (n.ctrl.friction_adaptation, n.ctrl.friction_forgetting,
+                    n.ctrl.hold_compensation) == ("least_squares", 2.0, True)
         finally:
             n.destroy_node()
         with pytest.raises(ConfigError) as err:
