@@ -21,10 +21,11 @@ qd_i^2) + sum (damping_i qd_i^2 + friction_i qd_i sigma(qd_i))``, so ``phi_f = [
 0, 0]``, ``psi_f = [0, qd_i^2, qd_i sigma(qd_i)]`` at every joint. They are filtered exactly
 as the link terms (``W_f = lambda (phi_f - phi_f^f) + psi_f^f``).
 
-Options: the joint terms always use their diagonal gain ``P_f,i`` (also when the link
-terms use least squares), by default :func:`feedback_scaled_gain` at the first step's
-posture, growing with the rotor (:func:`rotor`, which also adds the rotor's feedback); the
-leakage acts on the link terms only; the projection keeps the joint terms >= 0.
+Options: the joint terms use their diagonal gain ``P_f,i`` (whatever the link terms use), by
+default :func:`feedback_scaled_gain` at the first step's posture, growing with the rotor
+(:func:`rotor`, which also adds the rotor's feedback), or (``friction_adaptation=
+"least_squares"``) a 3x3 least-squares gain below it (:func:`update_joint_least_squares`);
+the leakage acts on the link terms only; the projection keeps the joint terms >= 0.
 Natural geometry (doc/design.md §8): each term adapts in the positive orthant's geometry
 (gain ``min(k_f x^2, P_f)`` at the step's start, :func:`term_gain`, with ``k_f`` following
 the estimate, :func:`follow_gain`, then :func:`retract_term`), so it stays > 0.
@@ -278,7 +279,7 @@ def joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, k):
 def adapt_joint(chan, jfilt, i, jrow, scal, tracking):
     """Eq 24, step 1, joint i's terms: ``R_f,i = theta_f_hat_i - h P_f,i (Y_f,i^T s_qi
     + prediction part)``, and ``U_f,ci = P_f,i W_f,ci^T`` for the implicit solve; ``P_f,i``
-    the diagonal gain, or the least-squares gain ``S S^T`` (``scal[I_JOINT_LS]``)."""
+    the diagonal gain, or the least-squares gain (``scal[I_JOINT_LS]``, :func:`ls_gain_times`)."""
     h, gamma = scal[I_H], scal[I_GAMMA]
     implicit = scal[I_IMPLICIT] != 0.0
     g0 = joint_gradient(chan, jfilt, i, jrow, gamma, implicit, tracking, 0)
