@@ -237,8 +237,9 @@ CONTROLLER = _robot("controller") + (
           "P_friction down, geometry 'euclidean'; doc/design.md §7)",
           choices=("gradient", "least_squares")),
     Param("hold_compensation", "bool", False,
-          "extrapolate each effort to the middle of the period it is held for, tau_k + "
-          "(tau_k - tau_k-1) / 2: removes the hold's half-period lag (doc/design.md §6)"),
+          "extrapolate eq 20's model torque m (feedback excluded) to the middle of the period "
+          "the effort is held for, tau_k + (m_k - m_k-1) / 2: removes the hold's half-period "
+          "lag (doc/design.md §6)"),
     Param("friction_forgetting", "double", 0.5,
           "friction_adaptation 'least_squares': forgetting rate lambda_0, 1/s",
           lo=0.0, hi=BIG),

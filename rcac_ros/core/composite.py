@@ -259,7 +259,8 @@ class RecursiveCompositeController:
 
     def _joint_adaptation(self, friction_adaptation, friction_forgetting, geometry):
         """The joint terms' gain (doc/design.md §7): least squares or the fixed diagonal."""
-        self.friction_adaptation = friction_adaptation_option(friction_adaptation, geometry)
+        self.friction_adaptation = friction_adaptation_option(friction_adaptation, geometry,
+                                                              self.joint_friction)
         self.friction_forgetting = scalar(friction_forgetting, "friction_forgetting",
                                           GainError, minimum=0.0)
         if not self.joint_friction:
@@ -548,7 +549,10 @@ class RecursiveCompositeController:
         return self._jdata[:, F_HAT:F_HAT + 3].copy()
 
     def set_friction_hat(self, friction_hat):
-        """Set the joint estimates (n, 3), e.g. restored from a file; filters keep running."""
+        """Set the joint estimates (n, 3), e.g. restored from a file; filters keep running.
+        The rotor's reference and the gains restart from them (a least-squares gain at
+        ``P_friction``); with ``hold_compensation`` the next torque's extrapolation holds
+        half the step of the model torque the new estimates make."""
         if not self.joint_friction:
             raise GainError("friction_hat: the controller has no joint terms "
                             "(joint_friction=False)")

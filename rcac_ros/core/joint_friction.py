@@ -227,13 +227,16 @@ def ls_gain_times(jrow, x0, x1, x2):
 @njit(cache=True, inline="always")
 def largest_eigenvalue(a00, a01, a02, a11, a12, a22):
     """The largest eigenvalue of a symmetric 3x3 matrix, closed form (O. K. Smith,
-    Comm. ACM 4(4), 1961: the trigonometric solution of the characteristic cubic)."""
+    Comm. ACM 4(4), 1961: the trigonometric solution of the characteristic cubic); to about
+    1e-15 relative, 1e-8 at a double largest eigenvalue (``acos`` near +-1)."""
     p1 = a01 * a01 + a02 * a02 + a12 * a12
     if p1 == 0.0:
         return max(a00, a11, a22)
     q = (a00 + a11 + a22) / 3.0
     b00, b11, b22 = a00 - q, a11 - q, a22 - q
     p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
+    if p * p * p == 0.0:                   # off-diagonals below the underflow of p^3
+        return q
     det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
            + a02 * (a01 * a12 - b11 * a02))
     r = min(max(det / (2.0 * p * p * p), -1.0), 1.0)

@@ -93,7 +93,7 @@ def parse_channels(value, n):
     return tuple(out)
 
 
-def friction_adaptation_option(value, geometry):
+def friction_adaptation_option(value, geometry, joint_friction=True):
     """Validate ``friction_adaptation`` for ``geometry``; None gives the default,
     ``"gradient"``. ``"least_squares"`` only in the Euclidean geometry (the natural one's
     joint terms adapt in the positive orthant's geometry, doc/design.md §8).
@@ -108,6 +108,8 @@ def friction_adaptation_option(value, geometry):
     if value not in FRICTION_ADAPTATIONS:
         raise GainError(f"friction_adaptation: expected 'least_squares' or 'gradient', "
                         f"got {value!r}")
+    if value == "least_squares" and not joint_friction:
+        raise GainError("friction_adaptation: 'least_squares' needs joint_friction=True")
     if value == "least_squares" and geometry == "natural":
         raise GainError("friction_adaptation: 'least_squares' needs geometry='euclidean' "
                         "(the natural geometry's joint terms use 'gradient', doc/design.md §8)")

@@ -72,6 +72,19 @@ def test_the_compensated_loop_is_second_order_in_h():
     assert held[1] < 0.1 * plain[1], (held, plain)
 
 
+def test_the_paper_law_compensated_runs_the_general_kernel():
+    """The paper's fused kernels hold eq 20 plainly: with the compensated hold its law runs
+    the general kernel, frozen or adapting."""
+    from rcac_ros.core.composite_fused import paper_step
+    from rcac_ros.core.composite_kernels import rcac_step_kernel
+    model, _ = chain()
+    held = RecursiveCompositeController(model, hold_compensation=True)
+    assert held._entry is rcac_step_kernel
+    assert RecursiveCompositeController(model)._entry is paper_step
+    held.set_adaptation(False)
+    assert held._entry is rcac_step_kernel
+
+
 def test_the_filters_see_the_torque_held():
     """The prediction channels filter the extrapolated torque, the one the arm receives: at
     the true parameters every E stays at the plain hold's level (with eq 20's own torque in

@@ -70,11 +70,12 @@ def test_information_lowers_the_gain_never_above_P_friction(forgetting):
 
 
 def test_largest_eigenvalue_of_a_symmetric_3x3():
-    """The closed form against numpy's eigvalsh, diagonal and repeated eigenvalues too."""
+    """The closed form against numpy's eigvalsh: random, diagonal, all equal with
+    off-diagonals below the underflow of p^3, and a double largest eigenvalue."""
     from rcac_ros.core.joint_friction import largest_eigenvalue
     rng = np.random.default_rng(42)
     cases = [np.diag((1.0, 1.0, 1.0)), np.diag((0.2, 3.0, 1.0)),
-             np.eye(3) - 0.5 * np.outer((1, 1, 1), (1, 1, 1)) / 3.0]
+             np.diag((2.0, 2.0, 2.0)) + 1e-120 * (np.ones((3, 3)) - np.eye(3))]
     for _ in range(200):
         A = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3, 3)
         cases.append(A @ A.T)
@@ -82,6 +83,13 @@ def test_largest_eigenvalue_of_a_symmetric_3x3():
         got = largest_eigenvalue(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
         ref = np.linalg.eigvalsh(A).max()
         assert got == pytest.approx(ref, rel=1e-12, abs=1e-14 * np.abs(A).max())
+    # a double largest eigenvalue (a first Potter step from Q = I): acos near 1 keeps half
+    # the digits, sqrt(eps) ~ 1.5e-8
+    for v in ((1.0, 2.0, 3.0), (1.0, 1.0, 1.0), (0.0, 0.3, -2.0)):
+        v = np.asarray(v) / np.linalg.norm(v)
+        A = np.eye(3) - 0.5 * np.outer(v, v)
+        got = largest_eigenvalue(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
+        assert got == pytest.approx(1.0, rel=1.5e-8)
 
 
 def test_a_frozen_law_holds_its_joint_gain():
@@ -100,11 +108,32 @@ def test_a_frozen_law_holds_its_joint_gain():
     (dict(friction_adaptation="newton"), "friction_adaptation: expected"),
     (dict(friction_adaptation="least_squares", geometry="natural"), "needs geometry"),
     (dict(friction_forgetting=-1.0), "friction_forgetting"),
+    (dict(joint_friction=False, friction_adaptation="least_squares"), "needs joint_friction"),
 ])
 def test_bad_options_are_one_line_errors(options, match):
     model, _, _ = frictional_chain()
-    with pytest.raises(GainError, match=match):
-        RecursiveCompositeController(model, joint_friction=True, **options)
+    options = dict(dict(joint_friction=True), **options)
+    with pytest.raises(GainError, match=match) as err:
+        RecursiveCompositeController(model, **options)
+    assert "\n" not in str(err.value)
+
+
+def test_the_paper_law_with_least_squares_runs_the_general_kernel():
+    """The paper's fused kernel has the diagonal gain only: with the joint least squares
+    the paper's law (channel 1) runs the general kernel, and its joint 1 gain falls."""
+    from rcac_ros.core.composite_fused import paper_friction_step
+    model, q0, traj = frictional_chain()
+    opts = dict(K_D=30.0, P=1.0, gamma=0.5, lam=20.0, joint_friction=True,
+                P_friction=(0.5, 5.0, 5.0))
+    ls = RecursiveCompositeController(model, friction_adaptation="least_squares", **opts)
+    fixed = RecursiveCompositeController(model, **opts)
+    assert ls._entry is friction_step_kernel and fixed._entry is paper_friction_step
+    sim = Simulator(model, q0=q0)
+    for k in range(200):
+        sim.step(ls.step(sim.q, sim.qd, *traj(k * 0.002)))
+    P = ls.friction_gain
+    assert np.trace(P[0]) < 0.99 * 10.5                     # joint 1: channel 1 informs it
+    np.testing.assert_allclose(P[1:], np.array([np.diag((0.5, 5.0, 5.0))] * 4), rtol=1e-12)
 
 
 def test_the_panda_learns_its_joint_terms_with_its_links_known():
