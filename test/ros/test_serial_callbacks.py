@@ -252,3 +252,21 @@ def test_a_state_that_came_while_inactive_is_answered_at_the_activation():
         node.trigger_activate()
         assert spin_until(executor, lambda: any(label(1) in lab for lab, _ in probe.efforts))
         assert node.counts.steps == 1
+
+
+def test_a_shutdown_under_the_watchdog_thread_ends_the_run_without_a_fault(capfd):
+    """rclpy shut down while the watchdog's thread runs (Ctrl-C, a launch's end): its next
+    safe effort fails on the invalid context. That is the run's end, not a fault: no fatal
+    report, the exit code not 1; the thread has ended."""
+    import rclpy
+    with ros_context() as (ctx, executor):
+        node = ControllerNode(context=ctx, parameter_overrides=[
+            Parameter("state_timeout", value=0.02)])
+        executor.add_node(node)
+        assert spin_until(executor, lambda: node.running)
+        spin_until(executor, lambda: False, timeout=0.2)   # safe efforts: no state yet
+        rclpy.try_shutdown(context=ctx)
+        time.sleep(0.5)                       # many periods of the watchdog's thread
+        err = capfd.readouterr().err
+        assert "fatal" not in err and "stop failed" not in err, err
+        assert node.exit_code != 1

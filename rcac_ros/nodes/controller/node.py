@@ -218,7 +218,10 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
 
     def _thread_fatal(self, text):
         """The watchdog's thread raised: as an executor callback's fault in :func:`run`, the
-        traceback in the log, one zero effort, and the node stops (exit code 1)."""
+        traceback in the log, one zero effort, and the node stops (exit code 1). Not after
+        rclpy's shutdown (Ctrl-C, a launch's end): its publish then fails, the run is over."""
+        if not self.context.ok():
+            return
         try:
             print(f"controller: fatal: {text}", file=sys.stderr, flush=True)
             self.get_logger().fatal(f"a callback raised; the node stops:\n{text}")
