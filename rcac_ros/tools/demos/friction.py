@@ -46,6 +46,8 @@ def run_friction_demo(duration=30.0, adapt_links=False, channels="all",
     """The closed loop; returns ``(t, friction_hat history (k, n, 3), truth (n, 3), rms)``.
     ``links_known``: no link adapts (every link the URDF's, the truth)."""
     from rcac_ros.core import RecursiveCompositeController, Simulator
+    if adapt_links and links_known:
+        raise ValueError("adapt_links and links_known: choose one")
     rigid = load_panda()
     plant = rigid.replace(armature=TRUTH[0], damping=TRUTH[1], friction=TRUTH[2])
     traj = SinusoidTrajectory(np.array(READY), AMPLITUDE, FREQUENCY)
