@@ -25,6 +25,10 @@ from rcac_ros.tools.launch import Child, child_env, init_context, node_command, 
     StopFlag, wait_until_active
 from rcac_ros.tools.bags.record import BagRecorder, format_counts
 
+#: the run's end: after the last state and its answer, the recorder takes what is still in
+#: flight until nothing has come for this long (s)
+QUIET = 0.1
+
 
 def _prepare_out(out):
     """Create ``out``; remove a bag a previous demo left in ``out/bag``."""
@@ -185,6 +189,14 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
                     and (recorder.last_state_stamp != last_state
                          or recorder.counts[answers] < recorder.counts[states]):
                 executor.spin_once(timeout_sec=0.02)
+            # then every other topic's last messages: the executor takes one message per
+            # call, so the answers' topic can be complete before the others are; until
+            # nothing has come for QUIET s
+            last_total, quiet_end = recorder.total, time.monotonic() + QUIET
+            while time.monotonic() < min(quiet_end, drain_end + 2.0) and not stop:
+                executor.spin_once(timeout_sec=0.01)
+                if recorder.total != last_total:
+                    last_total, quiet_end = recorder.total, time.monotonic() + QUIET
             sim = recorder.sim_time or 0.0
             log(f"{prog}: {sim:.3f} s simulated in {wall:.1f} s wall "
                 f"({sim / max(wall, 1e-9):.2f}x real time)")
