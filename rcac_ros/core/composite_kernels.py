@@ -153,8 +153,9 @@ def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
             jrow = jdata[i]
             follow = min(1.0, scal[I_H] / FOLLOW_TIME)   # doc/design.md §7, the rotor
             k_q = rotor(jrow, scal[I_NATURAL] != 0.0, follow)
-            tau[i] = F[5] + (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                             + jrow[F_Y + 2] * jrow[F_HAT + 2]) - k_q * jrow[F_SQ]  # eq 20
+            joint_model = (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
+                           + jrow[F_Y + 2] * jrow[F_HAT + 2])             # Y_f,i theta_f_hat_i
+            tau[i] = F[5] + joint_model - k_q * jrow[F_SQ]                          # eq 20
             if not frozen:
                 if scal[I_NATURAL] != 0.0:        # doc/design.md §8: min(k_f x^2, P_f)
                     a = follow
@@ -167,11 +168,7 @@ def general_law(data, filt, jdata, jfilt, joint, work, q, qd, q_d, qd_d, qdd_d):
         else:
             tau[i] = F[5]                                                          # eq 20
         if hold:                                # doc/design.md §6, "The hold"
-            model = ff[5]
-            if joint:
-                jrow = jdata[i]
-                model += (jrow[F_Y] * jrow[F_HAT] + jrow[F_Y + 1] * jrow[F_HAT + 1]
-                          + jrow[F_Y + 2] * jrow[F_HAT + 2])
+            model = ff[5] + joint_model if joint else ff[5]
             if not first:
                 tau[i] += 0.5 * (model - state[i, TAU_FF])
             state[i, TAU_FF] = model
