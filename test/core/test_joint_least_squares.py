@@ -1,5 +1,6 @@
-"""Least squares on the joint terms (doc/design.md §7): the 3x3 information update, the
-diagonal law without information, the trace bound, freezing, and the identification."""
+"""Least squares on the joint terms (doc/design.md §7; its 3x3 information update is in
+test_least_squares.py): the diagonal law without information, the bound P_f <= P_friction,
+freezing, the options, and the identification."""
 
 import numpy as np
 import pytest
@@ -7,22 +8,6 @@ from chains import frictional_chain, worst_difference
 
 from rcac_ros.core import GainError, RecursiveCompositeController, Simulator
 from rcac_ros.core.composite_kernels import friction_step_kernel
-from rcac_ros.core.least_squares import potter_update
-
-
-def test_potter_update_of_a_3x3_factor_is_the_information_update():
-    """The joints' 3x3 factor: S S^T after the update equals inv(inv(P) + h w^T w)."""
-    rng = np.random.default_rng(41)
-    f, Sf = np.empty(3), np.empty(3)
-    for _ in range(30):
-        A = rng.normal(size=(3, 3))
-        P = A @ A.T + 0.1 * np.eye(3)
-        S = np.linalg.cholesky(P).ravel().copy()
-        w, h = rng.normal(size=3) * 10.0, 0.002
-        potter_update(S, w, h, f, Sf)
-        P1 = S.reshape(3, 3) @ S.reshape(3, 3).T
-        ref = np.linalg.inv(np.linalg.inv(P) + h * np.outer(w, w))
-        assert np.allclose(P1, ref, rtol=1e-10, atol=1e-13 * np.abs(ref).max())
 
 
 def laws(gamma, **options):

@@ -10,19 +10,21 @@ from rcac_ros.core.model import PAPER_Q0
 Q0 = np.array(PAPER_Q0)
 
 
-def test_potter_update_is_the_information_update():
-    """S S^T after the update equals inv(inv(P) + h w^T w) (numpy's inverse as reference)."""
-    rng = np.random.default_rng(31)
-    f, Sf = np.empty(13), np.empty(13)
+@pytest.mark.parametrize("d, rtol, atol", [(13, 1e-9, 1e-12), (3, 1e-10, 1e-13)])
+def test_potter_update_is_the_information_update(d, rtol, atol):
+    """S S^T after the update equals inv(inv(P) + h w^T w) (numpy's inverse as reference):
+    a link's 13x13 factor and a joint's 3x3 (doc/design.md §7)."""
+    rng = np.random.default_rng(31 if d == 13 else 41)
+    f, Sf = np.empty(d), np.empty(d)
     for _ in range(30):
-        A = rng.normal(size=(13, 13))
-        P = A @ A.T / 13 + 0.1 * np.eye(13)
+        A = rng.normal(size=(d, d))
+        P = A @ A.T / d + 0.1 * np.eye(d)
         S = np.linalg.cholesky(P).ravel().copy()
-        w, h = rng.normal(size=13) * 10.0, 0.002
+        w, h = rng.normal(size=d) * 10.0, 0.002
         potter_update(S, w, h, f, Sf)
-        P1 = S.reshape(13, 13) @ S.reshape(13, 13).T
+        P1 = S.reshape(d, d) @ S.reshape(d, d).T
         ref = np.linalg.inv(np.linalg.inv(P) + h * np.outer(w, w))
-        assert np.allclose(P1, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        assert np.allclose(P1, ref, rtol=rtol, atol=atol * np.abs(ref).max())
 
 
 def test_square_root_form_stays_positive_definite():
