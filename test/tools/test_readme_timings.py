@@ -1,6 +1,7 @@
 """The timings of make demo and make test: pytest's counts, the timing of a target, the source."""
 
 import os
+import sys
 
 from rcac_ros.tools.results import timings as rt
 from rcac_ros.tools.results.blocks import render_timings
@@ -38,3 +39,12 @@ def test_a_target_is_timed_to_its_own_exit_not_to_its_leftovers(tmp_path, capsys
     assert (output.splitlines(), code) == (["one", "twö"], 3)
     assert seconds < 5.0
     assert "] twö" in capsys.readouterr().out      # echoed as it ran
+
+
+def test_output_written_while_it_is_being_read_is_all_kept(tmp_path, capsys):
+    """The target's writes and the echoing reads overlap all the time; no line is lost."""
+    script = "import sys\nfor i in range(20000):\n    print(i, flush=True)\n"
+    seconds, output, code = rt.timed([sys.executable, "-c", script], str(tmp_path),
+                                     dict(os.environ), poll=1e-4)
+    assert code == 0
+    assert output.splitlines() == [str(i) for i in range(20000)]

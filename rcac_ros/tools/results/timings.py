@@ -38,8 +38,9 @@ def pytest_counts(output):
     return ", ".join(p for p in parts if p and not p.endswith(("warning", "warnings")))
 
 
-def timed(command, cwd, env):
-    """Run ``command`` in ``cwd``, echoing its output; return (seconds, output, exit code)."""
+def timed(command, cwd, env, poll=0.5):
+    """Run ``command`` in ``cwd``, echoing its output every ``poll`` s; return (seconds,
+    output, exit code)."""
     print(f"readme-timings: {' '.join(command)} (in {cwd})", flush=True)
     # through a file, not a pipe: a process the target leaves behind cannot hold the read open
     decode = codecs.getincrementaldecoder("utf-8")(errors="replace").decode
@@ -50,15 +51,18 @@ def timed(command, cwd, env):
         while not done:
             done = proc.poll() is not None
             elapsed = time.monotonic() - t0
-            log.seek(pos)
-            text += decode(log.read(), final=done)
-            pos = log.tell()
+            # pread: the child shares the file's offset, so a seek and read here would move
+            # where its next line lands
+            while chunk := os.pread(log.fileno(), 1 << 20, pos):
+                text += decode(chunk)
+                pos += len(chunk)
+            text += decode(b"", final=done)
             end = len(text) if done else text.rfind("\n") + 1
             for line in text[shown:end].splitlines():
                 print(f"  [{elapsed:6.0f} s] {line}", flush=True)
             shown = max(shown, end)
             if not done:
-                time.sleep(0.5)
+                time.sleep(poll)
     return elapsed, text, proc.returncode
 
 
