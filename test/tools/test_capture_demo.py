@@ -108,6 +108,8 @@ def test_a_short_capture_over_ros_equals_the_same_loop_offline(tmp_path):
     changes = doc["ros"]["payload_changes"]
     assert [c["mass"] for c in changes] == [0.0, 1000.0, 0.0], proc.stdout[-3000:]
     assert 1.0 <= changes[1]["t"] < 1.5 <= changes[2]["t"] < 2.0, changes
+    sim_log = (out / "logs" / "simulator.log").read_text()
+    held = [line for line in sim_log.splitlines() if "finished" in line or "miss" in line]
     for phase in ("capture", "release"):
         ros, offline = doc["ros"][phase], doc["offline"]["composite"][phase]
         # (not the efforts: the node clips its command at the limit, offline the plant clips
@@ -117,7 +119,7 @@ def test_a_short_capture_over_ros_equals_the_same_loop_offline(tmp_path):
             # the figures pass through CDR doubles unchanged; the offline loop is the same
             # arithmetic: agreement to rounding
             assert ros[key] == pytest.approx(offline[key], rel=1e-9, abs=1e-12), \
-                (phase, key, proc.stdout[-3000:])
+                (phase, key, held, proc.stdout[-3000:])
         assert ros["goals"]["no_watchdog_trip"] is True
     for name in ("capture.md", "capture_ros.png", "capture_laws.png"):
         assert (out / name).is_file()

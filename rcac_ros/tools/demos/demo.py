@@ -52,9 +52,12 @@ def demo_overrides(duration, dt):
     controller = {"mode": "lockstep", "rate": 1.0 / dt, "state_timeout": 1.0}
     # min_subscribers 2: the simulator starts once the controller and our recorder both
     # subscribe to joint_states, so the bag holds the run from state 0; at most real time,
-    # so that the recorder (nine topics at 1/dt each) keeps up and the bag holds every step
+    # so that the recorder (nine topics at 1/dt each) keeps up and the bag holds every step;
+    # lockstep_timeout 5 s: the run is the discrete loop of `rcac experiment`, so a controller
+    # descheduled on a loaded machine (or discovering the simulator late, the first state
+    # re-sent meanwhile) is waited for rather than its effort held (a lockstep miss)
     simulator = {"mode": "lockstep", "dt": float(dt), "duration": float(duration),
-                 "min_subscribers": 2, "lockstep_max_speed": 1.0}
+                 "min_subscribers": 2, "lockstep_max_speed": 1.0, "lockstep_timeout": 5.0}
     return controller, simulator
 
 
