@@ -7,13 +7,17 @@ code 2 (``cli.py`` makes argparse's errors one line)::
     rcac experiment: error: argument --duration: must be > 0, got '-5'
 
 Every numeric helper rejects NaN and infinities; a file that must exist (``--urdf``) is
-checked by :func:`existing_file`. Checks that relate two options (``--jump`` before
-``--duration``) belong to the subcommand's ``run``, which raises the package's ``ConfigError``.
+checked by :func:`existing_file`, a path the command writes by :func:`output_dir` or
+:func:`output_file` (a run never ends on a path it cannot write). Checks that relate two
+options (``--jump`` before ``--duration``) belong to the subcommand's ``run``, which raises
+the package's ``ConfigError``.
 """
 
 import argparse
 import math
 import os
+import re
+import tempfile
 
 
 def _parse(text, kind):
@@ -70,6 +74,55 @@ def existing_file(text):
         what = "a directory" if os.path.isdir(text) else "no such file"
         raise argparse.ArgumentTypeError(f"{what}: {text!r}")
     return text
+
+
+def _writable(path):
+    """The nearest existing directory at or above ``path`` accepts a new entry (tried with a
+    temporary directory, removed at once: a permission bit does not say it for root or for a
+    file system such as /proc)."""
+    probe = os.path.abspath(path)
+    while not os.path.lexists(probe):
+        probe = os.path.dirname(probe)
+    if not os.path.isdir(probe):
+        raise argparse.ArgumentTypeError(f"not a directory: {probe!r}")
+    try:
+        tempfile.TemporaryDirectory(prefix=".rcac-check-", dir=probe).cleanup()
+    except OSError as err:
+        raise argparse.ArgumentTypeError(f"cannot write in {probe!r} ({err.strerror})") \
+            from None
+
+
+def output_dir(text):
+    """A directory the command writes into (made if missing): checked before anything runs,
+    so a run never ends on a path it cannot write."""
+    if os.path.lexists(text) and not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"exists and is not a directory: {text!r}")
+    _writable(text)
+    return text
+
+
+def output_file(text):
+    """A file the command writes (``--json``, ``--plot``): its directory checked before
+    anything runs."""
+    if os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"a directory: {text!r}")
+    _writable(os.path.dirname(os.path.abspath(text)))
+    return text
+
+
+#: a ROS 2 node name, with its namespace if any: tokens of letters, digits and underscores,
+#: none starting with a digit, joined by single slashes
+NODE_NAME = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+
+
+def node_name(text):
+    """A node's name, with its namespace if any (``arm/rcac_controller``; a leading ``/``
+    dropped): its topics' names are made from it."""
+    if not NODE_NAME.fullmatch(text):
+        raise argparse.ArgumentTypeError(
+            f"not a ROS node name: {text!r} (letters, digits and '_', no token starting with "
+            "a digit, '/' between namespace and name)")
+    return text.lstrip("/")
 
 
 def add_engine_argument(parser):

@@ -1,6 +1,7 @@
 """Every number on the ``rcac`` command line is checked by the parser: one line, exit code 2."""
 
 import argparse
+import os
 import subprocess
 import sys
 
@@ -132,7 +133,8 @@ def test_every_numeric_option_of_every_subcommand_is_checked(command):
             defaults = (action.default if isinstance(action.default, (list, tuple))
                         else [action.default])
             for value in defaults:
-                action.type(repr(value))   # raises if a default breaks its own rule
+                # raises if a default breaks its own rule
+                action.type(value if isinstance(value, str) else repr(value))
 
 
 @pytest.mark.parametrize("text", ["1e-300", "0.002", "3", "1e12"])
@@ -173,3 +175,103 @@ def test_the_cases_a_new_user_hit(argv):
     assert out.stderr.splitlines() == [
         f"rcac {argv[0]}: error: argument --duration: must be > 0, got '{argv[2]}'"]
     assert out.stdout == ""
+
+
+#: (words before the option, option): every path the commands write, with what the parser
+#: needs besides it
+OUTPUT_OPTIONS = [
+    (["experiment"], "--out"), (["demo"], "--out"), (["capture-demo"], "--out"),
+    (["payload-demo"], "--out"), (["friction-demo"], "--out"), (["friction-ros"], "--out"),
+    (["compare"], "--out"), (["record"], "--out"), (["sweep", "c.yaml"], "--out"),
+    (["sweep", "report", "r"], "--json"), (["sweep", "report", "r"], "--plot"),
+    (["sweep", "rerun", "r", "3"], "--plot"), (["bench", "core"], "--json"),
+    (["bench", "ros"], "--json"), (["bench", "faults"], "--json"),
+    (["bench", "faults"], "--plot"), (["bench", "soak", "5"], "--json"),
+    (["bench", "soak", "5"], "--plot"), (["bench", "delay-margin"], "--json"),
+    (["bench", "delay-margin"], "--plot"), (["bench", "noise"], "--out"),
+    (["bench", "startup"], "--json"),
+]
+WRITES = ("--out", "--json", "--plot")
+
+
+@pytest.mark.parametrize("command", sorted(cli.SUBCOMMANDS))
+def test_every_path_a_command_writes_is_checked_by_the_parser(command):
+    """Each ``--out``, ``--json``, ``--plot`` of every form is an ``output_dir`` or
+    ``output_file``, and is in :data:`OUTPUT_OPTIONS` (the test below)."""
+    listed = {(words[0], words[1] if words[0] == "bench" else None, option)
+              for words, option in OUTPUT_OPTIONS}
+    for parser in subcommand_parsers(command):
+        for action in parser._actions:
+            for option in set(action.option_strings) & set(WRITES):
+                assert action.type in (checked.output_dir, checked.output_file), \
+                    f"{parser.prog} {option}"
+                bench = parser.prog.split()[2] if command == "bench" else None
+                assert (command, bench, option) in listed, f"{parser.prog} {option}"
+
+
+@pytest.mark.parametrize("words,option", OUTPUT_OPTIONS,
+                         ids=[" ".join(w + [o]) for w, o in OUTPUT_OPTIONS])
+def test_a_path_that_cannot_be_written_stops_at_the_parser(capsys, monkeypatch, tmp_path,
+                                                           words, option):
+    (tmp_path / "afile").write_text("")
+    code, lines = parse_error(capsys, monkeypatch,
+                              [*words, option, str(tmp_path / "afile" / "x")])
+    name = " ".join(words[:2]) if words[0] == "bench" or words[1:2] in (["report"], ["rerun"]) \
+        else words[0]
+    assert_one_line(code, lines, name, option)
+    assert f"not a directory: '{tmp_path / 'afile'}'" in lines[0]
+
+
+def test_output_dir_and_output_file_refuse_what_they_cannot_write(tmp_path):
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(argparse.ArgumentTypeError, match="exists and is not a directory"):
+        checked.output_dir(str(tmp_path / "afile"))
+    with pytest.raises(argparse.ArgumentTypeError, match="a directory"):
+        checked.output_file(str(tmp_path))
+    if os.path.isdir("/proc/self"):     # Linux: no entry can be made in /proc, even by root
+        with pytest.raises(argparse.ArgumentTypeError, match="cannot write in '/proc'"):
+            checked.output_dir("/proc/rcac/out")
+        with pytest.raises(argparse.ArgumentTypeError, match="cannot write in '/proc'"):
+            checked.output_file("/proc/rcac.json")
+
+
+def test_a_writable_path_is_returned_and_nothing_is_left_behind(tmp_path):
+    out = str(tmp_path / "new" / "dir")
+    assert checked.output_dir(out) == out
+    assert checked.output_file(str(tmp_path / "r.json")) == str(tmp_path / "r.json")
+    assert checked.output_dir(str(tmp_path)) == str(tmp_path)
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_run_whose_history_cannot_fit_in_memory_is_refused_before_it_starts():
+    from rcac_ros.errors import ConfigError
+    from rcac_ros.tools.runs.closed_loop import available_memory, check_history
+    check_history(10, 8, available=80)              # exactly fits
+    free = available_memory()
+    assert free is None or free > 0
+    with pytest.raises(ConfigError, match="duration: 11 steps keep .* GiB of history"):
+        check_history(11, 8, available=80)
+
+
+def test_a_control_period_longer_than_the_run_is_refused(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(sys, "argv", ["rcac"])
+    code = cli.main(["experiment", "--h", "5", "--duration", "0.01", "--quiet",
+                     "--out", str(tmp_path)])
+    lines = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(lines) == 1, lines
+    assert lines[0].startswith("rcac experiment: error: --h: the control period (5 s)"), lines
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("bad", ["", "bad name!", "1arm", "arm//ctrl", "arm/", "a-b"])
+def test_a_node_name_ros_would_refuse_stops_at_the_parser(capsys, monkeypatch, bad):
+    code, lines = parse_error(capsys, monkeypatch, ["record", "--controller-node", bad])
+    assert_one_line(code, lines, "record", "--controller-node")
+    assert "not a ROS node name" in lines[0]
+
+
+@pytest.mark.parametrize("good,name", [("rcac_controller", "rcac_controller"),
+                                       ("arm/rcac_controller", "arm/rcac_controller"),
+                                       ("/arm/_c2", "arm/_c2")])
+def test_a_node_name_with_its_namespace_is_accepted(good, name):
+    assert checked.node_name(good) == name

@@ -90,3 +90,10 @@ def test_noise_sources_writes_its_report(tmp_path):
     assert report["both, gamma = 0"]["gamma"] == 0.0
     assert all(len(r["deviation"]) == 4 for r in report.values())
     assert (tmp_path / "sources.json").exists() and (tmp_path / "sources.png").exists()
+
+
+def test_growth_of_a_run_too_short_to_judge_has_every_key():
+    """Under 4 per-second samples nothing is assessed, and the report still has its fields."""
+    g = noise_bench.growth([1.0, 2.0, 3.0])
+    assert g.keys() == noise_bench.growth(np.arange(1.0, 9.0)).keys()
+    assert g["still_growing"] is None and np.isnan(g["exponent"])

@@ -30,7 +30,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import node_name, output_dir, positive_float
 from rcac_ros.tools.bags.writer import BagWriter, FLUSH_PERIOD, qos_dicts, STORAGES
 from rcac_ros.tools.launch import init_context, StopFlag
 
@@ -369,7 +369,7 @@ def format_counts(recorder):
 
 
 def add_arguments(parser):
-    parser.add_argument("--out", "-o", default=None,
+    parser.add_argument("--out", "-o", type=output_dir, default=None,
                         help="bag directory to create (default: ./rcac_bag_<date>-<time>)")
     parser.add_argument("--storage", choices=STORAGE_CHOICES, default="mcap",
                         help="rosbag2 storage plugin (default: mcap)")
@@ -378,7 +378,7 @@ def add_arguments(parser):
     parser.add_argument("--use-sim-time", action="store_true",
                         help="stamp messages with ROS time from /clock (as ros2 bag record "
                              "--use-sim-time); default: the receive time")
-    parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
+    parser.add_argument("--controller-node", type=node_name, default=topics.CONTROLLER_NODE,
                         help="controller node name, for its private topics "
                              f"(default: {topics.CONTROLLER_NODE})")
 

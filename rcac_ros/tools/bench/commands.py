@@ -24,12 +24,15 @@ Only the chosen benchmark's module is imported, when it runs; the ROS ones need 
 import argparse
 import sys
 
-from rcac_ros.tools.args import non_negative_float, non_negative_int, positive_float
+from rcac_ros.tools.args import (non_negative_float, non_negative_int, output_dir, output_file,
+                                 positive_float)
+from rcac_ros.errors import ConfigError
 from rcac_ros.tools.extras import require
 
 
 def add_core(p):
-    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE",
+                   help="also write the results as JSON")
     p.add_argument("--budget", type=positive_float, default=0.3,
                    help="seconds of timing per cell (default 0.3)")
     p.add_argument("--natural", action="store_true",
@@ -48,7 +51,8 @@ SIM_RT_OPTIONS = {"realtime.priority": 70, "realtime.lock_memory": True}
 def add_controller(p):
     """The nodes' options of the benchmarks over ROS (ros, faults, soak): the controller's,
     and with ``--rt`` the simulator's real-time options."""
-    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE",
+                   help="also write the results as JSON")
     p.add_argument("--rt", action="store_true",
                    help="both nodes with their real-time options, best effort: the "
                         "controller SCHED_FIFO 80 (its process's other threads 79), mlockall, "
@@ -93,7 +97,8 @@ def add_faults(p):
     p.add_argument("--duration", type=positive_float, default=60.0,
                    help="seconds per case (default 60)")
     p.add_argument("--cases", default=None, help="comma-separated cases (default: all)")
-    p.add_argument("--plot", metavar="FILE", help="tracking errors per case (PNG)")
+    p.add_argument("--plot", type=output_file, metavar="FILE",
+                   help="tracking errors per case (PNG)")
     _add_discovery_range(p)
     add_controller(p)
 
@@ -108,7 +113,7 @@ def _add_discovery_range(p):
 def add_soak(p):
     p.add_argument("minutes", type=positive_float, metavar="MINUTES",
                    help="minutes of the direct case (no fault, no relay)")
-    p.add_argument("--plot", metavar="FILE", help="the tracking error (PNG)")
+    p.add_argument("--plot", type=output_file, metavar="FILE", help="the tracking error (PNG)")
     p.add_argument("--busy", type=non_negative_int, default=0, metavar="N",
                    help="N busy processes beside the nodes for the whole soak, start-up "
                         "included (a starved machine; default 0)")
@@ -117,7 +122,8 @@ def add_soak(p):
 
 
 def add_delay_margin(p):
-    p.add_argument("--plot", metavar="FILE", help="tracking RMS against K_D (PNG)")
+    p.add_argument("--plot", type=output_file, metavar="FILE",
+                   help="tracking RMS against K_D (PNG)")
     p.add_argument("--model", choices=("css_arm", "panda", "ur5"), default="css_arm",
                    help="the CSS arm (gain K_D, the paper's), the Panda of payload-demo "
                         "(gain kappa, K_Di = kappa M_i) or the UR5 (gain K_D, K_Di = K_D I6)")
@@ -131,7 +137,8 @@ def add_delay_margin(p):
     p.add_argument("--check", action="store_true",
                    help="instead, check the derived delay margin on the Panda, the UR5 and "
                         "the CSS arm: the loop tracks 0.7 margin late, not 1.5 margin late")
-    p.add_argument("--json", metavar="FILE", help="with --check: also write the rows as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE",
+                   help="with --check: also write the rows as JSON")
 
 
 def _floats(text):
@@ -186,11 +193,12 @@ def add_noise(p):
     p.add_argument("--variants", type=noise_variants, default=None,
                    help="variants, comma-separated, among plain, dead zone, sigma, switching "
                         "(default: all; the clean run always)")
-    p.add_argument("--out", default="results/noise", help="output directory")
+    p.add_argument("--out", type=output_dir, default="results/noise", help="output directory")
 
 
 def add_startup(p):
-    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--json", type=output_file, metavar="FILE",
+                   help="also write the results as JSON")
     p.add_argument("--laws", type=startup_laws, default=None,
                    help="the controller's laws, comma-separated, among default, all, "
                         "joint_friction (default: default)")
@@ -229,7 +237,7 @@ def run_faults(args, cases=None, soak_minutes=None):
     from rcac_ros.tools.bench.faults import CASES, run_faults
     from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
     if cases is None:
-        cases = CASES if not args.cases else tuple(c.strip() for c in args.cases.split(","))
+        cases = CASES if args.cases is None else tuple(c.strip() for c in args.cases.split(","))
     run_faults(getattr(args, "duration", 60.0), cases,
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,
@@ -251,6 +259,11 @@ def run_soak(args):
 
 def run_delay_margin(args):
     from rcac_ros.tools.bench.delay_margin import check_margins, run_delay_margin
+    if args.json is not None and not args.check:
+        raise ConfigError("--json: the rows of --check; without it the sweep prints its table "
+                          "(and --plot draws it)")
+    if args.plot is not None and args.check:
+        raise ConfigError("--plot: draws the sweep, which --check does not run")
     if args.check:
         rows = check_margins(json_path=args.json)
         return 0 if all(r["holds"] for r in rows) else 1

@@ -116,7 +116,7 @@ def growth(series):
     x = np.asarray(series, dtype=float)
     if len(x) < 4:
         return {"last_half_rise": float("nan"), "max_ratio": float("nan"),
-                "still_growing": None}
+                "exponent": float("nan"), "still_growing": None}
     half = x[len(x) // 2:]
     t = np.arange(len(half), dtype=float)
     slope = np.polyfit(t, half, 1)[0]
@@ -267,8 +267,9 @@ def table(report):
         dev = f"{r['deviation'][-1]:.0f}" if "deviation" in r else "-"
         weak = f"{100 * r['deviation_weak_share'][f'{WEAK[1]:g}']:.0f} %" \
             if "deviation" in r else "-"
+        growing = {True: "yes", False: "no"}.get(g["still_growing"], "-")   # None: too short
         rows.append(f"| {name} | {r['theta_norm'][-1]:.0f} | {100 * g['last_half_rise']:+.1f} % "
-                    f"| {g['exponent']:.2f} | {'yes' if g['still_growing'] else 'no'} "
+                    f"| {g['exponent']:.2f} | {growing} "
                     f"| {r['theta_error'][-1]:.0f} | {dev} | {weak} | {r['rms']:.3g} "
                     f"| {r['rms_last_minute']:.3g} | {100 * r['adapting_share']:.0f} % |")
     return "\n".join(rows) + "\n"

@@ -319,7 +319,8 @@ def plot(path, runs, events, arm, loaded, title):
 
 # ------------------------------------------------------------------ command line
 def add_arguments(parser):
-    from rcac_ros.tools.args import finite_float, non_negative_float, positive_float
+    from rcac_ros.tools.args import (finite_float, non_negative_float, output_dir,
+                                     positive_float)
     parser.add_argument("--mass", type=positive_float, default=MASS,
                         help=f"payload mass, kg (default {MASS:g}, ten times the last link)")
     parser.add_argument("--at", type=positive_float, default=AT,
@@ -337,7 +338,8 @@ def add_arguments(parser):
                         metavar=("IXX", "IYY", "IZZ", "IXY", "IXZ", "IYZ"),
                         help="payload inertia about its centre of mass, kg m^2 (default: a "
                              f"solid cube of side {SIDE:g} m, mass * {SIDE:g}^2 / 6 per axis)")
-    parser.add_argument("--out", default="results/capture_demo", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/capture_demo",
+                        help="output directory")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
                         help="rosbag2 storage plugin (default: mcap)")
     parser.add_argument("--no-ros", action="store_true",

@@ -47,7 +47,7 @@ from rcac_ros.core.law_options import parse_channels
 from rcac_ros.errors import RcacError
 from rcac_ros.plants import with_joint_terms
 from rcac_ros.tools.runs import metrics as measure
-from rcac_ros.tools.args import add_engine_argument, positive_float
+from rcac_ros.tools.args import add_engine_argument, output_dir, positive_float
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.core.law_options import P_FRICTION as P_FRICTION_DEFAULT
 from rcac_ros.tools.demos.compare_report import markdown
@@ -404,7 +404,8 @@ def add_arguments(parser):
     add_engine_argument(parser)
     parser.add_argument("--channels", type=channel_list, default=None,
                         help="add a law with these channels, e.g. 1,power")
-    parser.add_argument("--out", default="results/compare", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/compare",
+                        help="output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 

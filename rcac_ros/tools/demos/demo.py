@@ -20,7 +20,7 @@ import time
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import output_dir, positive_float
 from rcac_ros.tools.launch import Child, child_env, init_context, node_command, NodeFailed, \
     StopFlag, wait_until_active
 from rcac_ros.tools.bags.record import BagRecorder, format_counts
@@ -238,7 +238,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
 def add_arguments(parser):
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="simulated seconds (default: 20, the paper's experiment)")
-    parser.add_argument("--out", "-o", default="rcac_demo",
+    parser.add_argument("--out", "-o", type=output_dir, default="rcac_demo",
                         help="output directory: bag/, logs/, figures, metrics.json "
                              "(default: ./rcac_demo)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",

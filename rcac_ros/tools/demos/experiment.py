@@ -14,8 +14,9 @@ import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, css_arm
 from rcac_ros.core.law_options import parse_channels
-from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, positive_float,
-                                 positive_int)
+from rcac_ros.errors import ConfigError
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, output_dir,
+                                 positive_float, positive_int)
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.tools.runs.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 
@@ -71,7 +72,8 @@ def add_arguments(parser):
     from rcac_ros.tools.demos.compare import channel_list
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="seconds (default 20)")
-    parser.add_argument("--out", default="results/experiment", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/experiment",
+                        help="output directory")
     parser.add_argument("--trajectory", choices=("velocity", "position"), default="velocity",
                         help="reading of the paper's desired motion (doc/design.md §5)")
     add_gain_arguments(parser, PAPER_GAINS, (
@@ -91,6 +93,9 @@ def add_arguments(parser):
 
 
 def run(args):
+    if args.h > args.duration:
+        raise ConfigError(f"--h: the control period ({args.h:g} s) is longer than the run "
+                          f"(--duration {args.duration:g} s)")
     gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
                  h=args.h)
     engine = args.engine or "builtin"

@@ -25,7 +25,7 @@ import os
 import numpy as np
 
 from rcac_ros.core import SinusoidTrajectory
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import output_dir, positive_float
 from rcac_ros.tools.runs.scenarios import GAINS, READY, gains_for, load_panda
 
 #: The true joint terms of every joint: armature kg m^2, damping N m s/rad, friction N m.
@@ -114,7 +114,8 @@ def add_arguments(parser):
     parser.add_argument("--hold-compensation", action=argparse.BooleanOptionalAction,
                         default=True, help="efforts extrapolated to the middle of their "
                         "hold (doc/design.md §6; default on)")
-    parser.add_argument("--out", default="results/friction", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/friction",
+                        help="output directory")
 
 
 def run(args):

@@ -20,7 +20,7 @@ import sys
 import numpy as np
 
 from rcac_ros import topics
-from rcac_ros.tools.args import positive_float
+from rcac_ros.tools.args import output_dir, positive_float
 
 #: The plant's joint terms on every joint: armature kg m^2, damping N m s/rad, friction N m;
 #: at the scale of the paper's arm and of its feedback ``K_D = 1e4 I6`` (the Panda-sized
@@ -90,7 +90,8 @@ def plot(duration, runs, path):
 def add_arguments(parser):
     parser.add_argument("--duration", type=positive_float, default=20.0,
                         help="simulated seconds per run (default: 20)")
-    parser.add_argument("--out", "-o", default="results/friction_ros", help="output directory")
+    parser.add_argument("--out", "-o", type=output_dir, default="results/friction_ros",
+                        help="output directory")
 
 
 def run(args):

@@ -31,7 +31,7 @@ import numpy as np
 from rcac_ros.core import ConfigError, SinusoidTrajectory
 from rcac_ros.tools.runs import metrics as measure
 from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, existing_file,
-                                 finite_float, non_negative_float, positive_float)
+                                 finite_float, non_negative_float, output_dir, positive_float)
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
                                            READY, with_payload)
@@ -147,7 +147,8 @@ def add_arguments(parser):
                         metavar=("X", "Y", "Z"),
                         help="payload centre of mass in the flange frame, m "
                              "(default 0.03 -0.02 0.08)")
-    parser.add_argument("--out", default="results/payload_demo", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/payload_demo",
+                        help="output directory")
     parser.add_argument("--urdf", type=existing_file, default=None,
                         help="panda.urdf (default: example-robot-data's)")
     add_gain_arguments(parser, GAINS, (

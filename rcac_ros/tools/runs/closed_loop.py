@@ -31,6 +31,7 @@ from collections import deque
 import numpy as np
 
 from rcac_ros.core import RcacError, theta_from_inertia
+from rcac_ros.errors import ConfigError
 from rcac_ros.plants import make_plant
 from rcac_ros.tools.runs import metrics
 
@@ -91,6 +92,29 @@ def perturbed_estimates(base, scale, relative_error, rng):
     if relative_error == 0.0:
         return np.array(base, dtype=float)
     return base + relative_error * np.abs(scale) * rng.standard_normal(np.shape(base))
+
+
+def available_memory():
+    """Bytes of memory available to a new allocation (``MemAvailable`` of /proc/meminfo), or
+    None where the system does not say."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_history(steps, per_step, available=None):
+    """A one-line ``ConfigError`` if a run's history (``steps`` rows of ``per_step`` bytes)
+    cannot fit in the memory available, before the run starts rather than at its end."""
+    available = available_memory() if available is None else available
+    need = steps * per_step
+    if available is not None and need > available:
+        raise ConfigError(f"duration: {steps} steps keep {need / 2**30:.3g} GiB of history, "
+                          f"more than the {available / 2**30:.3g} GiB of memory available")
 
 
 def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
@@ -166,6 +190,9 @@ def closed_loop(controller, trajectory, duration, plant=None, q0=None, qd0=None,
     steps = int(round(duration / h)) + 1
     plant = controller.model if plant is None else plant
     n = plant.n
+    check_history(steps, 8 * (1 + 5 * n + 13 * n + np.size(controller.E)
+                              + (2 * n if np.any(np.asarray(noise_q) != 0.0)
+                                 or np.any(np.asarray(noise_qd) != 0.0) else 0)))
     if theta_hat0 is not None:
         controller.reset(theta_hat0)
     q_d0, qd_d0, _ = trajectory(0.0)

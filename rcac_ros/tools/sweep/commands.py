@@ -19,7 +19,8 @@ import argparse
 import time
 
 from rcac_ros.errors import ConfigError
-from rcac_ros.tools.args import non_negative_int, positive_float, positive_int
+from rcac_ros.tools.args import (non_negative_int, output_dir, output_file, positive_float,
+                                 positive_int)
 from rcac_ros.tools.sweep import campaign as cp
 
 ACTIONS = ("report", "rerun")
@@ -47,18 +48,20 @@ def add_arguments(parser, argv=()):
         rep.add_argument("results", help="a results directory or its results.parquet")
         rep.add_argument("--worst", type=positive_int, default=10,
                          help="worst runs listed (default 10)")
-        rep.add_argument("--plot", default=None, help="PNG (default RESULTS_DIR/report.png)")
-        rep.add_argument("--json", default=None, metavar="FILE",
+        rep.add_argument("--plot", type=output_file, default=None,
+                         help="PNG (default RESULTS_DIR/report.png)")
+        rep.add_argument("--json", type=output_file, default=None, metavar="FILE",
                          help="also write the summary as JSON")
         rer = sub.add_parser("rerun", help="rerun one run alone and compare with its row")
         rer.add_argument("results", help="a results directory or its results.parquet")
         rer.add_argument("index", type=non_negative_int, help="the run's index")
-        rer.add_argument("--plot", default=None,
+        rer.add_argument("--plot", type=output_file, default=None,
                          help="PNG (default RESULTS_DIR/rerun_INDEX.png)")
         return
     parser.set_defaults(action="run")
     parser.add_argument("campaign", nargs="?", metavar="CAMPAIGN", help="campaign YAML file")
-    parser.add_argument("--out", default=None, metavar="DIR", help="results directory")
+    parser.add_argument("--out", type=output_dir, default=None, metavar="DIR",
+                        help="results directory")
     parser.add_argument("--samples", type=positive_int, metavar="N", default=None,
                         help="random draws per grid cell (overrides the campaign's)")
     parser.add_argument("--duration", type=positive_float, metavar="S", default=None,

@@ -16,6 +16,7 @@ import os
 
 import numpy as np
 
+from rcac_ros.tools.args import output_dir
 from rcac_ros.tools.sweep.report import load_table
 
 #: the grid's laws: (reference, compared)
@@ -49,7 +50,8 @@ def summary(r):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("results", nargs="+", help="results directories of the campaigns")
-    parser.add_argument("--out", default="results/friction_unseen", help="output directory")
+    parser.add_argument("--out", type=output_dir, default="results/friction_unseen",
+                        help="output directory")
     args = parser.parse_args(argv)
     rows, every = {}, []
     for path in args.results:
