@@ -7,6 +7,7 @@ spin their own rclpy context without rclpy's signal handlers (:func:`init_contex
 :class:`StopFlag`). rclpy is imported only inside the functions that need it.
 """
 
+import ctypes
 import os
 import signal
 import subprocess
@@ -89,8 +90,42 @@ def _param_text(value):
     return str(value)
 
 
+#: ``prctl(2)`` of the C library (Linux), else None
+try:
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform.startswith("linux") \
+        else None
+except (OSError, AttributeError):
+    _PRCTL = None
+PR_SET_PDEATHSIG = 1
+
+
+def ends_with_parent():
+    """A ``preexec_fn`` for :class:`subprocess.Popen`: the child is sent SIGTERM when the
+    process that started it ends, however it ends (Ctrl-C, ``kill``, ``kill -9``, a crash),
+    so no node or load process outlives its tool and goes on publishing. None where the
+    system has no ``PR_SET_PDEATHSIG`` (the children then end with :meth:`Child.stop`
+    only). The signal follows the thread that started the child: start children from the
+    thread that outlives them (the tools' main thread)."""
+    if _PRCTL is None:
+        return None
+    parent = os.getpid()
+
+    def preexec():
+        _PRCTL(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() != parent:      # the parent ended before the call
+            os.kill(os.getpid(), signal.SIGTERM)
+    return preexec
+
+
+def spawn(cmd, **kwargs):
+    """``subprocess.Popen(cmd, **kwargs)`` for a process that must end with its tool
+    (:func:`ends_with_parent`)."""
+    return subprocess.Popen(cmd, preexec_fn=ends_with_parent(), **kwargs)
+
+
 class Child:
-    """A node process in its own session, its output in a log file."""
+    """A node process in its own session, its output in a log file; it ends with the tool
+    (:func:`ends_with_parent`)."""
 
     def __init__(self, name, cmd, env, log_path):
         self.name = name
@@ -99,8 +134,8 @@ class Child:
         self._log = open(log_path, "w")
         self._log.write("$ " + " ".join(cmd) + "\n")
         self._log.flush()
-        self.proc = subprocess.Popen(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
+        self.proc = spawn(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
+                          stdin=subprocess.DEVNULL, start_new_session=True)
 
     def alive(self):
         return self.proc.poll() is None

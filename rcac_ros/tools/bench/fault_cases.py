@@ -13,6 +13,7 @@ from typing import Callable
 import numpy as np
 
 from rcac_ros import topics
+from rcac_ros.tools.launch import spawn
 
 GOALS = {"tracking_ratio": 3.0, "restart_recovery_s": 1.0, "gap_periods": 2.0,
          "memory_growth": 0.05, "settle_s": 5.0, "starved_ratio": 10.0}
@@ -34,7 +35,7 @@ def _thaw_clock(run):
 
 def start_busy(count):
     """``count`` busy processes (:data:`BUSY`): a starved machine."""
-    return [subprocess.Popen([sys.executable, "-c", BUSY]) for _ in range(count)]
+    return [spawn([sys.executable, "-c", BUSY]) for _ in range(count)]
 
 
 def stop_busy(processes):
@@ -64,8 +65,8 @@ def _flood(run, extra=(), prefix=()):
     cmd = list(prefix) + [sys.executable, FLOOD, str(run.third)] + list(extra)
     err_path = os.path.join(run.log_dir, "flood.log")
     with open(err_path, "w", encoding="utf-8") as err_file:    # never a pipe left unread
-        run.flood = subprocess.Popen(cmd, env=run.env, stdout=subprocess.PIPE,
-                                     stderr=err_file, text=True)
+        run.flood = spawn(cmd, env=run.env, stdout=subprocess.PIPE, stderr=err_file,
+                          text=True)
     started = threading.Event()
 
     def read():
@@ -114,7 +115,7 @@ JOIN_LEAD = 3.0
 
 def _joiners(run):
     count = max(1, int((run.third - JOIN_LEAD) / JOIN_PERIOD) + 1)
-    run.joiners = subprocess.Popen(
+    run.joiners = spawn(
         [sys.executable, "-c", JOINERS, str(JOIN_PERIOD), str(count),
          topics.resolve(topics.JOINT_STATES)], env=run.env, start_new_session=True)
 

@@ -63,6 +63,7 @@ from rcac_ros.errors import ConfigError
 from rcac_ros.tools.bench.fault_cases import CASES, GOALS, window_figures  # noqa: F401
 from rcac_ros.tools.bench.fault_parts import SIM, Probe, Relay, rss_kb
 from rcac_ros.tools.bench.fault_report import format_table, judge, plot  # noqa: F401
+from rcac_ros.tools.launch import spawn
 from rcac_ros.tools.warm import warm_once
 
 #: a process that only wakes every period (``h``, ``seconds``) and prints its wake-up times
@@ -199,9 +200,8 @@ def _run_windows(run, spec, duration, soak, verbose):
         spin_for(third)
         spec.inject(run)
         if spec.plain_loop:
-            run.plain = subprocess.Popen([sys.executable, "-c", PLAIN_LOOP, str(h),
-                                          str(third)], stdout=subprocess.PIPE,
-                                         text=True)
+            run.plain = spawn([sys.executable, "-c", PLAIN_LOOP, str(h), str(third)],
+                              stdout=subprocess.PIPE, text=True)
         run.window = (time.time_ns(), time.monotonic_ns())
         spin_for(third)
         run.window += (time.time_ns(), time.monotonic_ns())

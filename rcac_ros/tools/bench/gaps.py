@@ -20,12 +20,13 @@ import argparse
 import json
 import os
 import signal
-import subprocess
 import sys
 import tempfile
 import time
 
 import numpy as np
+
+from rcac_ros.tools.launch import spawn
 
 PERIOD_NS = 2_000_000
 
@@ -90,8 +91,7 @@ def main(argv=None):
             probes.append(self)
     ros.Probe = Probe
     out = os.path.join(tempfile.mkdtemp(prefix="rcac_gaps_"), "sentinel.json")
-    proc = subprocess.Popen([sys.executable, "-m", "rcac_ros.tools.bench.gaps",
-                             "--sentinel", out])
+    proc = spawn([sys.executable, "-m", "rcac_ros.tools.bench.gaps", "--sentinel", out])
     load0 = os.getloadavg()[0]
     try:
         r = ros.run_ros_bench(args.duration, controller_mode="timer", verbose=False,
