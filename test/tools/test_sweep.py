@@ -490,3 +490,15 @@ def test_the_natural_geometries_build_their_metric():
                                              barrier_c=30.0), panda)
         assert (type(ctrl).__name__, ctrl.natural_metric, ctrl.barrier_c) == \
             ("SlotineLiCompositeController", metric, c)
+
+
+def test_resume_into_a_directory_without_a_campaign_is_refused(tmp_path):
+    """A mistyped --out with --resume would start a whole new campaign unnoticed."""
+    from rcac_ros.errors import ConfigError
+    from rcac_ros.tools.sweep.store import Store
+    store = Store(str(tmp_path / "typo"))
+    with pytest.raises(ConfigError, match="--resume: no campaign to continue in"):
+        store.claim({"seed": 1}, resume=True)
+    assert not os.path.exists(tmp_path / "typo")
+    store.claim({"seed": 1})                            # a new campaign starts there
+    store.claim({"seed": 1}, resume=True)               # and is then continued

@@ -34,6 +34,9 @@ class Store:
     def claim(self, campaign, resume=False):
         """Record ``campaign`` here, or check it is the one already recorded (``resume``)."""
         key = dict(campaign, samples=None)
+        if resume and not os.path.exists(self.campaign_file):
+            raise ConfigError(f"--resume: no campaign to continue in {self.out} (no "
+                              "campaign.json); without --resume a new one starts there")
         if os.path.exists(self.campaign_file):
             if not resume:
                 raise ConfigError(f"--out: {self.out} already holds a campaign; pass --resume "
