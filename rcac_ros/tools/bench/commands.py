@@ -24,9 +24,9 @@ Only the chosen benchmark's module is imported, when it runs; the ROS ones need 
 import argparse
 import sys
 
+from rcac_ros.errors import ConfigError
 from rcac_ros.tools.args import (non_negative_float, non_negative_int, output_dir, output_file,
                                  positive_float)
-from rcac_ros.errors import ConfigError
 from rcac_ros.tools.extras import require
 
 
