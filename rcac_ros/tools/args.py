@@ -95,19 +95,33 @@ def _writable(path):
 def output_dir(text):
     """A directory the command writes into (made if missing): checked before anything runs,
     so a run never ends on a path it cannot write."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path")
     if os.path.lexists(text) and not os.path.isdir(text):
         raise argparse.ArgumentTypeError(f"exists and is not a directory: {text!r}")
     _writable(text)
     return text
 
 
+class OutputFile(str):
+    """A path :func:`output_file` checked; ``rcac`` makes its directory before the command
+    runs (``cli.main``)."""
+
+
 def output_file(text):
-    """A file the command writes (``--json``, ``--plot``): its directory checked before
-    anything runs."""
+    """A file the command writes (``--json``, ``--plot``): an existing file (``/dev/null``
+    too) must be writable, a new one's directory must be one the command can make or write
+    in; checked before anything runs."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path")
     if os.path.isdir(text):
         raise argparse.ArgumentTypeError(f"a directory: {text!r}")
-    _writable(os.path.dirname(os.path.abspath(text)))
-    return text
+    if os.path.lexists(text):
+        if not os.access(text, os.W_OK):
+            raise argparse.ArgumentTypeError(f"not writable: {text!r}")
+    else:
+        _writable(os.path.dirname(os.path.abspath(text)))
+    return OutputFile(text)
 
 
 #: a ROS 2 node name, with its namespace if any: tokens of letters, digits and underscores,

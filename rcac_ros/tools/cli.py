@@ -81,6 +81,21 @@ def build_parser(argv=()):
     return parser
 
 
+def make_output_dirs(args):
+    """The directory of every file the command will write (``--json``, ``--plot``, checked by
+    ``args.output_file``), made now rather than after the run."""
+    import os
+    from rcac_ros.errors import ConfigError
+    from rcac_ros.tools.args import OutputFile
+    for name, value in vars(args).items():
+        if isinstance(value, OutputFile):
+            try:
+                os.makedirs(os.path.dirname(os.path.abspath(value)), exist_ok=True)
+            except OSError as err:
+                raise ConfigError(f"--{name}: cannot make the directory of {value!r} "
+                                  f"({err.strerror})") from None
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
@@ -89,6 +104,7 @@ def main(argv=None):
     module, _, needs = SUBCOMMANDS[args.command]
     try:
         require(*(needs(args) if callable(needs) else needs))
+        make_output_dirs(args)
         return importlib.import_module(module).run(args) or 0
     except RcacError as err:
         print(f"rcac {args.command}: error: {err}", file=sys.stderr)

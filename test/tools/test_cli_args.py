@@ -48,6 +48,13 @@ NON_NEGATIVE_OPTIONS = [
 INTEGER_OPTIONS = {("experiment", "--substeps"), ("inspect", "--link")}
 
 
+@pytest.fixture(autouse=True)
+def in_tmp(tmp_path, monkeypatch):
+    """The defaults of the paths a command writes are checked against the working directory:
+    a fresh one, not the checkout."""
+    monkeypatch.chdir(tmp_path)
+
+
 def parse_error(capsys, monkeypatch, argv):
     """Run ``rcac ARGV`` in this process; return (exit code, stderr lines)."""
     monkeypatch.setattr(sys, "argv", ["rcac"])
@@ -189,9 +196,10 @@ OUTPUT_OPTIONS = [
     (["bench", "faults"], "--plot"), (["bench", "soak", "5"], "--json"),
     (["bench", "soak", "5"], "--plot"), (["bench", "delay-margin"], "--json"),
     (["bench", "delay-margin"], "--plot"), (["bench", "noise"], "--out"),
-    (["bench", "startup"], "--json"),
+    (["bench", "startup"], "--json"), (["inspect", "bag"], "--plots"),
+    (["inspect", "bag"], "--recover-out"),
 ]
-WRITES = ("--out", "--json", "--plot")
+WRITES = ("--out", "--json", "--plot", "--plots", "--recover-out")
 
 
 @pytest.mark.parametrize("command", sorted(cli.SUBCOMMANDS))
@@ -224,6 +232,14 @@ def test_a_path_that_cannot_be_written_stops_at_the_parser(capsys, monkeypatch, 
 
 def test_output_dir_and_output_file_refuse_what_they_cannot_write(tmp_path):
     (tmp_path / "afile").write_text("")
+    for check in (checked.output_dir, checked.output_file):
+        with pytest.raises(argparse.ArgumentTypeError, match="an empty path"):
+            check("")
+    (tmp_path / "ro").write_text("")
+    os.chmod(tmp_path / "ro", 0o444)
+    if not os.access(tmp_path / "ro", os.W_OK):     # (root may write a read-only file)
+        with pytest.raises(argparse.ArgumentTypeError, match="not writable"):
+            checked.output_file(str(tmp_path / "ro"))
     with pytest.raises(argparse.ArgumentTypeError, match="exists and is not a directory"):
         checked.output_dir(str(tmp_path / "afile"))
     with pytest.raises(argparse.ArgumentTypeError, match="a directory"):
@@ -241,6 +257,17 @@ def test_a_writable_path_is_returned_and_nothing_is_left_behind(tmp_path):
     assert checked.output_file(str(tmp_path / "r.json")) == str(tmp_path / "r.json")
     assert checked.output_dir(str(tmp_path)) == str(tmp_path)
     assert os.listdir(tmp_path) == []
+    assert checked.output_file(os.devnull) == os.devnull      # an existing writable file
+
+
+def test_the_directory_of_a_file_to_write_is_made_before_the_command_runs(tmp_path):
+    """``--json new/dir/x.json``: the directory is made by ``rcac``, not left to the writer
+    at the end of the run."""
+    path = tmp_path / "new" / "dir" / "margins.json"
+    args = cli.build_parser(["bench", "delay-margin"]).parse_args(
+        ["bench", "delay-margin", "--check", "--json", str(path)])
+    cli.make_output_dirs(args)
+    assert (tmp_path / "new" / "dir").is_dir() and not path.exists()
 
 
 def test_a_run_whose_history_cannot_fit_in_memory_is_refused_before_it_starts():

@@ -21,7 +21,7 @@ import numpy as np
 
 from rcac_ros import topics
 from rcac_ros.errors import ConfigError
-from rcac_ros.tools.args import positive_int
+from rcac_ros.tools.args import node_name, output_dir, positive_int
 from rcac_ros.tools.bags.recover import default_recovered_path, format_recovery, recover
 from rcac_ros.tools.bags.verify import bag_info, find_bag, Report
 from rcac_ros.tools.bags.analyse import analyse, joint_names, load_truth, notes
@@ -159,16 +159,16 @@ def add_arguments(parser):
     parser.add_argument("--recover", action="store_true",
                         help="salvage a bag cut by a crash or damaged (complete mcap chunks, "
                              "committed sqlite transactions) into a new bag, then inspect it")
-    parser.add_argument("--recover-out", default=None, metavar="DIR",
+    parser.add_argument("--recover-out", type=output_dir, default=None, metavar="DIR",
                         help="the recovered bag (default: BAG_recovered)")
-    parser.add_argument("--plots", default=None, metavar="DIR",
+    parser.add_argument("--plots", type=output_dir, default=None, metavar="DIR",
                         help="write the figures and metrics.json into DIR")
     parser.add_argument("--model", default="css_arm",
                         help="true model for the estimate errors: 'css_arm' (default, the paper's "
                              "arm), 'none', or a model YAML / URDF")
     parser.add_argument("--link", type=positive_int, default=None,
                         help="link (1-based) whose estimates are plotted (default: the last)")
-    parser.add_argument("--controller-node", default=topics.CONTROLLER_NODE,
+    parser.add_argument("--controller-node", type=node_name, default=topics.CONTROLLER_NODE,
                         help=f"controller node name (default: {topics.CONTROLLER_NODE})")
 
 

@@ -166,6 +166,9 @@ def add_arguments(parser):
 
 def run(args):
     gains = {k: getattr(args, k) for k in GAINS}
+    if args.h > args.duration:
+        raise ConfigError(f"--h: the control period ({args.h:g} s) is longer than the run "
+                          f"(--duration {args.duration:g} s)")
     if args.jump >= args.duration:
         raise ConfigError(f"--jump: the payload must attach before the end of the run "
                           f"(--duration {args.duration:g} s), got {args.jump:g} s")
