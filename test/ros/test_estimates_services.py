@@ -40,6 +40,15 @@ class Operator(Node):
         assert spin_until(self.ex, lambda: len(self.theta) >= n + count, timeout=60.0)
         return self.theta[n:]
 
+    def wait_still(self, count=50, timeout=60.0):
+        """Spin until the last ``count`` estimates received are equal: the estimates sent
+        before a freeze, still queued here when a loaded test process lags behind the
+        lockstep loop, are drained. Estimates that keep moving never get there."""
+        def still():
+            last = self.theta[-count:]
+            return len(last) == count and all(np.array_equal(t, last[-1]) for t in last)
+        return spin_until(self.ex, still, timeout=timeout)
+
 
 def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
     path = str(tmp_path / "est.yaml")
@@ -54,7 +63,8 @@ def test_freeze_resume_save_reset_and_restart_from_the_file(tmp_path):
             # freeze: the estimates stop moving, control goes on
             res = op.call("set_adaptation", data=False)
             assert res.success and "frozen" in res.message
-            frozen = op.wait_steps(100)[-50:]
+            assert op.wait_still()
+            frozen = [op.theta[-1]] + op.wait_steps(50)
             assert all(np.array_equal(t, frozen[0]) for t in frozen)
             # save: YAML at estimates_file, the response names it
             res = op.call("save_estimates")
