@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from rcac_ros.core.law_options import FRICTION_ADAPTATIONS, FRICTION_FORGETTING
 from rcac_ros.core.model import PAPER_GAINS, PRESETS
 from rcac_ros.errors import ConfigError
 from rcac_ros.plants import ENGINES
@@ -235,12 +236,12 @@ CONTROLLER = _robot("controller") + (
     Param("friction_adaptation", "string", "gradient",
           "gain of the joint terms: 'gradient' (P_friction fixed) or 'least_squares' (from "
           "P_friction down, geometry 'euclidean'; doc/design.md §7)",
-          choices=("gradient", "least_squares")),
+          choices=FRICTION_ADAPTATIONS),
     Param("hold_compensation", "bool", False,
           "extrapolate eq 20's model torque m (feedback excluded) to the middle of the period "
           "the effort is held for, tau_k + (m_k - m_k-1) / 2: removes the hold's half-period "
           "lag (doc/design.md §6)"),
-    Param("friction_forgetting", "double", 0.5,
+    Param("friction_forgetting", "double", FRICTION_FORGETTING,
           "friction_adaptation 'least_squares': forgetting rate lambda_0, 1/s",
           lo=0.0, hi=BIG),
     Param("trajectory", "string", "paper",

@@ -76,6 +76,15 @@ def existing_file(text):
     return text
 
 
+def check_period(h, duration):
+    """``--h`` against ``--duration``: a ``ConfigError`` if the control period is longer than
+    the run (it would take no step)."""
+    if h > duration:
+        from rcac_ros.errors import ConfigError
+        raise ConfigError(f"--h: the control period ({h:g} s) is longer than the run "
+                          f"(--duration {duration:g} s)")
+
+
 def _writable(path):
     """The nearest existing directory at or above ``path`` accepts a new entry (tried with a
     temporary directory, removed at once: a permission bit does not say it for root or for a

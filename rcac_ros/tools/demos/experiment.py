@@ -14,9 +14,8 @@ import numpy as np
 
 from rcac_ros.core import PAPER_GAINS, PAPER_Q0, PaperTrajectory, css_arm
 from rcac_ros.core.law_options import parse_channels
-from rcac_ros.errors import ConfigError
-from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, output_dir,
-                                 positive_float, positive_int)
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, check_period,
+                                 output_dir, positive_float, positive_int)
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.tools.runs.metrics import estimates, LAST_WINDOW, prediction, torque, tracking
 
@@ -93,9 +92,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    if args.h > args.duration:
-        raise ConfigError(f"--h: the control period ({args.h:g} s) is longer than the run "
-                          f"(--duration {args.duration:g} s)")
+    check_period(args.h, args.duration)
     gains = dict(K_D=args.K_D, Lambda=args.Lambda, P=args.P, gamma=args.gamma, lam=args.lam,
                  h=args.h)
     engine = args.engine or "builtin"

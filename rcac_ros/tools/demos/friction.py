@@ -25,6 +25,7 @@ import os
 import numpy as np
 
 from rcac_ros.core import SinusoidTrajectory
+from rcac_ros.core.law_options import FRICTION_ADAPTATIONS
 from rcac_ros.tools.args import output_dir, positive_float
 from rcac_ros.tools.runs.scenarios import GAINS, READY, gains_for, load_panda
 
@@ -109,7 +110,7 @@ def add_arguments(parser):
                        help="the links adapt too, from the URDF's nominal parameters")
     links.add_argument("--links-known", action="store_true",
                        help="no link adapts (the URDF's are the plant's)")
-    parser.add_argument("--friction-adaptation", choices=("gradient", "least_squares"),
+    parser.add_argument("--friction-adaptation", choices=FRICTION_ADAPTATIONS,
                         default="gradient", help="the joint terms' gain (doc/design.md §7)")
     parser.add_argument("--hold-compensation", action=argparse.BooleanOptionalAction,
                         default=True, help="efforts extrapolated to the middle of their "

@@ -30,8 +30,9 @@ import numpy as np
 
 from rcac_ros.core import ConfigError, SinusoidTrajectory
 from rcac_ros.tools.runs import metrics as measure
-from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, existing_file,
-                                 finite_float, non_negative_float, output_dir, positive_float)
+from rcac_ros.tools.args import (add_engine_argument, add_gain_arguments, check_period,
+                                 existing_file, finite_float, non_negative_float, output_dir,
+                                 positive_float)
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.tools.runs.scenarios import (AMPLITUDE, FREQUENCY, GAINS, gains_for, load_panda,
                                            READY, with_payload)
@@ -166,9 +167,7 @@ def add_arguments(parser):
 
 def run(args):
     gains = {k: getattr(args, k) for k in GAINS}
-    if args.h > args.duration:
-        raise ConfigError(f"--h: the control period ({args.h:g} s) is longer than the run "
-                          f"(--duration {args.duration:g} s)")
+    check_period(args.h, args.duration)
     if args.jump >= args.duration:
         raise ConfigError(f"--jump: the payload must attach before the end of the run "
                           f"(--duration {args.duration:g} s), got {args.jump:g} s")
