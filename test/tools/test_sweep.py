@@ -502,3 +502,21 @@ def test_resume_into_a_directory_without_a_campaign_is_refused(tmp_path):
     assert not os.path.exists(tmp_path / "typo")
     store.claim({"seed": 1})                            # a new campaign starts there
     store.claim({"seed": 1}, resume=True)               # and is then continued
+
+
+def test_a_scheduler_that_refuses_the_connection_is_refused_before_the_directory(
+        tmp_path, capsys):
+    """A closed port: one line naming --scheduler, and no results directory claimed (Dask's
+    client alone would retry the port for its whole timeout)."""
+    import socket
+    with socket.socket() as s:                          # a port nobody listens on now
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "out"
+    code = cli.main(["sweep", os.path.join(ROOT, "campaigns", "channels_paper.yaml"),
+                     "--out", str(out), "--scheduler", f"tcp://127.0.0.1:{port}"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith(
+        f"rcac sweep: error: --scheduler: cannot connect to tcp://127.0.0.1:{port}"), err
+    assert not out.exists()

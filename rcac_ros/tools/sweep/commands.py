@@ -102,9 +102,11 @@ def run(args):
         raise ConfigError("--workers: not with --scheduler (the cluster has its workers)")
     campaign = cp.with_overrides(cp.load(args.campaign), args.samples, args.duration)
     total = cp.run_count(campaign)
-    from rcac_ros.tools.sweep.engine import execute
+    from rcac_ros.tools.sweep.engine import execute, reachable
     from rcac_ros.tools.sweep.store import Store
     cp.setup(campaign, 0)                  # a campaign that cannot build a run fails here
+    if args.scheduler is not None:
+        reachable(args.scheduler)          # before the results directory is claimed
     store = Store(args.out)
     store.claim(campaign, resume=args.resume)
     t0 = time.perf_counter()

@@ -13,11 +13,15 @@ import logging
 import math
 import os
 import signal
+import socket
 import sys
 import uuid
 
 from rcac_ros.errors import ConfigError
 from rcac_ros.tools.sweep import campaign as cp
+
+#: s a TCP connection to ``--scheduler`` may take before the address is refused
+CONNECT_TIMEOUT = 3.0
 
 
 def run_chunk(campaign, indices):
@@ -86,6 +90,21 @@ def chunks_of(pending, chunk):
 def auto_chunk(pending, workers):
     """About 8 tasks per worker (balance, progress), at most 25 runs per task."""
     return max(1, min(25, math.ceil(pending / (8 * max(1, workers)))))
+
+
+def reachable(scheduler, timeout=CONNECT_TIMEOUT):
+    """Raise :class:`ConfigError` at once if the ``tcp://HOST:PORT`` of ``scheduler`` takes no
+    TCP connection within ``timeout`` s (Dask's client retries a refused port for its whole
+    timeout); other protocols are left to Dask."""
+    proto, _, rest = scheduler.partition("://")
+    if proto != "tcp":
+        return
+    host, _, port = rest.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise ConfigError(f"--scheduler: cannot connect to {scheduler} "
+                          f"({err.strerror or err})") from None
 
 
 def start_client(workers=None, scheduler=None, dashboard=":8787"):
