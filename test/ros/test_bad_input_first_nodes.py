@@ -45,6 +45,9 @@ CASES = [
     ("controller", ["-p", "rate:=-1.0"], "controller: error: rate: value out of range"),
     ("controller", ["-p", "model:={tmp}/no_arm.urdf"],
      "controller: error: model: {tmp}/no_arm.urdf: no such URDF file"),
+    # a per-joint gain is the gains reader's to refuse: no warning of an undeclared key first
+    ("controller", ["-p", "gains.joint9.K_D:=3.0"],
+     "controller: error: gains.joint9.K_D: unknown joint 'joint9'"),
     ("controller", ["--params-file", "{tmp}/bad.yaml"],
      "controller: error: params file {tmp}/bad.yaml: not valid YAML"),
     ("simulator", ["-p", "dt:=-1.0"], "simulator: error: dt: value out of range"),

@@ -96,6 +96,9 @@ def test_per_joint_gains_reach_the_core_and_unknown_joints_are_refused():
         np.testing.assert_array_equal(node.ctrl.Lambda, [1.0, 3.0, 1, 1, 1, 1, 1])
         np.testing.assert_array_equal(node.ctrl.P[0], 5.0 * np.eye(13))
         assert node.get_parameter("gains.joint7.K_D").value == 2.0e3
+    with ros_context() as (ctx, ex):            # declared by the gains reader: not unknown
+        node, _ = make(ctx, ex, strict_parameters=True, **{"gains.joint7.K_D": 2.0e3})
+        np.testing.assert_array_equal(node.ctrl.K_D[6], 2.0e3 * np.eye(6))
     with ros_context() as (ctx, _):
         with pytest.raises(ConfigError) as err:
             ControllerNode(context=ctx, parameter_overrides=[

@@ -65,6 +65,8 @@ class ControllerNode(ControlStep, SerialCallbacks, ManagedNode):
     """
 
     PARAMETERS = params.CONTROLLER
+    #: ``gains.<joint>.<gain>``: declared and checked by the gains reader (controller/gains.py)
+    READ_PREFIXES = (params.GAINS_PREFIX,)
 
     def __init__(self, **kwargs):
         self.ctrl = None

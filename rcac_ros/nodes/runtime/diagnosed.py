@@ -18,6 +18,10 @@ class RcacNodeMixin:
     """Parameter checks and diagnostics of both nodes (plain or managed): uses ``_rows``
     (name -> :class:`rcac_ros.params.Param`), ``model``, ``_pub_diag``, ``diagnostics()``."""
 
+    #: prefixes of the given keys the node declares and checks itself as it reads them (each
+    #: one used or refused): not reported as undeclared beforehand
+    READ_PREFIXES = ()
+
     def create_publisher(self, *args, **kwargs):
         """rclpy's, without its default event handlers unless ``event_callbacks`` is given.
 
@@ -36,8 +40,8 @@ class RcacNodeMixin:
 
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
-        unknown = paramcheck.unknown_parameters(parameter_overrides(self),
-                                                self.list_parameters([], 0).names)
+        given = [k for k in parameter_overrides(self) if not k.startswith(self.READ_PREFIXES)]
+        unknown = paramcheck.unknown_parameters(given, self.list_parameters([], 0).names)
         if unknown:
             text = paramcheck.describe_unknown(unknown, self.get_name())
             if strict:
