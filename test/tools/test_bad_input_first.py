@@ -48,6 +48,8 @@ CASES = [
     (["bench", "core", "--budget", "-1"], "argument --budget: must be > 0"),
     (["bench", "ros", "--duration", "0"], "argument --duration: must be > 0"),
     (["bench", "faults", "--lookahead", "-1"], "argument --lookahead: must be >= 0"),
+    (["bench", "faults", "--cases", ""], "argument --cases: an empty name in ''"),
+    (["bench", "faults", "--cases", "nominal,bogus"], "argument --cases: unknown bogus"),
     (["bench", "soak", "-5"], "argument MINUTES: must be > 0"),
     (["bench", "delay-margin", "--gains", "-1"], "argument --gains: gains must be > 0"),
     (["bench", "noise", "--laws", "bogus"], "argument --laws: unknown bogus"),

@@ -96,7 +96,8 @@ def add_ros(p):
 def add_faults(p):
     p.add_argument("--duration", type=positive_float, default=60.0,
                    help="seconds per case (default 60)")
-    p.add_argument("--cases", default=None, help="comma-separated cases (default: all)")
+    p.add_argument("--cases", type=fault_cases, default=None,
+                   help="comma-separated cases (default: all)")
     p.add_argument("--plot", type=output_file, metavar="FILE",
                    help="tracking errors per case (PNG)")
     _add_discovery_range(p)
@@ -163,11 +164,20 @@ def _periods(text):
 
 def _choices(text, sep, known):
     items = [v.strip() for v in text.split(sep)]
+    if "" in items:
+        raise argparse.ArgumentTypeError(f"an empty name in {text!r} (known: "
+                                         f"{sep.join(known)})")
     bad = [v for v in items if v not in known]
     if bad:
         raise argparse.ArgumentTypeError(f"unknown {', '.join(bad)} (known: "
                                          f"{sep.join(known)})")
     return items
+
+
+def fault_cases(text):
+    """``--cases``: comma-separated names of :data:`rcac_ros.tools.bench.fault_cases.CASES`."""
+    from rcac_ros.tools.bench.fault_cases import CASES
+    return tuple(_choices(text, ",", CASES))
 
 
 def noise_laws(text):
@@ -237,7 +247,7 @@ def run_faults(args, cases=None, soak_minutes=None):
     from rcac_ros.tools.bench.faults import CASES, run_faults
     from rcac_ros.tools.bench.ros import BENCH_CONTROLLER
     if cases is None:
-        cases = CASES if args.cases is None else tuple(c.strip() for c in args.cases.split(","))
+        cases = CASES if args.cases is None else args.cases
     run_faults(getattr(args, "duration", 60.0), cases,
                dict(BENCH_CONTROLLER, **controller_overrides(args)),
                simulator=simulator_overrides(args), json_path=args.json,
