@@ -62,6 +62,8 @@ def read_yaml(path, label=None):
             return yaml.safe_load(f)
     except OSError as err:
         raise ConfigError(f"{label}: cannot read ({err.strerror})") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{label}: not UTF-8 text (byte {err.start})") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""

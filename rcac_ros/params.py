@@ -12,6 +12,7 @@ To add a parameter, add a row here and read it in the node. No rclpy, no compile
 
 from dataclasses import dataclass
 import math
+import re
 
 import numpy as np
 
@@ -51,8 +52,8 @@ class Param:
     size : int, optional
         The exact length of an array.
     syntax : callable, optional
-        ``syntax(name, value)`` raises :class:`ConfigError` (``channels``' syntax; what
-        needs the robot is checked at configure).
+        ``syntax(name, value)`` raises :class:`ConfigError` (the syntax of ``channels``, a
+        topic name, CPU numbers; what needs the robot is checked at configure).
     """
 
     name: str
@@ -93,6 +94,23 @@ def _channels_syntax(name, value):
         raise ConfigError(f"{name}: {str(err).partition(': ')[2]}") from None
 
 
+#: a ROS 2 topic name: absolute, relative or private, of tokens that do not start with a digit
+TOPIC_NAME = re.compile(r"(/|~/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", re.ASCII)
+
+
+def _topic_syntax(name, value):
+    """Empty, or a valid topic name (rclpy would raise at the subscription)."""
+    if value and not TOPIC_NAME.fullmatch(value):
+        raise ConfigError(f"{name}: {value!r} is not a valid topic name (tokens of letters, "
+                          "digits and '_' not starting with a digit, separated by '/')")
+
+
+def _cpus_syntax(name, value):
+    """CPU numbers are >= 0 (whether the machine has them is best effort, at start)."""
+    if any(v < 0 for v in value):
+        raise ConfigError(f"{name}: CPU numbers must be >= 0, got {list(value)}")
+
+
 def _robot(node):
     """The robot description rows both nodes share."""
     order = "effort commands" if node == "controller" else "efforts and joint states"
@@ -110,7 +128,7 @@ def _robot(node):
         Param("description_topic", "string", "",
               "take the URDF from this transient-local std_msgs/String topic (e.g. "
               "/robot_description, as robot_state_publisher offers it) and wait for it; "
-              "empty: 'robot_description' or 'model'"),
+              "empty: 'robot_description' or 'model'", syntax=_topic_syntax),
     )
 
 
@@ -141,7 +159,8 @@ def _realtime(loop):
         Param("realtime.lock_memory", "bool", False,
               "mlockall the process's memory (best effort)"),
         Param("realtime.cpus", "integer_array", None,
-              f"CPU affinity of the {loop} (best effort; unset: any CPU)"),
+              f"CPU affinity of the {loop} (best effort; unset: any CPU)",
+              syntax=_cpus_syntax),
         Param("realtime.cpu_dma_latency", "integer", -1,
               "hold /dev/cpu_dma_latency at this many us while running (0: the shallowest "
               "idle state; best effort); -1: off", lo=-1, hi=100_000),
@@ -463,6 +482,8 @@ def check(p, value):
     if p.choices and value not in p.choices:
         raise ConfigError(f"{p.name}: must be {' or '.join(repr(c) for c in p.choices)}, "
                           f"got {value!r}")
+    if p.syntax is not None:
+        p.syntax(p.name, value)
     return value
 
 

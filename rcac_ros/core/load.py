@@ -47,6 +47,8 @@ def load_model(spec, base_link=None, tip_link=None):
     if is_urdf(text):
         return model_from_urdf(text, base_link=base_link, tip_link=tip_link)
     if text.endswith(YAML_SUFFIXES) or os.path.sep in text:
+        if os.path.isdir(text):
+            raise ConfigError(f"{text!r} is a directory, not a model file")
         if not os.path.isfile(text):
             raise ConfigError(f"no such file {text!r}")
         return RobotModel.from_yaml(text)

@@ -218,7 +218,8 @@ def _load(path_or_xml):
             raise ConfigError(f"path_or_xml: expected a file path or URDF XML, got "
                               f"{type(path_or_xml).__name__}") from None
         if not os.path.isfile(source):
-            raise ConfigError(f"{source}: no such URDF file")
+            raise ConfigError(f"{source}: " + ("a directory, not a URDF file"
+                                               if os.path.isdir(source) else "no such URDF file"))
         stream = source
     import yourdfpy                         # once the file is known to exist
     logger = logging.getLogger(yourdfpy.urdf.__name__)
@@ -231,7 +232,9 @@ def _load(path_or_xml):
                                   build_collision_scene_graph=False,
                                   load_collision_meshes=False)
     except Exception as err:  # yourdfpy/lxml raise many kinds on broken input
-        detail = log.messages[0] if log.messages else f"{type(err).__name__}: {err}"
+        detail = log.messages[0] if log.messages else \
+            f"an element lacks its {err.args[0]!r} attribute" if isinstance(err, KeyError) \
+            else f"{type(err).__name__}: {err}"
         raise ConfigError(f"{source}: not a valid URDF ({detail})") from None
     finally:
         logger.removeHandler(log)

@@ -66,14 +66,33 @@ def test_unknown_keys_are_refused_when_strict(tmp_path):
     assert len(errors) == 1 and "K_d" in errors[0], out
 
 
+def test_a_file_shared_by_both_nodes_is_not_unknown_to_either(tmp_path):
+    """A ``/**`` section holding the two nodes' parameters (one file for a whole launch):
+    the simulator's ``dt`` is not an unknown key of the strict controller; a key no node
+    declares still is."""
+    path = tmp_path / "shared.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    rate: 500.0\n    dt: 0.002\n")
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path,
+                         until="active: publishing efforts")
+    assert "active: publishing efforts" in out and code is None, out
+    assert "no parameter declares" not in out, out
+    path.write_text("/**:\n  ros__parameters:\n    dt: 0.002\n    d_t: 0.002\n")
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path)
+    assert code == 2 and "'d_t'" in out and "'dt'" not in out.split("declares", 1)[1], out
+
+
 @pytest.mark.parametrize("module, text", [
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    K_D: [1.0\n"),  # unclosed
     ("controller_node", "rcac_controller:\n  ros__parameters:\n\tK_D: 1.0\n"),     # a tab
     ("simulator_node", "rcac_simulator: [1, 2]\n"),       # valid YAML, not a params file
+    # rcl would refuse these two with its own message, source location and log line
+    ("controller_node", "rcac_controller:\n  ros__parameters:\n    gravity: [0.0, 0, -9.8]\n"),
+    ("controller_node", "rcac_controller:\n  ros__parameters:\n    rate: 500.0\n  rate: 1\n"),
+    ("controller_node", b"\xff\xfe not UTF-8 text"),
 ])
 def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     path = tmp_path / "bad.yaml"
-    path.write_text(text)
+    path.write_bytes(text) if isinstance(text, bytes) else path.write_text(text)
     code, out = run_node(module, params_file=path)
     assert code == 2, out
     assert "Traceback" not in out

@@ -25,7 +25,7 @@ def test_overrides_replace_the_scalar_for_one_joint_only():
     ("gains.wrist.gamma", 0.1, "unknown per-joint gain 'gamma'"),
     ("gains.wrist.K_D", -1.0, "must be > 0"),
     ("gains.wrist.K_D", 2000, "wrong type"),
-    ("gains.K_D", 2e3, "unknown joint"),
+    ("gains.K_D", 2e3, "expected gains.<joint>.<gain>"),
 ])
 def test_bad_overrides_are_rejected_in_one_line_naming_them(name, value, text):
     with pytest.raises(ConfigError) as err:

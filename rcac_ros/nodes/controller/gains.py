@@ -29,6 +29,9 @@ def parse_overrides(values, joint_names):
     for name in sorted(values):
         rest = name[len(PREFIX):] if name.startswith(PREFIX) else ""
         joint, _, gain = rest.rpartition(".")
+        if not joint:
+            raise ConfigError(f"{name}: expected {PREFIX}<joint>.<gain> (e.g. "
+                              f"{PREFIX}{joint_names[-1]}.K_D)")
         if joint not in joint_names:
             raise ConfigError(f"{name}: unknown joint {joint!r} (joints: "
                               f"{', '.join(joint_names)})")

@@ -149,7 +149,7 @@ def read_parameters(node, v):
             P_friction=P_FRICTION if v["P_friction"] is None else list(v["P_friction"]),
             **adaptation_options(v, channels))
     except RcacError as err:
-        raise ConfigError(f"gains: {err}") from None
+        raise ConfigError(str(err)) from None       # names its parameter
     return config, ctrl
 
 

@@ -20,19 +20,18 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 
 from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError
-from rcac_ros.nodes.runtime import gcwatch, paramcheck
+from rcac_ros.nodes.runtime import gcwatch, startargs
 from rcac_ros.nodes.runtime.description import wait_for_description
 from rcac_ros.nodes.runtime.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.runtime.pacing import spin_node_once
+from rcac_ros.nodes.runtime.rclpy_private import parameter_overrides
 from rcac_ros.nodes.runtime.realtime import Realtime
 from rcac_ros.nodes.runtime.stats import Throttle
 
@@ -67,19 +66,18 @@ def declare(node, p):
             node.declare_parameter(p.name, default, desc)
         value = node.get_parameter(p.name).value
     except InvalidParameterTypeException as err:
-        raise ConfigError(f"{p.name}: wrong type, expected {p.type} ({_first_line(err)})") \
-            from None
+        raise ConfigError(f"{p.name}: wrong type, expected {p.type} "
+                          f"({startargs.first_line(err)})") from None
     except InvalidParameterValueException:
         raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]") from None
     except ParameterUninitializedException:
+        if p.name in parameter_overrides(node):     # given as [] (rcl: a value not set)
+            raise ConfigError(f"{p.name}: empty ([]); leave it out for its default") \
+                from None
         return None
     if p.type.endswith("_array"):
         value = list(value)         # rclpy gives array.array for double arrays
     return params.check(p, value)
-
-
-def _first_line(err):
-    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
 def declare_parameters(node, rows, description=None):
@@ -116,7 +114,7 @@ def declare_parameters(node, rows, description=None):
     except RcacError as err:
         raise ConfigError(f"{which}: {err}") from None
     except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
-        raise ConfigError(f"{which}: cannot load ({_first_line(err)})") from None
+        raise ConfigError(f"{which}: cannot load ({startargs.first_line(err)})") from None
     if values["gravity"] is not None:
         model = model.replace(gravity=list(values["gravity"]))
     return values, model, _joints(values["joints"], model)
@@ -229,11 +227,7 @@ def run(node_factory, prog, args=None):
     # rclpy's own SIGINT handler would shut the context down before we could publish the
     # final zero effort: handle both signals in Python instead.
     args = sys.argv if args is None else args
-    try:
-        paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except (RcacError, _rclpy.RCLError) as err:
-        print(f"{prog}: error: {_first_line(err)}", file=sys.stderr, flush=True)
+    if not startargs.init(args, prog):
         return 2
     signal.signal(signal.SIGINT, _raise_interrupt)
     signal.signal(signal.SIGTERM, _raise_interrupt)

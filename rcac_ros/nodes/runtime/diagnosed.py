@@ -40,14 +40,16 @@ class RcacNodeMixin:
 
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
-        given = [k for k in parameter_overrides(self) if not k.startswith(self.READ_PREFIXES)]
+        files = paramcheck.check_params_files(sys.argv)
+        shared = paramcheck.shared_keys(files)      # the other node's, from a /** section
+        given = [k for k in parameter_overrides(self)
+                 if not k.startswith(self.READ_PREFIXES) and k not in shared]
         unknown = paramcheck.unknown_parameters(given, self.list_parameters([], 0).names)
         if unknown:
             text = paramcheck.describe_unknown(unknown, self.get_name())
             if strict:
                 raise ConfigError(f"strict_parameters: {text}")
             self.get_logger().warning(text)
-        files = paramcheck.check_params_files(sys.argv)
         nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE]
         for path, section, hint in paramcheck.foreign_sections(files, nodes):
             self.get_logger().warning(

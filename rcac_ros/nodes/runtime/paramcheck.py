@@ -45,8 +45,26 @@ def load_params_file(path):
         if not isinstance(params, dict):
             raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
                               "holding a mapping")
+        beside = [str(k) for k in section if k != "ros__parameters"]
+        if beside:
+            raise ConfigError(f"params file {path}: {node}: {beside[0]!r} beside "
+                              "'ros__parameters' (every parameter goes under it)")
         out[str(node)] = dict(flatten(params))
+        for name, value in out[str(node)].items():
+            _one_type(path, node, name, value)
     return out
+
+
+def _one_type(path, node, name, value):
+    """rcl refuses an array whose values are not all of one type (``[1.0, 2]``)."""
+    if not isinstance(value, list):
+        return
+    kinds = {"bool" if isinstance(v, bool) else type(v).__name__ for v in value}
+    if len(kinds) > 1:
+        hint = "; write every number with a decimal point (2.0)" \
+            if kinds == {"int", "float"} else ""
+        raise ConfigError(f"params file {path}: {node}: {name}: values of several types "
+                          f"{value}{hint}")
 
 
 def check_params_files(argv):
@@ -100,6 +118,15 @@ def describe_unknown(unknown, node):
     parts = [f"'{name}'" + (f" (did you mean '{hint}'?)" if hint else "")
              for name, hint in unknown]
     return f"{node}: no parameter declares {', '.join(parts)}"
+
+
+def shared_keys(files):
+    """Keys of the files' wildcard sections (``/**``) that a node of rcac_ros declares: a
+    file shared by the two nodes gives each the other's parameters too."""
+    declared = {p.name for rows in TABLE.values() for p in rows}
+    return {name for sections in files.values() for section, params in sections.items()
+            if section.strip("/").split("/")[-1] == "**"
+            for name in params if name in declared}
 
 
 def foreign_sections(files, nodes):
