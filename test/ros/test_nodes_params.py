@@ -158,3 +158,21 @@ def test_controller_friction_adaptation_reaches_the_core_and_a_misuse_is_one_lin
         text = str(err.value)
         assert "friction_adaptation: 'least_squares' needs geometry='euclidean'" in text, text
         assert "\n" not in text, text
+
+
+def test_options_that_act_only_with_others_are_named_when_set_alone():
+    """A value off its default for an option that does nothing in the configuration (the
+    forgetting of a gradient law, a lookahead in lockstep) is named; at the defaults, or
+    where each acts, nothing is."""
+    from rcac_ros.nodes.controller.params import inert_options
+    v = {p.name: p.default for p in params.CONTROLLER}
+    assert inert_options(v) == []
+    v.update({"forgetting": 0.5, "P_max": 10.0, "P_friction": (1.0, 1.0, 1.0),
+              "friction_forgetting": 2.0, "timer.lookahead": 0.01, "timer.phase_offset": 0.0,
+              "mode": "lockstep", "adaptation": "gradient", "joint_friction": False})
+    assert [name for name, _ in inert_options(v)] == [
+        "forgetting", "P_max", "P_friction", "friction_forgetting", "timer.lookahead",
+        "timer.phase_offset"]
+    v.update(adaptation="least_squares", joint_friction=True,
+             friction_adaptation="least_squares", mode="timer")
+    assert inert_options(v) == []

@@ -150,6 +150,8 @@ def read_parameters(node, v):
             **adaptation_options(v, channels))
     except RcacError as err:
         raise ConfigError(str(err)) from None       # names its parameter
+    for name, needs in inert_options(v):
+        node.get_logger().warning(f"{name}: {v[name]} changes nothing without {needs}")
     return config, ctrl
 
 
@@ -166,6 +168,32 @@ def adaptation_options(v, channels):
                 barrier_c=v["barrier_c"], friction_adaptation=v["friction_adaptation"],
                 friction_forgetting=v["friction_forgetting"],
                 hold_compensation=v["hold_compensation"])
+
+
+def _least_squares(v):
+    return v["adaptation"].startswith("least_squares")
+
+
+#: options that act only with others: (name, whether it acts, under what); a value other than
+#: its default given where it does not act is named in one warning (it changes nothing)
+INERT = (
+    ("forgetting", _least_squares, "adaptation 'least_squares*'"),
+    ("P_max", _least_squares, "adaptation 'least_squares*'"),
+    ("P_friction", lambda v: v["joint_friction"], "joint_friction"),
+    ("friction_forgetting", lambda v: v["joint_friction"]
+     and v["friction_adaptation"] == "least_squares",
+     "joint_friction and friction_adaptation 'least_squares'"),
+    ("timer.lookahead", lambda v: v["mode"] == "timer", "mode 'timer'"),
+    ("timer.phase_offset", lambda v: v["mode"] == "timer", "mode 'timer'"),
+)
+
+
+def inert_options(v):
+    """The ``(name, under what it acts)`` of each option of :data:`INERT` that ``v`` (the
+    checked values) sets off its default where it does not act."""
+    default = {p.name: p.default for p in params.CONTROLLER}
+    return [(name, needs) for name, acts, needs in INERT
+            if v[name] != default[name] and not acts(v)]
 
 
 def channel_names(channels):
