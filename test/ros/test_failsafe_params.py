@@ -98,3 +98,20 @@ def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     assert "Traceback" not in out
     lines = [ln for ln in out.splitlines() if ln.strip()]
     assert len(lines) == 1 and str(path) in lines[0], out
+
+
+def test_a_section_of_another_namespace_is_named(tmp_path):
+    """``/ns/rcac_controller`` does not address the node ``/rcac_controller`` (rcl matches the
+    fully qualified name): its parameters would be dropped in silence."""
+    from rcac_ros.nodes.runtime.paramcheck import section_applies
+    for section, here, in_ns in [("/ns/rcac_controller", False, True),
+                                 ("rcac_controller", True, False), ("/**", True, True),
+                                 ("/**/rcac_controller", True, True),
+                                 ("/*/rcac_controller", False, True), ("/ns/**", False, True)]:
+        assert section_applies(section, "/rcac_controller") is here, section
+        assert section_applies(section, "/ns/rcac_controller") is in_ns, section
+    path = tmp_path / "ns.yaml"
+    path.write_text("/ns/rcac_controller:\n  ros__parameters:\n    rate: 250.0\n")
+    code, out = run_node("controller_node", params_file=path, until="active: publishing")
+    assert "section '/ns/rcac_controller' is not this node's (/rcac_controller)" in out, out
+    assert "h=2 ms" in out, out                     # the section's rate did not apply

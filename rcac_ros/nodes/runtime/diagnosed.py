@@ -55,6 +55,10 @@ class RcacNodeMixin:
             self.get_logger().warning(
                 f"{path}: section '{section}' addresses no node of rcac_ros"
                 + (f" (did you mean '{hint}'?)" if hint else ""))
+        fq_name = self.get_fully_qualified_name()
+        for path, section in paramcheck.other_namespace(files, self.get_name(), fq_name):
+            self.get_logger().warning(f"{path}: section '{section}' is not this node's "
+                                      f"({fq_name}): none of its parameters apply")
 
     def _check_parameters(self, changed):
         """On-set callback: validate against the table (a subclass applies them post-set)."""

@@ -11,6 +11,7 @@
 """
 
 import difflib
+import re
 
 from rcac_ros.errors import ConfigError, read_yaml
 from rcac_ros.params import GAINS_PREFIX, TABLE, check, flatten, gain_override
@@ -127,6 +128,23 @@ def shared_keys(files):
     return {name for sections in files.values() for section, params in sections.items()
             if section.strip("/").split("/")[-1] == "**"
             for name in params if name in declared}
+
+
+def section_applies(section, fq_name):
+    """Whether a parameters file's section name (``/ns/node``, ``node``, ``/**``, ``/*/node``)
+    addresses the node of fully qualified name ``fq_name``, as rcl matches them."""
+    tokens = section.strip("/").split("/")
+    pattern = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
+                      for t in tokens)
+    return re.fullmatch(pattern, fq_name) is not None
+
+
+def other_namespace(files, name, fq_name):
+    """Sections that name node ``name`` in a namespace other than its own (``fq_name``): rcl
+    gives it none of their parameters. ``[(path, section)]``."""
+    return [(path, section) for path, sections in files.items() for section in sections
+            if section.strip("/").split("/")[-1] == name
+            and not section_applies(section, fq_name)]
 
 
 def foreign_sections(files, nodes):
