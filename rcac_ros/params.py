@@ -476,7 +476,7 @@ def check(p, value):
     if p.type == "double" and not math.isfinite(value):
         raise ConfigError(f"{p.name}: must be finite, got {value}")
     if p.lo is not None and not p.lo <= value <= p.hi:
-        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]")
+        raise ConfigError(out_of_range(p))
     if p.strict and not value > p.lo:
         raise ConfigError(f"{p.name}: must be > {p.lo:g}, got {value}")
     if p.choices and value not in p.choices:
@@ -485,6 +485,12 @@ def check(p, value):
     if p.syntax is not None:
         p.syntax(p.name, value)
     return value
+
+
+def out_of_range(p):
+    """The message of a value of row ``p`` outside ``[lo, hi]`` (integers in full)."""
+    fmt = "d" if p.type == "integer" else "g"
+    return f"{p.name}: value out of range [{p.lo:{fmt}}, {p.hi:{fmt}}]"
 
 
 def _in_range(p, v):

@@ -51,6 +51,8 @@ CASES = [
     ("controller", ["--params-file", "{tmp}/bad.yaml"],
      "controller: error: params file {tmp}/bad.yaml: not valid YAML"),
     ("controller", ["-p", "channels:=[]"], "controller: error: channels: empty ([])"),
+    ("controller", ["-p", "max_state_bytes:=-1"],
+     "controller: error: max_state_bytes: value out of range [0, 2147483647]"),
     ("controller", ["-p", "description_topic:=a!"],
      "controller: error: description_topic: 'a!' is not a valid topic name"),
     ("controller", ["-p", "realtime.cpus:=[-1]"],

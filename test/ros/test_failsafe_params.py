@@ -100,9 +100,10 @@ def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     assert len(lines) == 1 and str(path) in lines[0], out
 
 
-def test_a_section_of_another_namespace_is_named(tmp_path):
+def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
     """``/ns/rcac_controller`` does not address the node ``/rcac_controller`` (rcl matches the
-    fully qualified name): its parameters would be dropped in silence."""
+    fully qualified name): its parameters would be dropped in silence; so would an empty
+    file's none."""
     from rcac_ros.nodes.runtime.paramcheck import section_applies
     for section, here, in_ns in [("/ns/rcac_controller", False, True),
                                  ("rcac_controller", True, False), ("/**", True, True),
@@ -115,3 +116,6 @@ def test_a_section_of_another_namespace_is_named(tmp_path):
     code, out = run_node("controller_node", params_file=path, until="active: publishing")
     assert "section '/ns/rcac_controller' is not this node's (/rcac_controller)" in out, out
     assert "h=2 ms" in out, out                     # the section's rate did not apply
+    path.write_text("# rcac_controller:\n#   ros__parameters: {rate: 250.0}\n")
+    code, out = run_node("controller_node", params_file=path, until="active: publishing")
+    assert f"{path}: an empty parameters file" in out, out

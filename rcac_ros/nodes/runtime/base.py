@@ -69,7 +69,7 @@ def declare(node, p):
         raise ConfigError(f"{p.name}: wrong type, expected {p.type} "
                           f"({startargs.first_line(err)})") from None
     except InvalidParameterValueException:
-        raise ConfigError(f"{p.name}: value out of range [{p.lo:g}, {p.hi:g}]") from None
+        raise ConfigError(params.out_of_range(p)) from None
     except ParameterUninitializedException:
         if p.name in parameter_overrides(node):     # given as [] (rcl: a value not set)
             raise ConfigError(f"{p.name}: empty ([]); leave it out for its default") \

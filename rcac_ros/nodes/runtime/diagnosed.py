@@ -55,6 +55,8 @@ class RcacNodeMixin:
             self.get_logger().warning(
                 f"{path}: section '{section}' addresses no node of rcac_ros"
                 + (f" (did you mean '{hint}'?)" if hint else ""))
+        for path in (path for path, sections in files.items() if not sections):
+            self.get_logger().warning(f"{path}: an empty parameters file")
         fq_name = self.get_fully_qualified_name()
         for path, section in paramcheck.other_namespace(files, self.get_name(), fq_name):
             self.get_logger().warning(f"{path}: section '{section}' is not this node's "
