@@ -102,8 +102,8 @@ def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
 
 def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
     """``/ns/rcac_controller`` does not address the node ``/rcac_controller`` (rcl matches the
-    fully qualified name): its parameters would be dropped in silence; so would an empty
-    file's none."""
+    fully qualified name): its parameters would be dropped in silence. An empty file, which
+    sets nothing, is named too."""
     from rcac_ros.nodes.runtime.paramcheck import section_applies
     for section, here, in_ns in [("/ns/rcac_controller", False, True),
                                  ("rcac_controller", True, False), ("/**", True, True),
