@@ -34,6 +34,11 @@ class CutBagError(BagError):
     """A bag was not closed (its recorder was killed): ``rcac inspect --recover`` salvages it."""
 
 
+def first_line(err):
+    """The first line of an exception's text, or its type's name (a one-line report)."""
+    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+
+
 def read_yaml(path, label=None):
     """Parse the YAML file at ``path``.
 
@@ -58,12 +63,10 @@ def read_yaml(path, label=None):
     import yaml      # here: importing the exceptions stays light
     label = path if label is None else label
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, "rb") as f:             # bytes: YAML reads a byte-order mark
             return yaml.safe_load(f)
     except OSError as err:
         raise ConfigError(f"{label}: cannot read ({err.strerror})") from None
-    except UnicodeDecodeError as err:
-        raise ConfigError(f"{label}: not UTF-8 text (byte {err.start})") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1} column {mark.column + 1}" if mark else ""

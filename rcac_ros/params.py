@@ -94,8 +94,12 @@ def _channels_syntax(name, value):
         raise ConfigError(f"{name}: {str(err).partition(': ')[2]}") from None
 
 
-#: a ROS 2 topic name: absolute, relative or private, of tokens that do not start with a digit
-TOPIC_NAME = re.compile(r"(/|~/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*", re.ASCII)
+#: a ROS 2 topic name: absolute, relative or private (``~``, ``~/x``), of tokens of letters,
+#: digits, '_' and the substitutions ``{node}``, ``{ns}``, ``{namespace}``, not starting with
+#: a digit
+_SUB = r"\{(?:node|ns|namespace)\}"
+_TOKEN = rf"(?:[A-Za-z_]|{_SUB})(?:\w|{_SUB})*"
+TOPIC_NAME = re.compile(rf"~|(?:/|~/)?{_TOKEN}(?:/{_TOKEN})*", re.ASCII)
 
 
 def _topic_syntax(name, value):

@@ -59,7 +59,8 @@ CASES = [
      "controller: error: realtime.cpus: CPU numbers must be >= 0"),
     ("controller", ["-p", "gains.joint7:=5.0"],
      "controller: error: gains.joint7: expected gains.<joint>.<gain>"),
-    ("controller", ["-p", "model:={tmp}"], "model: '{tmp}' is a directory, not a model file"),
+    ("controller", ["-p", "model:={tmp}"],
+     "controller: error: model: '{tmp}' is a directory, not a model file"),
     # rcl's own refusals: its message once, without the line rcl logs before it
     ("controller", ["-p", "mode:="],
      "controller: error: cannot parse parameter override rule: '-p mode:='"),

@@ -18,12 +18,13 @@ rcac_simulater:
 """
 
 
-def run_node(module, *overrides, params_file=None, until=None, timeout=120.0):
+def run_node(module, *overrides, params_file=None, until=None, timeout=120.0, ros_args=()):
     """Run a node until it exits, or (``until``) until a line of its output contains
     ``until``, and then stop it; ``timeout`` s at most (generous: a loaded machine). Return
     ``(exit code, or None if it was still running, output)``."""
     with ros_domain():
-        proc = subprocess.Popen(node_cmd(module, *overrides, params_file=params_file),
+        proc = subprocess.Popen(node_cmd(module, *overrides, params_file=params_file,
+                                         ros_args=ros_args),
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 cwd=ROOT)
         lines, seen, ended = [], threading.Event(), threading.Event()
@@ -79,6 +80,12 @@ def test_a_file_shared_by_both_nodes_is_not_unknown_to_either(tmp_path):
     path.write_text("/**:\n  ros__parameters:\n    dt: 0.002\n    d_t: 0.002\n")
     code, out = run_node("controller_node", "strict_parameters:=true", params_file=path)
     assert code == 2 and "'d_t'" in out and "'dt'" not in out.split("declares", 1)[1], out
+    # /* (every node of the root namespace), a number rcl reads as a double (2.5e2)
+    path.write_text("/*:\n  ros__parameters:\n    rate: 2.5e2\n    dt: 0.004\n")
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path,
+                         until="active: publishing efforts")
+    assert "h=4 ms" in out and code is None, out
+    assert "no parameter declares" not in out and "addresses no node" not in out, out
 
 
 @pytest.mark.parametrize("module, text", [
@@ -119,3 +126,18 @@ def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
     path.write_text("# rcac_controller:\n#   ros__parameters: {rate: 250.0}\n")
     code, out = run_node("controller_node", params_file=path, until="active: publishing")
     assert f"{path}: an empty parameters file" in out, out
+    # one file for two arms, the node started in one of their namespaces: no warning
+    path.write_text("/arm1/rcac_controller:\n  ros__parameters:\n    rate: 250.0\n"
+                    "arm2:\n  rcac_controller:\n    ros__parameters:\n      rate: 125.0\n")
+    code, out = run_node("controller_node", params_file=path, until="active: publishing",
+                         ros_args=("-r", "__ns:=/arm1"))
+    assert "h=4 ms" in out and "not this node's" not in out, out
+
+
+def test_an_inert_option_is_named_and_rcl_log_levels_still_apply():
+    """An option that acts only with another, given alone, is named once; a log level the
+    user gives rcl (``--log-level rcl:=debug``) still reaches it."""
+    code, out = run_node("controller_node", "forgetting:=0.5", until="active: publishing",
+                         ros_args=("--log-level", "rcl:=debug"))
+    assert "forgetting: 0.5 changes nothing without adaptation 'least_squares*'" in out, out
+    assert "[DEBUG]" in out and "[rcl]" in out, out[:2000]

@@ -97,9 +97,10 @@ NODE_MODULES = {"controller_node": "rcac_ros.nodes.controller.node",
                 "simulator_node": "rcac_ros.nodes.simulator.node"}
 
 
-def node_cmd(module, *overrides, params_file=None):
-    """The command line of node ``module`` (a key of NODE_MODULES) with ``-p`` overrides."""
-    cmd = [sys.executable, "-m", NODE_MODULES[module], "--ros-args"]
+def node_cmd(module, *overrides, params_file=None, ros_args=()):
+    """The command line of node ``module`` (a key of NODE_MODULES) with ``-p`` overrides
+    (and other ROS arguments, ``ros_args``)."""
+    cmd = [sys.executable, "-m", NODE_MODULES[module], "--ros-args", *ros_args]
     if params_file is not None:
         cmd += ["--params-file", str(params_file)]
     for o in overrides:

@@ -30,7 +30,7 @@ import yaml
 
 from rcac_ros.core.model import PARAMETER_NAMES
 from rcac_ros.core.pseudo_inertia import default_start
-from rcac_ros.errors import ConfigError
+from rcac_ros.errors import ConfigError, first_line
 
 #: the ``format`` key of an estimates file
 FORMAT = "rcac_ros/estimates 1"
@@ -172,11 +172,10 @@ def load(path, joint_names, field="initial_estimates"):
     if not os.path.isfile(path):
         raise ConfigError(f"{field}: no such file {path!r} (or 'zero', 'model')")
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, "rb") as f:             # bytes: YAML reads a byte-order mark
             doc = yaml.safe_load(f)
     except (OSError, yaml.YAMLError) as err:
-        text = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise ConfigError(f"{field}: {path}: cannot read ({text})") from None
+        raise ConfigError(f"{field}: {path}: cannot read ({first_line(err)})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ConfigError(f"{field}: {path}: not an estimates file (format: {FORMAT!r})")
     entries = doc.get("links")

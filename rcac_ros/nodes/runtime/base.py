@@ -26,7 +26,7 @@ from rclpy.parameter import Parameter
 from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
-from rcac_ros.errors import ConfigError, RcacError
+from rcac_ros.errors import ConfigError, RcacError, first_line
 from rcac_ros.nodes.runtime import gcwatch, startargs
 from rcac_ros.nodes.runtime.description import wait_for_description
 from rcac_ros.nodes.runtime.diagnosed import RcacNodeMixin
@@ -67,11 +67,11 @@ def declare(node, p):
         value = node.get_parameter(p.name).value
     except InvalidParameterTypeException as err:
         raise ConfigError(f"{p.name}: wrong type, expected {p.type} "
-                          f"({startargs.first_line(err)})") from None
+                          f"({first_line(err)})") from None
     except InvalidParameterValueException:
         raise ConfigError(params.out_of_range(p)) from None
     except ParameterUninitializedException:
-        if p.name in parameter_overrides(node):     # given as [] (rcl: a value not set)
+        if p.default is not None and p.name in parameter_overrides(node):    # given as []
             raise ConfigError(f"{p.name}: empty ([]); leave it out for its default") \
                 from None
         return None
@@ -114,7 +114,7 @@ def declare_parameters(node, rows, description=None):
     except RcacError as err:
         raise ConfigError(f"{which}: {err}") from None
     except Exception as err:  # noqa: BLE001 - any parser failure is a bad parameter
-        raise ConfigError(f"{which}: cannot load ({startargs.first_line(err)})") from None
+        raise ConfigError(f"{which}: cannot load ({first_line(err)})") from None
     if values["gravity"] is not None:
         model = model.replace(gravity=list(values["gravity"]))
     return values, model, _joints(values["joints"], model)

@@ -41,7 +41,8 @@ class RcacNodeMixin:
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
         files = paramcheck.check_params_files(sys.argv)
-        shared = paramcheck.shared_keys(files)      # the other node's, from a /** section
+        fq_name = self.get_fully_qualified_name()
+        shared = paramcheck.shared_keys(files, fq_name)     # the other node's, from /**
         given = [k for k in parameter_overrides(self)
                  if not k.startswith(self.READ_PREFIXES) and k not in shared]
         unknown = paramcheck.unknown_parameters(given, self.list_parameters([], 0).names)
@@ -57,7 +58,6 @@ class RcacNodeMixin:
                 + (f" (did you mean '{hint}'?)" if hint else ""))
         for path in (path for path, sections in files.items() if not sections):
             self.get_logger().warning(f"{path}: an empty parameters file")
-        fq_name = self.get_fully_qualified_name()
         for path, section in paramcheck.other_namespace(files, self.get_name(), fq_name):
             self.get_logger().warning(f"{path}: section '{section}' is not this node's "
                                       f"({fq_name}): none of its parameters apply")

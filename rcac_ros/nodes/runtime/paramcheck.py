@@ -41,31 +41,32 @@ def load_params_file(path):
         raise ConfigError(f"params file {path}: expected a mapping of node names, got "
                           f"{type(data).__name__}")
     out = {}
-    for node, section in data.items():
-        params = section.get("ros__parameters") if isinstance(section, dict) else None
-        if not isinstance(params, dict):
-            raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
-                              "holding a mapping")
-        beside = [str(k) for k in section if k != "ros__parameters"]
-        if beside:
-            raise ConfigError(f"params file {path}: {node}: {beside[0]!r} beside "
-                              "'ros__parameters' (every parameter goes under it)")
-        out[str(node)] = dict(flatten(params))
-        for name, value in out[str(node)].items():
-            _one_type(path, node, name, value)
+    _sections(path, "", data, out)
     return out
 
 
-def _one_type(path, node, name, value):
-    """rcl refuses an array whose values are not all of one type (``[1.0, 2]``)."""
-    if not isinstance(value, list):
-        return
-    kinds = {"bool" if isinstance(v, bool) else type(v).__name__ for v in value}
-    if len(kinds) > 1:
-        hint = "; write every number with a decimal point (2.0)" \
-            if kinds == {"int", "float"} else ""
-        raise ConfigError(f"params file {path}: {node}: {name}: values of several types "
-                          f"{value}{hint}")
+def _sections(path, namespace, mapping, out):
+    """The node sections of ``mapping`` into ``out`` (``{"ns/node": {name: value}}``): a
+    key holding ``ros__parameters`` is a node; one holding mappings only, a namespace
+    (``arm: {rcac_controller: {ros__parameters: ...}}`` is ``arm/rcac_controller``)."""
+    for key, section in mapping.items():
+        node = f"{namespace}/{key}" if namespace else str(key)
+        if isinstance(section, dict) and "ros__parameters" in section:
+            params = section["ros__parameters"]
+            if not isinstance(params, dict):
+                raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
+                                  "holding a mapping")
+            beside = [str(k) for k in section if k != "ros__parameters"]
+            if beside:
+                raise ConfigError(f"params file {path}: {node}: {beside[0]!r} beside "
+                                  "'ros__parameters' (every parameter goes under it)")
+            out[node] = dict(flatten(params))
+        elif isinstance(section, dict) and section \
+                and all(isinstance(v, dict) for v in section.values()):
+            _sections(path, node, section, out)
+        else:
+            raise ConfigError(f"params file {path}: {node}: expected 'ros__parameters:' "
+                              "holding a mapping")
 
 
 def check_params_files(argv):
@@ -121,13 +122,9 @@ def describe_unknown(unknown, node):
     return f"{node}: no parameter declares {', '.join(parts)}"
 
 
-def shared_keys(files):
-    """Keys of the files' wildcard sections (``/**``) that a node of rcac_ros declares: a
-    file shared by the two nodes gives each the other's parameters too."""
-    declared = {p.name for rows in TABLE.values() for p in rows}
-    return {name for sections in files.values() for section, params in sections.items()
-            if section.strip("/").split("/")[-1] == "**"
-            for name in params if name in declared}
+def node_token(section):
+    """The last name of a section (``/arm/rcac_controller`` -> ``rcac_controller``)."""
+    return section.strip("/").split("/")[-1]
 
 
 def section_applies(section, fq_name):
@@ -139,16 +136,29 @@ def section_applies(section, fq_name):
     return re.fullmatch(pattern, fq_name) is not None
 
 
+def shared_keys(files, fq_name):
+    """Keys that a wildcard section applying to the node ``fq_name`` (``/**``, ``/*``) gives
+    it and a node of rcac_ros declares: a file shared by the two nodes gives each the other's
+    parameters too (the controller's ``gains.<joint>.<gain>`` among them)."""
+    declared = {p.name for rows in TABLE.values() for p in rows}
+    return {name for sections in files.values() for section, params in sections.items()
+            if "*" in node_token(section) and section_applies(section, fq_name)
+            for name in params if name in declared or name.startswith(GAINS_PREFIX)}
+
+
 def other_namespace(files, name, fq_name):
-    """Sections that name node ``name`` in a namespace other than its own (``fq_name``): rcl
-    gives it none of their parameters. ``[(path, section)]``."""
-    return [(path, section) for path, sections in files.items() for section in sections
-            if section.strip("/").split("/")[-1] == name
-            and not section_applies(section, fq_name)]
+    """Sections that name node ``name`` only in namespaces other than its own (``fq_name``):
+    rcl gives it none of their parameters. ``[(path, section)]``; none where a section of the
+    files applies to it (a file for several robots)."""
+    named = [(path, section) for path, sections in files.items() for section in sections
+             if node_token(section) == name]
+    if any(section_applies(section, fq_name) for _, section in named):
+        return []
+    return named
 
 
 def foreign_sections(files, nodes):
-    """Sections of the parameter files that match none of ``nodes`` (nor ``/**``).
+    """Sections of the parameter files that match none of ``nodes`` (nor a wildcard).
 
     Returns
     -------
@@ -158,8 +168,8 @@ def foreign_sections(files, nodes):
     out = []
     for path, sections in files.items():
         for section in sections:
-            name = section.strip("/").split("/")[-1]
-            if section.strip("/") == "**" or name in nodes or name == "**":
+            name = node_token(section)
+            if "*" in name or name in nodes:
                 continue
             out.append((path, section, nearest(name, nodes)))
     return out

@@ -1,5 +1,6 @@
-"""A node's ROS arguments at start-up: its parameters files checked, then rclpy initialised
-with them; a bad argument or file is one line on stderr (doc/failsafe.md, "parameters")."""
+"""A node's ROS arguments at start-up: its parameters files and ROS arguments checked, then
+rclpy initialised with them; a bad argument or file is one line on stderr (doc/failsafe.md,
+"parameters")."""
 
 import re
 import sys
@@ -7,34 +8,29 @@ import sys
 import rclpy
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
-from rcac_ros.errors import RcacError
+from rcac_ros.errors import RcacError, first_line
 from rcac_ros.nodes.runtime import paramcheck
-
-
-def first_line(err):
-    """The first line of an exception's text, or its type's name."""
-    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
 def rcl_message(err):
     """rcl's refusal of an argument, without its C source locations and empty inner error."""
-    text = first_line(err).removeprefix("failed to initialize rcl: ")
+    text = first_line(err)
+    for prefix in ("Failed to parse ROS arguments: ", "failed to initialize rcl: "):
+        text = text.removeprefix(prefix)
     text = re.sub(r",? at /\S+:\d+", "", text.replace(". Error: error not set", ""))
     return text.replace("Couldn't parse", "cannot parse")
 
 
 def init(args, prog):
-    """Check the ``--params-file`` files of ``args``, then ``rclpy.init(args)`` with the
-    signals left to Python. True; or False after one line ``prog: error: ...`` on stderr."""
+    """Check the ``--params-file`` files and the ROS arguments of ``args`` (rcl parses them
+    without logging), then ``rclpy.init(args)`` with the signals left to Python. True; or False
+    after one line ``prog: error: ...`` on stderr."""
     try:
         paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
-        # rcl logs an argument it cannot parse before it raises: the error says it once
-        rclpy.logging.set_logger_level("rcl", rclpy.logging.LoggingSeverity.FATAL)
-        try:
-            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-        finally:
-            rclpy.logging.set_logger_level("rcl", rclpy.logging.LoggingSeverity.UNSET)
+        remove_ros_args(args)                   # rcl's refusal before init, which logs it too
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RcacError as err:
         text = first_line(err)
     except _rclpy.RCLError as err:
