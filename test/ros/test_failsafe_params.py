@@ -92,7 +92,8 @@ def test_a_file_shared_by_both_nodes_is_not_unknown_to_either(tmp_path):
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    K_D: [1.0\n"),  # unclosed
     ("controller_node", "rcac_controller:\n  ros__parameters:\n\tK_D: 1.0\n"),     # a tab
     ("simulator_node", "rcac_simulator: [1, 2]\n"),       # valid YAML, not a params file
-    # rcl would refuse these two with its own message, source location and log line
+    # an array of mixed types: rcl's refusal, once and without its source location; a key
+    # beside ros__parameters: named by the file check
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    gravity: [0.0, 0, -9.8]\n"),
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    rate: 500.0\n  rate: 1\n"),
     ("controller_node", b"\xff\xfe not UTF-8 text"),

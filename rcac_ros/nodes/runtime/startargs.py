@@ -29,7 +29,7 @@ def init(args, prog):
     after one line ``prog: error: ...`` on stderr."""
     try:
         paramcheck.check_params_files(args)     # a malformed file: one line, not an RCLError
-        remove_ros_args(args)                   # rcl's refusal before init, which logs it too
+        remove_ros_args(args)                   # rcl refuses here without a log line
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RcacError as err:
         text = first_line(err)
