@@ -55,6 +55,9 @@ CASES = [
      "controller: error: max_state_bytes: value out of range [0, 2147483647]"),
     ("controller", ["-p", "description_topic:=a!"],
      "controller: error: description_topic: 'a!' is not a valid topic name"),
+    ("simulator", ["-p", "description_topic:='{{ns}}/robot_description'"],  # '//robot_...'
+     "simulator: error: description_topic: '{{ns}}/robot_description' is not a valid topic "
+     "name in /"),
     ("controller", ["-p", "realtime.cpus:=[-1]"],
      "controller: error: realtime.cpus: CPU numbers must be >= 0"),
     ("controller", ["-p", "gains.joint7:=5.0"],

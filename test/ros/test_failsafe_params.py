@@ -108,10 +108,10 @@ def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     assert len(lines) == 1 and str(path) in lines[0], out
 
 
-def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
+def test_a_file_that_gives_the_node_nothing_is_named(tmp_path):
     """``/ns/rcac_controller`` does not address the node ``/rcac_controller`` (rcl matches the
-    fully qualified name): its parameters would be dropped in silence. An empty file, which
-    sets nothing, is named too."""
+    fully qualified name): a file none of whose sections applies, or an empty one, would be
+    dropped in silence. A file for several arms or a whole stack is not named."""
     from rcac_ros.nodes.runtime.paramcheck import section_applies
     for section, here, in_ns in [("/ns/rcac_controller", False, True),
                                  ("rcac_controller", True, False), ("/**", True, True),
@@ -122,7 +122,8 @@ def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
     path = tmp_path / "ns.yaml"
     path.write_text("/ns/rcac_controller:\n  ros__parameters:\n    rate: 250.0\n")
     code, out = run_node("controller_node", params_file=path, until="active: publishing")
-    assert "section '/ns/rcac_controller' is not this node's (/rcac_controller)" in out, out
+    assert (f"{path}: no section applies to this node (/rcac_controller); "
+            "/ns/rcac_controller: another namespace") in out, out
     assert "h=2 ms" in out, out                     # the section's rate did not apply
     path.write_text("# rcac_controller:\n#   ros__parameters: {rate: 250.0}\n")
     code, out = run_node("controller_node", params_file=path, until="active: publishing")
@@ -132,7 +133,14 @@ def test_a_section_of_another_namespace_and_an_empty_file_are_named(tmp_path):
                     "arm2:\n  rcac_controller:\n    ros__parameters:\n      rate: 125.0\n")
     code, out = run_node("controller_node", params_file=path, until="active: publishing",
                          ros_args=("-r", "__ns:=/arm1"))
-    assert "h=4 ms" in out and "not this node's" not in out, out
+    assert "h=4 ms" in out and "no section applies" not in out, out
+    # a renamed node, in a file for the whole stack: its own section, another node's
+    path.write_text("ctrl2:\n  ros__parameters:\n    rate: 250.0\n"
+                    "robot_state_publisher:\n  ros__parameters:\n    publish_frequency: 20.0\n")
+    code, out = run_node("controller_node", params_file=path, until="active: publishing",
+                         ros_args=("-r", "__node:=ctrl2"))
+    assert "h=4 ms" in out and "addresses no node" not in out, out
+    assert "no section applies" not in out, out
 
 
 def test_an_inert_option_is_named_and_rcl_log_levels_still_apply():

@@ -8,8 +8,11 @@ text arrives (then configures from it); the simulator waits before it starts.
 
 import time
 
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
+
+from rcac_ros.errors import ConfigError, first_line
 
 #: robot_state_publisher's profile for /robot_description
 DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -24,7 +27,12 @@ def subscribe_description(node, topic, callback):
             callback(msg.data)
         else:
             node.get_logger().warning(f"{topic}: empty robot description ignored")
-    return node.create_subscription(String, topic, on_message, DESCRIPTION_QOS)
+    try:
+        return node.create_subscription(String, topic, on_message, DESCRIPTION_QOS)
+    except InvalidTopicNameException as err:    # e.g. '{ns}/x' in the root namespace: '//x'
+        why = first_line(err).removeprefix("Invalid topic name: ").rstrip(":")
+        raise ConfigError(f"description_topic: {topic!r} is not a valid topic name in "
+                          f"{node.get_namespace()} ({why})") from None
 
 
 def wait_for_description(node, topic, executor_factory, log_every=5.0):

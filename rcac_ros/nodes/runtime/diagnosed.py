@@ -51,16 +51,18 @@ class RcacNodeMixin:
             if strict:
                 raise ConfigError(f"strict_parameters: {text}")
             self.get_logger().warning(text)
-        nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE]
+        nodes = [topics.CONTROLLER_NODE, topics.SIMULATOR_NODE, self.get_name()]
         for path, section, hint in paramcheck.foreign_sections(files, nodes):
-            self.get_logger().warning(
-                f"{path}: section '{section}' addresses no node of rcac_ros"
-                + (f" (did you mean '{hint}'?)" if hint else ""))
+            self.get_logger().warning(f"{path}: section '{section}' addresses no node of "
+                                      f"rcac_ros (did you mean '{hint}'?)")
         for path in (path for path, sections in files.items() if not sections):
             self.get_logger().warning(f"{path}: an empty parameters file")
-        for path, section in paramcheck.other_namespace(files, self.get_name(), fq_name):
-            self.get_logger().warning(f"{path}: section '{section}' is not this node's "
-                                      f"({fq_name}): none of its parameters apply")
+        missed = paramcheck.unapplied(files, self.get_name(), fq_name)
+        if missed is not None:
+            paths, elsewhere = missed
+            self.get_logger().warning(
+                f"{', '.join(paths)}: no section applies to this node ({fq_name})"
+                + (f"; {', '.join(elsewhere)}: another namespace" if elsewhere else ""))
 
     def _check_parameters(self, changed):
         """On-set callback: validate against the table (a subclass applies them post-set)."""

@@ -146,30 +146,31 @@ def shared_keys(files, fq_name):
             for name in params if name in declared or name.startswith(GAINS_PREFIX)}
 
 
-def other_namespace(files, name, fq_name):
-    """Sections that name node ``name`` only in namespaces other than its own (``fq_name``):
-    rcl gives it none of their parameters. ``[(path, section)]``; none where a section of the
-    files applies to it (a file for several robots)."""
-    named = [(path, section) for path, sections in files.items() for section in sections
-             if node_token(section) == name]
-    if any(section_applies(section, fq_name) for _, section in named):
-        return []
-    return named
+def unapplied(files, name, fq_name):
+    """None if a section of the files applies to the node ``fq_name`` (or none has a section);
+    else ``(paths, sections)``: the files, none of whose sections rcl gives the node, and
+    those that name it (``name``) in another namespace."""
+    paths = [path for path, sections in files.items() if sections]
+    sections = [s for path in paths for s in files[path]]
+    if not sections or any(section_applies(s, fq_name) for s in sections):
+        return None
+    return paths, [s for s in sections if node_token(s) == name]
 
 
 def foreign_sections(files, nodes):
-    """Sections of the parameter files that match none of ``nodes`` (nor a wildcard).
+    """Sections of the parameter files that name none of ``nodes`` but one close to it (a
+    typo: ``rcac_simulater``); a section of another node of the stack is not one.
 
     Returns
     -------
-    list of (str, str, str or None)
+    list of (str, str, str)
         ``(path, section, nearest node name)``.
     """
     out = []
     for path, sections in files.items():
         for section in sections:
             name = node_token(section)
-            if "*" in name or name in nodes:
-                continue
-            out.append((path, section, nearest(name, nodes)))
+            hint = None if "*" in name or name in nodes else nearest(name, nodes)
+            if hint is not None:
+                out.append((path, section, hint))
     return out
