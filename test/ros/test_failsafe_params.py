@@ -145,8 +145,10 @@ def test_a_file_that_gives_the_node_nothing_is_named(tmp_path):
 
 def test_an_inert_option_is_named_and_rcl_log_levels_still_apply():
     """An option that acts only with another, given alone, is named once; a log level the
-    user gives rcl (``--log-level rcl:=debug``) still reaches it."""
-    code, out = run_node("controller_node", "forgetting:=0.5", until="active: publishing",
-                         ros_args=("--log-level", "rcl:=debug"))
+    user gives rcl (``--log-level rcl:=debug``) still reaches it; ``[]`` for a parameter
+    without a default leaves it unset."""
+    code, out = run_node("controller_node", "forgetting:=0.5", "realtime.cpus:=[]",
+                         until="active: publishing", ros_args=("--log-level", "rcl:=debug"))
+    assert "active: publishing" in out and code is None, out    # [] without a default: unset
     assert "forgetting: 0.5 changes nothing without adaptation 'least_squares*'" in out, out
     assert "[DEBUG]" in out and "[rcl]" in out, out[:2000]

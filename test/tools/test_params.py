@@ -82,3 +82,19 @@ def test_doc_table_is_the_generated_one():
     with open(os.path.join(ROOT, "doc", "parameters.md"), encoding="utf-8") as f:
         assert f.read() == params_doc.document(), \
             "doc/parameters.md is stale: python -m rcac_ros.params_doc > doc/parameters.md"
+
+
+@pytest.mark.parametrize("name, valid", [
+    ("~", True), ("~/robot_description", True), ("/robot_description", True),
+    ("robot_description", True), ("_private/x", True), ("{node}/robot_description", True),
+    ("~/{node}", True), ("/{namespace}/x_1", True), ("a!", False), ("1abc", False),
+    ("/a//b", False), ("/a/", False), ("bad topic", False), ("{other}/x", False),
+])
+def test_a_topic_name_is_checked_as_ros_names_it(name, valid):
+    """``description_topic``: ROS 2's topic names, private ones and substitutions included."""
+    row = next(p for p in params.CONTROLLER if p.name == "description_topic")
+    if valid:
+        assert params.check(row, name) == name
+    else:
+        with pytest.raises(ConfigError, match="is not a valid topic name"):
+            params.check(row, name)
