@@ -30,7 +30,7 @@ import yaml
 
 from rcac_ros.core.model import PARAMETER_NAMES
 from rcac_ros.core.pseudo_inertia import default_start
-from rcac_ros.errors import ConfigError, first_line
+from rcac_ros.errors import ConfigError, read_yaml
 
 #: the ``format`` key of an estimates file
 FORMAT = "rcac_ros/estimates 1"
@@ -171,11 +171,7 @@ def load(path, joint_names, field="initial_estimates"):
     """
     if not os.path.isfile(path):
         raise ConfigError(f"{field}: no such file {path!r} (or 'zero', 'model')")
-    try:
-        with open(path, "rb") as f:             # bytes: YAML reads a byte-order mark
-            doc = yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as err:
-        raise ConfigError(f"{field}: {path}: cannot read ({first_line(err)})") from None
+    doc = read_yaml(path, f"{field}: {path}")
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ConfigError(f"{field}: {path}: not an estimates file (format: {FORMAT!r})")
     entries = doc.get("links")
@@ -208,8 +204,7 @@ def load_joint_terms(path, joint_names, field="initial_estimates"):
         numbers per joint.
     """
     load(path, joint_names, field)
-    with open(path, encoding="utf-8") as f:
-        doc = yaml.safe_load(f)
+    doc = read_yaml(path, f"{field}: {path}")
     by_joint = {str(e.get("joint")): e.get("joint_terms") for e in doc["links"]}
     if all(v is None for v in by_joint.values()):
         return None
