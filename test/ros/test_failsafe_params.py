@@ -38,11 +38,16 @@ def run_node(module, *overrides, params_file=None, until=None, timeout=120.0, ro
             seen.set()
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
-        seen.wait(timeout)
-        code = proc.wait(timeout=30) if ended.is_set() else proc.poll()
-        if proc.poll() is None:
-            proc.terminate()
-            proc.wait(timeout=30)
+        try:
+            seen.wait(timeout)
+            code = proc.wait(timeout=30) if ended.is_set() else proc.poll()
+            if proc.poll() is None:
+                proc.terminate()
+                proc.wait(timeout=30)
+        finally:
+            if proc.poll() is None:     # never outlive the domain: its next user would see it
+                proc.kill()
+                proc.wait()
         reader.join(timeout=30)
         return code, "".join(lines)
 

@@ -3,6 +3,7 @@
 import os
 import signal
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -127,6 +128,71 @@ def test_sigint_in_timer_mode_joins_the_input_threads_and_exits_zero():
                 ex.spin_once(timeout_sec=0.002)
         finally:
             code, out = stop(ctrl)
+    assert code == 0, out
+    assert "terminate called" not in out and "Traceback" not in out, out
+
+
+#: the controller's main, with a SIGTERM sent from inside a finalizer once it is active:
+#: Python runs the handler there and drops the KeyboardInterrupt it raises
+DROPPED_INTERRUPT = """
+import os, signal, sys
+from rcac_ros.nodes.controller import node as cn
+from rcac_ros.nodes.runtime.base import run
+class Finalized:
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(1000))
+activate = cn.ControllerNode._activate
+def activate_then_signal(self):
+    activate(self)
+    self.create_timer(0.2, Finalized)
+cn.ControllerNode._activate = activate_then_signal
+sys.exit(run(cn.ControllerNode, "controller", ["controller"]))
+"""
+
+#: the controller's main, interrupted (as by SIGTERM) at the end of configure, while the node
+#: is being built: its input threads are running, waiting in rcl
+INTERRUPT_IN_CONFIGURE = """
+import sys
+from rcac_ros.nodes.controller import node as cn
+from rcac_ros.nodes.runtime.base import run
+configure = cn.ControllerNode._configure
+def configure_then_interrupt(self, values):
+    configure(self, values)
+    raise KeyboardInterrupt
+cn.ControllerNode._configure = configure_then_interrupt
+sys.exit(run(cn.ControllerNode, "controller", ["controller"]))
+"""
+
+
+def run_script(source, timeout=60.0):
+    """Run ``source`` in a Python process (isolated domain): ``(exit code or None if it had
+    to be killed after ``timeout`` s, output)``."""
+    with ros_domain():
+        proc = subprocess.Popen([sys.executable, "-c", source], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return None, proc.communicate()[0]
+    return proc.returncode, out
+
+
+def test_an_interrupt_that_python_drops_still_stops_the_node():
+    """A signal handled inside a finalizer or a collector callback loses its exception; the
+    node must stop all the same (once, with its zero effort), not run on deaf to signals."""
+    code, out = run_script(DROPPED_INTERRUPT)
+    assert "Exception ignored" in out and "KeyboardInterrupt" in out, out   # it was dropped
+    assert code == 0, out
+    assert out.count("inactive: one zero effort sent") == 1, out
+
+
+def test_an_interrupt_while_configuring_leaves_no_thread_behind():
+    """SIGINT/SIGTERM during autostart's configure: the half-built node's input threads are
+    joined (a thread left waiting in rcl at exit aborts the process, exit 134)."""
+    code, out = run_script(INTERRUPT_IN_CONFIGURE)
+    assert "configured:" in out, out
     assert code == 0, out
     assert "terminate called" not in out and "Traceback" not in out, out
 

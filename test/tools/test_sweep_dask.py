@@ -45,11 +45,7 @@ class DaskCluster:
         dask = [sys.executable, "-m", "dask"]
         self.scheduler = self.spawn(dask + ["scheduler", "--host", "127.0.0.1", "--port", "0",
                                             "--no-dashboard", "--scheduler-file", self.file])
-        deadline = time.monotonic() + 60
-        while not os.path.exists(self.file) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        with open(self.file, encoding="utf-8") as f:
-            self.address = json.load(f)["address"]
+        self.address = self.read_address(time.monotonic() + 60)
         self.workers = [self.spawn(dask + ["worker", self.address, "--nthreads", "1",
                                            "--nworkers", "1", "--no-dashboard",
                                            "--name", f"w{k}", "--host", "127.0.0.1"])
@@ -57,6 +53,17 @@ class DaskCluster:
         from distributed import Client
         with Client(self.address, timeout="30s") as client:
             client.wait_for_workers(workers, timeout=90)
+
+    def read_address(self, deadline):
+        """The scheduler's address from its file, once the scheduler has written all of it."""
+        while True:
+            try:
+                with open(self.file, encoding="utf-8") as f:
+                    return json.load(f)["address"]
+            except (OSError, ValueError, KeyError):
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
 
     @staticmethod
     def spawn(cmd):

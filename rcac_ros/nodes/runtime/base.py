@@ -7,7 +7,6 @@ SIGINT/SIGTERM). Throttled warnings and compute-time statistics:
 :mod:`rcac_ros.nodes.runtime.stats`.
 """
 
-import signal
 import sys
 import time
 import traceback
@@ -27,7 +26,7 @@ from rcac_ros import params, topics
 from rcac_ros.core.load import load_model
 from rcac_ros.core.urdf import model_from_urdf
 from rcac_ros.errors import ConfigError, RcacError, first_line
-from rcac_ros.nodes.runtime import gcwatch, startargs
+from rcac_ros.nodes.runtime import gcwatch, interrupt, startargs
 from rcac_ros.nodes.runtime.description import wait_for_description
 from rcac_ros.nodes.runtime.diagnosed import RcacNodeMixin
 from rcac_ros.nodes.runtime.pacing import spin_node_once
@@ -176,7 +175,7 @@ class RcacNode(RcacNodeMixin, Node):
             self._out, self._order = joint_order(self.model, self.joints)
             self._read_parameters(values)
             self._check_unknown_parameters(values["strict_parameters"])
-        except Exception:
+        except BaseException:       # a bad parameter, or an interrupt (SIGTERM) at start-up
             self.destroy_node()     # leave no half-built node (and its rosout logger) behind
             raise
         self._throttle = Throttle(self.get_logger())
@@ -188,13 +187,6 @@ class RcacNode(RcacNodeMixin, Node):
 
 
 # ------------------------------------------------------------------ main
-def _raise_interrupt(signum, frame):
-    # one interrupt starts the clean shutdown; later ones must not cut it short
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    raise KeyboardInterrupt
-
-
 #: s a node stays after its shutdown transition, serving its executor, so that DDS delivers
 #: what it wrote last (the transition's answer)
 SHUTDOWN_LINGER = 0.5
@@ -224,17 +216,15 @@ def run(node_factory, prog, args=None):
     node caught (logged with its traceback; exit code 1). A :class:`RcacError` at start-up (a
     bad parameter) prints one line naming the parameter and returns 2. Returns the exit code.
     """
-    # rclpy's own SIGINT handler would shut the context down before we could publish the
-    # final zero effort: handle both signals in Python instead.
     args = sys.argv if args is None else args
     if not startargs.init(args, prog):
         return 2
-    signal.signal(signal.SIGINT, _raise_interrupt)
-    signal.signal(signal.SIGTERM, _raise_interrupt)
+    interrupt.install()
     node = rt = executor = None
     code, spinning = 0, False
     try:
         node = node_factory()
+        interrupt.check()
         gcwatch.WATCH.install()             # the collector's pauses, in the diagnostics
         rt = Realtime.for_node(node)
         executor = SingleThreadedExecutor()
@@ -242,6 +232,7 @@ def run(node_factory, prog, args=None):
         spinning = True
         while rclpy.ok() and not node.finished:
             spin_node_once(executor, node)
+            interrupt.check()
         if node.finished:
             # the shutdown transition's answer (and the last zero effort) are written but may
             # not be delivered yet: keep the participant a moment before destroying it (a
@@ -264,8 +255,7 @@ def run(node_factory, prog, args=None):
     except Exception:                   # noqa: BLE001 -- a fault no part of the node caught
         code = _fatal(node, prog)
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        interrupt.ignore()
         gcwatch.WATCH.close()
         if rt is not None:
             rt.release()

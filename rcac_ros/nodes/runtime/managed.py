@@ -76,7 +76,11 @@ class ManagedNode(RcacNodeMixin, LifecycleNode):
                                    f"{self.description_topic}")
         elif self.autostart:
             self._at_start = True
-            started = self._start()
+            try:
+                started = self._start()
+            except BaseException:           # an interrupt (SIGTERM) while configuring: the
+                self.destroy_node()         # input threads it started are joined, not left
+                raise                       # to die inside rcl at exit (an abort)
             self._at_start = False
             if not started:
                 self.destroy_node()         # leave no half-built node behind
