@@ -39,7 +39,7 @@ def first_line(err):
     return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
-def read_yaml(path, label=None):
+def read_yaml(path, label=None, load=None):
     """Parse the YAML file at ``path``.
 
     Parameters
@@ -48,6 +48,8 @@ def read_yaml(path, label=None):
         The file.
     label : str, optional
         How the message names the file (default: the path).
+    load : callable, optional
+        ``load(stream)`` parses the open file (default :func:`yaml.safe_load`).
 
     Returns
     -------
@@ -64,7 +66,7 @@ def read_yaml(path, label=None):
     label = path if label is None else label
     try:
         with open(path, "rb") as f:             # bytes: YAML reads a byte-order mark
-            return yaml.safe_load(f)
+            return (load or yaml.safe_load)(f)
     except OSError as err:
         raise ConfigError(f"{label}: cannot read ({err.strerror})") from None
     except yaml.YAMLError as err:

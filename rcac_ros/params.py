@@ -178,8 +178,8 @@ def _diagnostics_period():
 
 def _strict_parameters():
     return Param("strict_parameters", "bool", False,
-                 "refuse to start when a given parameter is declared by no row of the node "
-                 "(default: a warning naming it, with the nearest name)")
+                 "refuse to start on a parameter no row declares, or one given twice in a "
+                 "file (default: a warning naming it, with the nearest name)")
 
 
 #: The controller node's parameters (``config/controller.yaml``).

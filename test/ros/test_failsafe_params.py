@@ -157,3 +157,53 @@ def test_an_inert_option_is_named_and_rcl_log_levels_still_apply():
     assert "active: publishing" in out and code is None, out    # [] without a default: unset
     assert "forgetting: 0.5 changes nothing without adaptation 'least_squares*'" in out, out
     assert "[DEBUG]" in out and "[rcl]" in out, out[:2000]
+
+
+#: files with a key given twice, and the node section rcl gives ``/rcac_controller``
+REPEATED = [
+    "rcac_controller:\n  ros__parameters:\n    K_D: 100.0\n    rate: 400.0\n    K_D: 200.0\n",
+    # the section twice: rcl merges the two (PyYAML alone would keep the second only)
+    "rcac_controller:\n  ros__parameters:\n    K_D: 100.0\n    rate: 400.0\n"
+    "rcac_controller:\n  ros__parameters:\n    K_D: 200.0\n",
+    # a nested parameter twice
+    "rcac_controller:\n  ros__parameters:\n    paper: {period: 20.0, amplitude: 0.5}\n"
+    "    paper: {period: 10.0}\n",
+]
+
+
+@pytest.mark.parametrize("text", REPEATED)
+def test_a_key_given_twice_is_read_as_rcl_reads_it(tmp_path, text):
+    """The file check's view of a file is the node's: compared with what rcl itself gives a
+    node (its parameter overrides), and each value given twice is reported once."""
+    from rclpy.node import Node
+    from test_nodes_support import ros_context
+    from rcac_ros.nodes.runtime.paramcheck import load_params_file, repeated_in
+    path = tmp_path / "twice.yaml"
+    path.write_text(text)
+    repeated = []
+    ours = load_params_file(str(path), repeated)["rcac_controller"]
+    with ros_context() as (ctx, _):
+        node = Node("rcac_controller", context=ctx,
+                    cli_args=["--ros-args", "--params-file", str(path)],
+                    automatically_declare_parameters_from_overrides=True)
+        try:
+            rcl = {k: p.value for k, p in node.get_parameters_by_prefix("").items()
+                   if k not in ("use_sim_time", "start_type_description_service")}
+        finally:
+            node.destroy_node()
+    assert dict(ours) == rcl
+    lines = repeated_in(repeated, "/rcac_controller")
+    assert len(lines) == 1 and "is given twice" in lines[0], lines
+    assert repeated_in(repeated, "/other_node") == []
+
+
+def test_a_key_given_twice_is_named_and_refused_when_strict(tmp_path):
+    path = tmp_path / "twice.yaml"
+    path.write_text(REPEATED[1])
+    code, out = run_node("controller_node", params_file=path, until="active: publishing")
+    assert code is None, out
+    assert "'K_D' is given twice (100.0, then 200.0); the last is used" in out, out
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path)
+    assert code == 2, out
+    errors = [ln for ln in out.splitlines() if "error" in ln]
+    assert len(errors) == 1 and "'K_D' is given twice" in errors[0], out

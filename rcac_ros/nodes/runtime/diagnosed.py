@@ -40,8 +40,13 @@ class RcacNodeMixin:
 
     def _check_unknown_parameters(self, strict):
         """Warn about (``strict``: refuse) given keys that no row declares; name the nearest."""
-        files = paramcheck.check_params_files(sys.argv)
+        repeated = []
+        files = paramcheck.check_params_files(sys.argv, repeated)
         fq_name = self.get_fully_qualified_name()
+        for text in paramcheck.repeated_in(repeated, fq_name):
+            if strict:
+                raise ConfigError(f"strict_parameters: {text}")
+            self.get_logger().warning(f"{text}; the last is used")
         shared = paramcheck.shared_keys(files, fq_name)     # the other node's, from /**
         given = [k for k in parameter_overrides(self)
                  if not k.startswith(self.READ_PREFIXES) and k not in shared]

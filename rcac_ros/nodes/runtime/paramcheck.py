@@ -2,7 +2,8 @@
 
 * :func:`check_params_files` reads every ``--params-file`` of the command line before
   ``rclpy.init`` does, so that a malformed file gives one line naming it (and the CLI
-  exit code 2) instead of an RCLError traceback.
+  exit code 2) instead of an RCLError traceback; a key given twice is read as rcl reads it
+  and named (:func:`repeated_in`).
 * :func:`check_file_params` checks one node's section of a parameters file against the
   table (the tests run it on the shipped ``config/*.yaml``).
 * :func:`unknown_parameters` names each given key that no parameter declares, with the
@@ -10,6 +11,7 @@
   that address no node of the package.
 """
 
+import collections.abc
 import difflib
 import re
 
@@ -25,8 +27,12 @@ def params_files(argv):
     return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
 
 
-def load_params_file(path):
-    """Parse one parameters file; return ``{node: {name: value}}``.
+def load_params_file(path, repeated=None):
+    """Parse one parameters file as rcl reads it; return ``{node: {name: value}}``.
+
+    A key given twice in one mapping is read as rcl reads it: two mappings merge, and of two
+    values the last is kept. Each value given twice is appended to ``repeated`` (if given)
+    as ``(path, keys, first value, last value)``.
 
     Raises
     ------
@@ -34,7 +40,9 @@ def load_params_file(path):
         One line naming the file, and the line and column of a YAML error, or the first
         entry that is not ``NODE: {ros__parameters: {...}}``.
     """
-    data = read_yaml(path, f"params file {path}")
+    found = [] if repeated is None else repeated
+    data = read_yaml(path, f"params file {path}",
+                     load=lambda stream: _load_merging(stream, path, found))
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -43,6 +51,65 @@ def load_params_file(path):
     out = {}
     _sections(path, "", data, out)
     return out
+
+
+def _load_merging(stream, path, repeated):
+    """The document of ``stream`` (PyYAML's safe types), a repeated key merged as rcl does."""
+    import yaml
+    loader = yaml.SafeLoader(stream)
+    try:
+        root = loader.get_single_node()
+        return None if root is None else _value(loader, root, (), path, repeated)
+    finally:
+        loader.dispose()
+
+
+def _value(loader, node, keys, path, repeated):
+    import yaml
+    if not isinstance(node, yaml.MappingNode):
+        return loader.construct_object(node, deep=True)
+    out = {}
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        if not isinstance(key, collections.abc.Hashable):
+            raise yaml.constructor.ConstructorError("while constructing a mapping",
+                                                    node.start_mark, "found unhashable key",
+                                                    key_node.start_mark)
+        value = _value(loader, value_node, keys + (key,), path, repeated)
+        if key in out:
+            _merge(out, key, value, keys, path, repeated)
+        else:
+            out[key] = value
+    return out
+
+
+def _merge(mapping, key, value, keys, path, repeated):
+    old = mapping[key]
+    if isinstance(old, dict) and isinstance(value, dict):
+        for k, v in value.items():
+            if k in old:
+                _merge(old, k, v, keys + (key,), path, repeated)
+            else:
+                old[k] = v
+        return
+    repeated.append((path, keys + (key,), old, value))
+    mapping[key] = value
+
+
+def repeated_in(repeated, fq_name):
+    """One line for each value given twice in a section of ``repeated`` (from
+    :func:`load_params_file`) that applies to the node ``fq_name``."""
+    lines = []
+    for path, keys, first, last in repeated:
+        if "ros__parameters" not in keys[:-1]:
+            continue
+        at = keys.index("ros__parameters")
+        section = "/".join(str(k) for k in keys[:at])
+        if section_applies(section, fq_name):
+            name = ".".join(str(k) for k in keys[at + 1:])
+            lines.append(f"{path}: {section}: {name!r} is given twice ({first!r}, then "
+                         f"{last!r})")
+    return lines
 
 
 def _sections(path, namespace, mapping, out):
@@ -69,9 +136,10 @@ def _sections(path, namespace, mapping, out):
                               "holding a mapping")
 
 
-def check_params_files(argv):
-    """Load every ``--params-file`` of ``argv``; return ``{path: {node: params}}``."""
-    return {path: load_params_file(path) for path in params_files(argv)}
+def check_params_files(argv, repeated=None):
+    """Load every ``--params-file`` of ``argv``; return ``{path: {node: params}}`` (the
+    values given twice: appended to ``repeated``, :func:`load_params_file`)."""
+    return {path: load_params_file(path, repeated) for path in params_files(argv)}
 
 
 def check_file_params(node, params):
