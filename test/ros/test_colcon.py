@@ -93,7 +93,11 @@ def test_installed_nodes_run(install):
                                  env=env, capture_output=True, text=True, timeout=600)
         finally:
             ctrl.send_signal(subprocess.signal.SIGINT)
-            out, _ = ctrl.communicate(timeout=30)
+            try:
+                out, _ = ctrl.communicate(timeout=30)
+            except subprocess.TimeoutExpired:   # never outlive the domain (the next test's)
+                ctrl.kill()
+                out, _ = ctrl.communicate()
     assert sim.returncode == 0, sim.stdout + sim.stderr
     assert "finished: 100 steps" in sim.stderr + sim.stdout
     assert "lockstep misses 0" in sim.stderr + sim.stdout
