@@ -82,8 +82,10 @@ def parse_channels(value, n):
             item = int(word)
         if isinstance(item, (bool, np.bool_)) or not isinstance(item, (int, np.integer)):
             raise GainError(f"channels: {item!r} is not a {joints}, 'power' or 'all'")
-        if item < 1 or (n is not None and item > n):
-            raise GainError(f"channels: joint {item} is out of range 1..{n or 'n'}")
+        if item < 1:
+            raise GainError(f"channels: joint {item}: joints are numbered from 1")
+        if n is not None and item > n:
+            raise GainError(f"channels: joint {item} is out of range 1..{n}")
         out.append(int(item))
     if not out:
         raise GainError("channels: empty (give at least one joint number, 'power' or 'all')")

@@ -261,7 +261,7 @@ def test_parse_channels(value, expected):
 
 
 @pytest.mark.parametrize("value,match", [
-    ("0", "channels: joint 0 is out of range 1..3"),
+    ("0", "channels: joint 0: joints are numbered from 1"),
     ([4], "channels: joint 4 is out of range 1..3"),
     ("1,speed", "channels: 'speed' is not a joint number"),
     ([], "channels: empty"),
