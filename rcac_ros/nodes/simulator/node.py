@@ -46,6 +46,8 @@ from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 from rcac_ros.nodes.simulator.payload import PayloadParameters, QOS_PAYLOAD
 
 NS = 1_000_000_000
+#: s the end of a finite run waits for its readers to acknowledge the last states
+ACK_WAIT = 5.0
 
 
 class SimulatorNode(PayloadParameters, RcacNode):
@@ -195,7 +197,9 @@ class SimulatorNode(PayloadParameters, RcacNode):
             self.loop.stop()
         self._wall_end = time.monotonic()
         wall = self._wall_end - self._wall_start
-        self._pub_state.wait_for_all_acked(Duration(seconds=1.0))
+        if not self._pub_state.wait_for_all_acked(Duration(seconds=ACK_WAIT)):
+            self.get_logger().warning(f"a reader of the joint states did not acknowledge the "
+                                      f"last ones within {ACK_WAIT:g} s: it may miss them")
         self.get_logger().info(
             f"finished: {self.k} steps, sim time {self.k * self.dt:.3f} s, wall {wall:.2f} s "
             f"({self.k / max(wall, 1e-9):.0f} steps/s), lockstep misses {self.misses}, "

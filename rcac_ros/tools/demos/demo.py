@@ -28,6 +28,9 @@ from rcac_ros.tools.bags.record import BagRecorder, format_counts
 #: the run's end: after the last state and its answer, the recorder takes what is still in
 #: flight until nothing has come for this long (s)
 QUIET = 0.1
+#: s at most for each of the two drains (the last state and its answer; the rest): a recorder
+#: behind on a loaded machine takes its backlog, one message per executor call
+DRAIN = 10.0
 
 
 def _prepare_out(out):
@@ -187,7 +190,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             states = topics.resolve(topics.JOINT_STATES)
             answers = topics.resolve(topics.DESIRED_STATE)
             last_state = int(round(duration / dt)) * int(round(dt * 1e9))
-            drain_end = time.monotonic() + 2.0
+            drain_end = time.monotonic() + DRAIN
             while time.monotonic() < drain_end and not stop \
                     and (recorder.last_state_stamp != last_state
                          or recorder.counts[answers] < recorder.counts[states]):
@@ -196,7 +199,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
             # call, so the answers' topic can be complete before the others are; until
             # nothing has come for QUIET s
             last_total, quiet_end = recorder.total, time.monotonic() + QUIET
-            while time.monotonic() < min(quiet_end, drain_end + 2.0) and not stop:
+            while time.monotonic() < min(quiet_end, drain_end + DRAIN) and not stop:
                 executor.spin_once(timeout_sec=0.01)
                 if recorder.total != last_total:
                     last_total, quiet_end = recorder.total, time.monotonic() + QUIET
