@@ -143,7 +143,7 @@ def test_managed_configure_fails_with_the_reason():
             Parameter("autostart", value=False), Parameter("channels", value=["0"])])
         try:
             assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
-            assert node.config_error.startswith("channels: joint 0 is out of range"), \
+            assert node.config_error.startswith("channels: joint 0: joints are numbered from 1"), \
                 node.config_error
         finally:
             node.destroy_node()

@@ -302,9 +302,15 @@ def test_record_two_node_lockstep_run(tmp_path, procs):
     assert clock[-1] == stamps[-1] and len(set(clock)) == len(clock)
     desired = [_stamp_ns(m.header.stamp)
                for _, m in data[f"/{topics.CONTROLLER_NODE}/desired_state"]]
-    assert desired == answered                    # matched before the first state
+    # each of the controller's writers matches the recorder's reader on its own ("subscribed
+    # to" is the reader's side): on a loaded machine one can match some states after the
+    # others, and its stream is then the tail of the answers, joined within the same window
+    assert desired == answered[len(answered) - len(desired):]
+    assert desired[0] <= 0.6 * duration * 1e9
     for name in ("tracking_error", "parameter_estimates", "prediction_error"):
-        assert len(data[f"/{topics.CONTROLLER_NODE}/{name}"]) == len(answered)
+        count = len(data[f"/{topics.CONTROLLER_NODE}/{name}"])
+        assert len([a for a in answered if a >= 0.6 * duration * 1e9]) <= count \
+            <= len(answered), name
     est = data[f"/{topics.CONTROLLER_NODE}/parameter_estimates"][-1][1]
     assert [(d.label, d.size) for d in est.layout.dim] == [("link", N), ("parameter", 13)]
     # receive stamps increase per topic (the recorder writes in arrival order)
