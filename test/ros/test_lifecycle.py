@@ -2,6 +2,7 @@
 
 import contextlib
 import os
+import time
 
 import numpy as np
 
@@ -31,13 +32,21 @@ class Lifecycle:
         assert spin_until(executor, lambda: self.get.service_is_ready()
                           and self.change.service_is_ready(), timeout=60.0)
 
-    def call(self, client, request):
-        future = client.call_async(request)
-        assert spin_until(self.ex, future.done, timeout=60.0)
-        return future.result()
+    def call(self, client, request, resend=None):
+        """Call and wait for the answer (60 s); every ``resend`` s, send the request again
+        (an idempotent one): the server's answer goes out on a writer that matches the
+        client's reader on its own, and can be lost while the first call is being matched."""
+        end = time.monotonic() + 60.0
+        while True:
+            future = client.call_async(request)
+            left = end - time.monotonic()
+            wait = left if resend is None else min(resend, left)
+            if spin_until(self.ex, future.done, timeout=max(wait, 0.0)):
+                return future.result()
+            assert time.monotonic() < end, "no answer within 60 s"
 
     def state(self):
-        return self.call(self.get, GetState.Request()).current_state.id
+        return self.call(self.get, GetState.Request(), resend=5.0).current_state.id
 
     def transition(self, tid):
         return self.call(self.change, ChangeState.Request(

@@ -211,13 +211,16 @@ def capture_hook(at, release, payload, log):
     the recorder's executor may run behind the simulator (it takes every message of every
     topic), so the sim time it has seen would send them late. A request waits until the
     simulator's parameter service is matched (DDS matches each side on its own, and a request
-    sent before would be lost)."""
+    sent before would be lost). So that the run does not start before (discovery can take
+    seconds on a loaded machine), the node subscribes to the joint states once the service is
+    matched, and ``hook.subscribers`` (1) tells the demo to make the simulator wait for it."""
     import threading
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
     from rosgraph_msgs.msg import Clock as ClockMsg
+    from sensor_msgs.msg import JointState
     from rcac_ros import topics
     from rcac_ros.core.payload import inertia_values
     capture = [Parameter("payload.com", value=[float(v) for v in payload.com]),
@@ -253,11 +256,16 @@ def capture_hook(at, release, payload, log):
             futures.append(client.set_parameters(request))
 
         node.create_subscription(ClockMsg, topics.CLOCK, on_clock, topics.qos(depth=1))
+        gate = []
 
         def spin():
             try:
                 while not done.is_set():
                     own.spin_once(timeout_sec=0.05)
+                    if not gate and client.services_are_ready():    # the run may start
+                        gate.append(node.create_subscription(
+                            JointState, topics.JOINT_STATES, lambda _: None,
+                            topics.qos(depth=1, reliable=False), raw=True))
                     if not plan and all(f.done() for f in futures):
                         done.set()
             except Exception as exc:  # noqa: BLE001 - reported; the run's checks go on
@@ -276,6 +284,7 @@ def capture_hook(at, release, payload, log):
         return close
 
     hook.futures = futures
+    hook.subscribers = 1
     return hook
 
 

@@ -88,7 +88,9 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     lockstep parameters of :func:`demo_overrides` (e.g. the plant's model and engine);
     ``hook``: ``hook(context, executor)`` once the recorder runs (what ``rcac capture-demo``
     changes at run time), returning None or a callable that closes what it made, called when
-    the run ends, before the context shuts down; ``prog`` prefixes the log lines.
+    the run ends, before the context shuts down; a hook with ``subscribers`` (int) subscribes
+    that many times to the joint states when it is ready, and the simulator waits for them;
+    ``prog`` prefixes the log lines.
 
     Raises
     ------
@@ -108,6 +110,7 @@ def run_demo(duration=20.0, out="rcac_demo", storage="mcap", dt=0.002, progress=
     ctrl_over, sim_over = demo_overrides(duration, dt)
     ctrl_over.update(controller_overrides or {})
     sim_over.update(simulator_overrides or {})
+    sim_over["min_subscribers"] += getattr(hook, "subscribers", 0)
     close_hook = None
     stop = StopFlag()
     children = []
