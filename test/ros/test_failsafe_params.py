@@ -102,6 +102,9 @@ def test_a_file_shared_by_both_nodes_is_not_unknown_to_either(tmp_path):
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    gravity: [0.0, 0, -9.8]\n"),
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    rate: 500.0\n  rate: 1\n"),
     ("controller_node", b"\xff\xfe not UTF-8 text"),
+    # a merge key, which rcl does not read
+    ("controller_node", "base: &b\n  ros__parameters: {rate: 250.0}\nrcac_controller:\n"
+                        "  <<: *b\n"),
 ])
 def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     path = tmp_path / "bad.yaml"
@@ -168,6 +171,9 @@ REPEATED = [
     # a nested parameter twice
     "rcac_controller:\n  ros__parameters:\n    paper: {period: 20.0, amplitude: 0.5}\n"
     "    paper: {period: 10.0}\n",
+    # names are the keys' text: 'on' and 'true' are two (PyYAML reads both as True), 1 and
+    # '1' one
+    "rcac_controller:\n  ros__parameters:\n    q: {on: 1, true: 2, 1: 3, '1': 4}\n",
 ]
 
 
@@ -193,7 +199,7 @@ def test_a_key_given_twice_is_read_as_rcl_reads_it(tmp_path, text):
             node.destroy_node()
     assert dict(ours) == rcl
     lines = repeated_in(repeated, "/rcac_controller")
-    assert len(lines) == 1 and "is given twice" in lines[0], lines
+    assert len(lines) == 1 and "is given twice" in lines[0][0] and not lines[0][1], lines
     assert repeated_in(repeated, "/other_node") == []
 
 
@@ -207,3 +213,13 @@ def test_a_key_given_twice_is_named_and_refused_when_strict(tmp_path):
     assert code == 2, out
     errors = [ln for ln in out.splitlines() if "error" in ln]
     assert len(errors) == 1 and "'K_D' is given twice" in errors[0], out
+    # of two types, rcl gives the node one by type, not the last: refused, strict or not
+    path.write_text("rcac_controller:\n  ros__parameters:\n    K_D: 100.0\n    K_D: '200'\n")
+    code, out = run_node("controller_node", params_file=path)
+    errors = [ln for ln in out.splitlines() if "error" in ln]
+    assert code == 2 and len(errors) == 1 and "of two types" in errors[0], out
+    # the simulator's key twice in a section for both nodes is the simulator's to name
+    path.write_text("/**:\n  ros__parameters:\n    duration: 1.0\n    duration: 2.0\n")
+    code, out = run_node("controller_node", "strict_parameters:=true", params_file=path,
+                         until="active: publishing")
+    assert code is None and "given twice" not in out, out

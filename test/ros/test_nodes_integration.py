@@ -150,6 +150,14 @@ cn.ControllerNode._activate = activate_then_signal
 sys.exit(run(cn.ControllerNode, "controller", ["controller"]))
 """
 
+#: the same, with the node ending (exit code 1, as after a fault of a side thread) in the
+#: callback whose finalizer sends the signal
+FINISHED_THEN_DROPPED = DROPPED_INTERRUPT.replace("""    self.create_timer(0.2, Finalized)""", """
+    def fail():
+        self.exit_code, self.finished = 1, True
+        return Finalized()
+    self.create_timer(0.2, fail)""")
+
 #: the controller's main, interrupted (as by SIGTERM) at the end of configure, while the node
 #: is being built: its input threads are running, waiting in rcl
 INTERRUPT_IN_CONFIGURE = """
@@ -186,6 +194,12 @@ def test_an_interrupt_that_python_drops_still_stops_the_node():
     assert "Exception ignored" in out and "KeyboardInterrupt" in out, out   # it was dropped
     assert code == 0, out
     assert out.count("inactive: one zero effort sent") == 1, out
+
+
+def test_an_interrupt_that_python_drops_after_the_node_ended_keeps_its_exit_code():
+    code, out = run_script(FINISHED_THEN_DROPPED)
+    assert "Exception ignored" in out, out
+    assert code == 1, out
 
 
 def test_an_interrupt_while_configuring_leaves_no_thread_behind():

@@ -232,7 +232,8 @@ def run(node_factory, prog, args=None):
         spinning = True
         while rclpy.ok() and not node.finished:
             spin_node_once(executor, node)
-            interrupt.check()
+            if not node.finished:
+                interrupt.check()
         if node.finished:
             # the shutdown transition's answer (and the last zero effort) are written but may
             # not be delivered yet: keep the participant a moment before destroying it (a
@@ -248,7 +249,9 @@ def run(node_factory, prog, args=None):
             print(f"{prog}: error: {err}", file=sys.stderr, flush=True)
             code = 2
     except KeyboardInterrupt:
-        if node is not None:
+        if node is not None and node.finished:
+            code = node.exit_code       # it had stopped already (its linger was cut short)
+        elif node is not None:
             node.on_interrupt()
     except ExternalShutdownException:
         pass

@@ -13,6 +13,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import String
 
 from rcac_ros.errors import ConfigError, first_line
+from rcac_ros.nodes.runtime import interrupt
 
 #: robot_state_publisher's profile for /robot_description
 DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
@@ -53,6 +54,7 @@ def wait_for_description(node, topic, executor_factory, log_every=5.0):
                 node.get_logger().info(f"waiting for the robot description on {topic}")
                 last = now
             executor.spin_once(timeout_sec=0.1)
+            interrupt.check()               # one Python dropped in a callback still counts
     finally:
         executor.remove_node(node)
         executor.shutdown()

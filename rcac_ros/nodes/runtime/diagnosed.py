@@ -43,14 +43,19 @@ class RcacNodeMixin:
         repeated = []
         files = paramcheck.check_params_files(sys.argv, repeated)
         fq_name = self.get_fully_qualified_name()
-        for text in paramcheck.repeated_in(repeated, fq_name):
+        shared = paramcheck.shared_keys(files, fq_name)     # the other node's, from /**
+        declared = self.list_parameters([], 0).names
+        others = {k for k in shared if k not in declared and not k.startswith(self.READ_PREFIXES)}
+        for text, mixed in paramcheck.repeated_in(repeated, fq_name, skip=others):
+            if mixed:
+                raise ConfigError(f"{text}: of two types, rcl gives the node one of them by "
+                                  "type, not the last; give it once")
             if strict:
                 raise ConfigError(f"strict_parameters: {text}")
             self.get_logger().warning(f"{text}; the last is used")
-        shared = paramcheck.shared_keys(files, fq_name)     # the other node's, from /**
         given = [k for k in parameter_overrides(self)
                  if not k.startswith(self.READ_PREFIXES) and k not in shared]
-        unknown = paramcheck.unknown_parameters(given, self.list_parameters([], 0).names)
+        unknown = paramcheck.unknown_parameters(given, declared)
         if unknown:
             text = paramcheck.describe_unknown(unknown, self.get_name())
             if strict:

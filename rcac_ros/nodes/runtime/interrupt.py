@@ -23,9 +23,11 @@ def install():
 
 
 def ignore():
-    """Ignore both signals (the shutdown is under way: nothing may cut it short)."""
+    """Ignore both signals (the shutdown is under way: nothing may cut it short); a request
+    recorded so far is spent."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _requested[0] = False
 
 
 def check():

@@ -11,7 +11,6 @@
   that address no node of the package.
 """
 
-import collections.abc
 import difflib
 import re
 
@@ -31,8 +30,8 @@ def load_params_file(path, repeated=None):
     """Parse one parameters file as rcl reads it; return ``{node: {name: value}}``.
 
     A key given twice in one mapping is read as rcl reads it: two mappings merge, and of two
-    values the last is kept. Each value given twice is appended to ``repeated`` (if given)
-    as ``(path, keys, first value, last value)``.
+    values of one type the last is kept. Each value given twice is appended to ``repeated``
+    (if given) as ``(path, keys, first value, last value, of two types)``.
 
     Raises
     ------
@@ -70,17 +69,29 @@ def _value(loader, node, keys, path, repeated):
         return loader.construct_object(node, deep=True)
     out = {}
     for key_node, value_node in node.value:
-        key = loader.construct_object(key_node, deep=True)
-        if not isinstance(key, collections.abc.Hashable):
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping", node.start_mark,
+                "a merge key ('<<'), which rcl does not read", key_node.start_mark)
+        if not isinstance(key_node, yaml.ScalarNode):
             raise yaml.constructor.ConstructorError("while constructing a mapping",
                                                     node.start_mark, "found unhashable key",
                                                     key_node.start_mark)
+        key = key_node.value                        # rcl's names are the keys' text
         value = _value(loader, value_node, keys + (key,), path, repeated)
         if key in out:
             _merge(out, key, value, keys, path, repeated)
         else:
             out[key] = value
     return out
+
+
+def _kind(value):
+    """A value's type as far as a repeat goes: rcl keeps two values of different types (the
+    node gets one of them by type, not the last)."""
+    if isinstance(value, list):
+        return ("array",) + tuple(sorted({type(v).__name__ for v in value}))
+    return (type(value).__name__,)
 
 
 def _merge(mapping, key, value, keys, path, repeated):
@@ -92,23 +103,24 @@ def _merge(mapping, key, value, keys, path, repeated):
             else:
                 old[k] = v
         return
-    repeated.append((path, keys + (key,), old, value))
+    repeated.append((path, keys + (key,), old, value, _kind(old) != _kind(value)))
     mapping[key] = value
 
 
-def repeated_in(repeated, fq_name):
-    """One line for each value given twice in a section of ``repeated`` (from
-    :func:`load_params_file`) that applies to the node ``fq_name``."""
+def repeated_in(repeated, fq_name, skip=frozenset()):
+    """``(line, mixed)`` for each value given twice in a section of ``repeated`` (from
+    :func:`load_params_file`) that applies to the node ``fq_name``, but for names in
+    ``skip``; ``mixed``: the two values are of different types."""
     lines = []
-    for path, keys, first, last in repeated:
+    for path, keys, first, last, mixed in repeated:
         if "ros__parameters" not in keys[:-1]:
             continue
         at = keys.index("ros__parameters")
-        section = "/".join(str(k) for k in keys[:at])
-        if section_applies(section, fq_name):
-            name = ".".join(str(k) for k in keys[at + 1:])
-            lines.append(f"{path}: {section}: {name!r} is given twice ({first!r}, then "
-                         f"{last!r})")
+        section = "/".join(keys[:at])
+        name = ".".join(keys[at + 1:])
+        if section_applies(section, fq_name) and name not in skip:
+            lines.append((f"{path}: {section}: {name!r} is given twice ({first!r}, then "
+                          f"{last!r})", mixed))
     return lines
 
 

@@ -197,9 +197,13 @@ class SimulatorNode(PayloadParameters, RcacNode):
             self.loop.stop()
         self._wall_end = time.monotonic()
         wall = self._wall_end - self._wall_start
-        if not self._pub_state.wait_for_all_acked(Duration(seconds=ACK_WAIT)):
-            self.get_logger().warning(f"a reader of the joint states did not acknowledge the "
-                                      f"last ones within {ACK_WAIT:g} s: it may miss them")
+        end = time.monotonic() + ACK_WAIT     # in slices: a signal is handled meanwhile
+        while not self._pub_state.wait_for_all_acked(Duration(seconds=0.1)):
+            if time.monotonic() > end:
+                self.get_logger().warning(f"a reader of the joint states did not acknowledge "
+                                          f"the last ones within {ACK_WAIT:g} s: it may miss "
+                                          "them")
+                break
         self.get_logger().info(
             f"finished: {self.k} steps, sim time {self.k * self.dt:.3f} s, wall {wall:.2f} s "
             f"({self.k / max(wall, 1e-9):.0f} steps/s), lockstep misses {self.misses}, "
