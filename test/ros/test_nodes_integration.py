@@ -158,6 +158,26 @@ FINISHED_THEN_DROPPED = DROPPED_INTERRUPT.replace("""    self.create_timer(0.2, 
         return Finalized()
     self.create_timer(0.2, fail)""")
 
+#: the simulator's main, waiting for a robot description that never comes, with the signal
+#: sent from a finalizer as above
+WAITING_FOR_DESCRIPTION = """
+import os, signal, sys
+from rcac_ros.nodes.runtime import description
+from rcac_ros.nodes.runtime.base import run
+from rcac_ros.nodes.simulator.node import SimulatorNode
+class Finalized:
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        sum(range(1000))
+subscribe = description.subscribe_description
+def subscribe_then_signal(node, topic, callback):
+    node.create_timer(0.5, Finalized)
+    return subscribe(node, topic, callback)
+description.subscribe_description = subscribe_then_signal
+sys.exit(run(SimulatorNode, "simulator",
+             ["simulator", "--ros-args", "-p", "description_topic:=/robot_description"]))
+"""
+
 #: the controller's main, interrupted (as by SIGTERM) at the end of configure, while the node
 #: is being built: its input threads are running, waiting in rcl
 INTERRUPT_IN_CONFIGURE = """
@@ -200,6 +220,12 @@ def test_an_interrupt_that_python_drops_after_the_node_ended_keeps_its_exit_code
     code, out = run_script(FINISHED_THEN_DROPPED)
     assert "Exception ignored" in out, out
     assert code == 1, out
+
+
+def test_an_interrupt_that_python_drops_while_waiting_for_the_description_counts():
+    code, out = run_script(WAITING_FOR_DESCRIPTION)
+    assert "Exception ignored" in out and "waiting for the robot description" in out, out
+    assert code == 0, out
 
 
 def test_an_interrupt_while_configuring_leaves_no_thread_behind():
