@@ -102,9 +102,10 @@ def test_a_file_shared_by_both_nodes_is_not_unknown_to_either(tmp_path):
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    gravity: [0.0, 0, -9.8]\n"),
     ("controller_node", "rcac_controller:\n  ros__parameters:\n    rate: 500.0\n  rate: 1\n"),
     ("controller_node", b"\xff\xfe not UTF-8 text"),
-    # a merge key, which rcl does not read
+    # a merge key, and a mapping inside itself: rcl reads no aliases
     ("controller_node", "base: &b\n  ros__parameters: {rate: 250.0}\nrcac_controller:\n"
                         "  <<: *b\n"),
+    ("controller_node", "rcac_controller:\n  ros__parameters: &x\n    rate: 1.0\n    q: *x\n"),
 ])
 def test_malformed_params_yaml_is_one_line_and_exit_2(tmp_path, module, text):
     path = tmp_path / "bad.yaml"

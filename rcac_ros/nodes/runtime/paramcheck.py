@@ -63,10 +63,14 @@ def _load_merging(stream, path, repeated):
         loader.dispose()
 
 
-def _value(loader, node, keys, path, repeated):
+def _value(loader, node, keys, path, repeated, within=()):
     import yaml
     if not isinstance(node, yaml.MappingNode):
         return loader.construct_object(node, deep=True)
+    if id(node) in within:
+        raise yaml.constructor.ConstructorError(None, None, "an alias of a mapping inside "
+                                                "itself (rcl reads no aliases)", node.start_mark)
+    within += (id(node),)
     out = {}
     for key_node, value_node in node.value:
         if key_node.tag == "tag:yaml.org,2002:merge":
@@ -78,7 +82,7 @@ def _value(loader, node, keys, path, repeated):
                                                     node.start_mark, "found unhashable key",
                                                     key_node.start_mark)
         key = key_node.value                        # rcl's names are the keys' text
-        value = _value(loader, value_node, keys + (key,), path, repeated)
+        value = _value(loader, value_node, keys + (key,), path, repeated, within)
         if key in out:
             _merge(out, key, value, keys, path, repeated)
         else:
