@@ -116,6 +116,17 @@ class DeadlineLoop:
             executor.spin_once(timeout_sec=max(wait, 0) * 1e-9)
 
 
+def wait_for_acks(publisher, seconds, step=0.1):
+    """Whether every reliable reader of ``publisher`` acknowledged what it wrote within
+    ``seconds``; waits in slices of ``step`` s, so that a signal is handled meanwhile."""
+    from rclpy.duration import Duration
+    end = time.monotonic() + seconds
+    while not publisher.wait_for_all_acked(Duration(seconds=step)):
+        if time.monotonic() > end:
+            return False
+    return True
+
+
 def _fine_timer_slack():
     """Ask Linux for 1 ns of timer slack on this thread (default 50 us); best effort."""
     try:

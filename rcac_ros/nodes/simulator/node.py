@@ -30,7 +30,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import InertiaStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
-from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -41,7 +40,7 @@ from rcac_ros.core.payload import arm_reach, inertia_values
 from rcac_ros.plants import make_plant
 from rcac_ros.errors import ConfigError, RcacError
 from rcac_ros.nodes.runtime.base import QOS, QOS_MONITOR, RcacNode, run
-from rcac_ros.nodes.runtime.pacing import DeadlineLoop
+from rcac_ros.nodes.runtime.pacing import DeadlineLoop, wait_for_acks
 from rcac_ros.nodes.runtime.realtime import RealtimeOptions
 from rcac_ros.nodes.simulator.payload import PayloadParameters, QOS_PAYLOAD
 
@@ -197,13 +196,9 @@ class SimulatorNode(PayloadParameters, RcacNode):
             self.loop.stop()
         self._wall_end = time.monotonic()
         wall = self._wall_end - self._wall_start
-        end = time.monotonic() + ACK_WAIT     # in slices: a signal is handled meanwhile
-        while not self._pub_state.wait_for_all_acked(Duration(seconds=0.1)):
-            if time.monotonic() > end:
-                self.get_logger().warning(f"a reader of the joint states did not acknowledge "
-                                          f"the last ones within {ACK_WAIT:g} s: it may miss "
-                                          "them")
-                break
+        if not wait_for_acks(self._pub_state, ACK_WAIT):
+            self.get_logger().warning(f"a reader of the joint states did not acknowledge the "
+                                      f"last ones within {ACK_WAIT:g} s: it may miss them")
         self.get_logger().info(
             f"finished: {self.k} steps, sim time {self.k * self.dt:.3f} s, wall {wall:.2f} s "
             f"({self.k / max(wall, 1e-9):.0f} steps/s), lockstep misses {self.misses}, "
