@@ -241,6 +241,9 @@ def capture_hook(at, release, payload, log):
         waiting = []
 
         def on_clock(msg):
+            if gate and gate[-1] is not None:   # the run has started: the gate has served
+                node.destroy_subscription(gate[-1])
+                gate.append(None)
             sim_time = msg.clock.sec + 1e-9 * msg.clock.nanosec
             if not plan or sim_time < plan[0][0]:
                 return
@@ -255,8 +258,8 @@ def capture_hook(at, release, payload, log):
                 + ", ".join(f"{p.name}={p.value}" for p in request))
             futures.append(client.set_parameters(request))
 
-        node.create_subscription(ClockMsg, topics.CLOCK, on_clock, topics.qos(depth=1))
         gate = []
+        node.create_subscription(ClockMsg, topics.CLOCK, on_clock, topics.qos(depth=1))
 
         def spin():
             try:
