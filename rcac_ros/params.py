@@ -178,8 +178,8 @@ def _diagnostics_period():
 
 def _strict_parameters():
     return Param("strict_parameters", "bool", False,
-                 "refuse to start on a parameter no row declares, or one given twice in a "
-                 "file (default: a warning naming it, with the nearest name)")
+                 "refuse to start on a parameter no row declares or a file gives twice "
+                 "(default: a warning naming it, with the nearest name)")
 
 
 #: The controller node's parameters (``config/controller.yaml``).
@@ -392,7 +392,7 @@ SIMULATOR = _robot("simulator") + (
           "start only once a node subscribes to joint_states and publishes efforts"),
     Param("min_subscribers", "integer", 1,
           "with wait_for_controller: also wait for this many joint_states subscribers "
-          "(e.g. 2 = the controller and a recorder)", lo=1, hi=1000),
+          "(2: the controller and a recorder)", lo=1, hi=1000),
     Param("q0", "double_array", None,
           "initial positions, rad, in joints order (unset: the paper's q0 for css_arm, "
           "else zero)", per_joint=True),
