@@ -25,6 +25,30 @@ def test_recovery_time_of_a_burst_is_its_closed_form():
     assert recovery_time(t, e, tc, 12.0, reference=a) is None
 
 
+def test_the_figures_cut_the_same_samples_from_stamps_and_from_k_h():
+    """A bag's times (``sec + 1e-9 nsec``) and an offline loop's (``k h``) round apart (step
+    858 of 2 ms: 1.7160000000000002 against 1.716); with an error that grows to the end of
+    the phase, the two must still give the same figures."""
+    from rcac_ros.tools.demos.capture_figures import figures
+    h_ns, steps = 2_000_000, 1000
+    ns = np.arange(steps) * h_ns
+    from_stamps = ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+    from_k_h = np.arange(steps) * 0.002
+    assert from_stamps[858] != from_k_h[858]            # the case: they do round apart
+    at, release = from_stamps[502], from_stamps[858]
+    e = np.outer(np.arange(steps, dtype=float), [1e-4, 2e-4])     # largest at the end
+    tau = np.outer(np.arange(steps, dtype=float), [1.0, 0.5])
+    theta = np.tile(np.arange(13.0), (steps, 1))
+    truth = np.arange(13.0) + 1.0
+    got = [figures((t, e), (t, tau), (t, theta), at, release, truth, np.array([2e3, 2e3]))
+           for t in (from_stamps, from_k_h)]
+    assert got[0]["peak_error_norm_after_rad"] == pytest.approx(np.linalg.norm(e[857]),
+                                                                rel=1e-15)
+    for key in ("rms_error_before_rad", "peak_error_norm_after_rad", "max_effort_nm",
+                "steps_at_limit", "mass_estimate_end_kg"):
+        assert got[0][key] == pytest.approx(got[1][key], rel=1e-12), key
+
+
 def test_effort_figures_find_the_first_step_at_a_limit():
     t = np.arange(5) * 0.5
     tau = np.array([[1.0, 0.0], [2.0, 5.0], [4.0, 10.0], [1.0, 10.0], [0.0, 0.0]])

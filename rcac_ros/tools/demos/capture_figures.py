@@ -13,6 +13,9 @@ PRE_WINDOW = 5.0
 WINDOW, FACTOR = 1.0, 2.0
 #: goals: recovery time (s), last link's mass estimate relative error at the end
 GOAL_RECOVERY, GOAL_MASS = 5.0, 0.05
+#: s: two times closer than this are one (a bag's stamps, ``sec + 1e-9 nsec``, and an offline
+#: loop's ``k h`` round apart), so that both runs cut their windows at the same sample
+EPS = 1e-9
 
 
 # ------------------------------------------------------------------ figures
@@ -30,10 +33,10 @@ def recovery_time(t, e, t_event, t_end, reference, window=WINDOW, factor=FACTOR)
     sq = np.sum(np.square(e), axis=1)
     n = e.shape[1]
     cum = np.concatenate([[0.0], np.cumsum(sq)])
-    idx = np.nonzero((t >= t_event) & (t < t_end))[0]
+    idx = np.nonzero((t >= t_event - EPS) & (t < t_end - EPS))[0]
     if idx.size == 0:
         return None
-    lo = np.searchsorted(t, t[idx] - window, side="right")
+    lo = np.searchsorted(t, t[idx] - window + EPS, side="right")
     rms = np.sqrt((cum[idx + 1] - cum[lo]) / (n * (idx + 1 - lo)))
     out = np.nonzero(rms > factor * reference)[0]
     if out.size == 0:
@@ -66,8 +69,8 @@ def figures(track, effort, estimates, t_event, t_end, truth, effort_limit):
     dict
     """
     t, e = (np.asarray(a, dtype=float) for a in track)
-    before = (t >= max(0.0, t_event - PRE_WINDOW)) & (t < t_event)
-    after = (t >= t_event) & (t < t_end)
+    before = (t >= max(0.0, t_event - PRE_WINDOW) - EPS) & (t < t_event - EPS)
+    after = (t >= t_event - EPS) & (t < t_end - EPS)
     rms_before = float(np.sqrt(np.mean(np.square(e[before])))) if before.any() else math.nan
     out = {"event_time_s": float(t_event), "phase_end_s": float(t_end),
            "rms_error_before_rad": rms_before,
@@ -75,7 +78,7 @@ def figures(track, effort, estimates, t_event, t_end, truth, effort_limit):
            else math.nan,
            "recovery_time_s": recovery_time(t, e, t_event, t_end, rms_before)}
     te, th = (np.asarray(a, dtype=float) for a in estimates)
-    last = np.nonzero(te < t_end)[0]
+    last = np.nonzero(te < t_end - EPS)[0]
     est = th[last[-1]] if last.size else th[-1]
     out["mass_true_kg"] = float(truth[0])
     out["mass_estimate_end_kg"] = float(est[0])
@@ -97,7 +100,7 @@ def effort_figures(effort, effort_limit, start, stop):
     """The largest effort over ``[start, stop)`` against the limits, and where a limit is
     first reached (``None`` if never)."""
     t, tau = (np.asarray(a, dtype=float) for a in effort)
-    sel = (t >= start) & (t < stop)
+    sel = (t >= start - EPS) & (t < stop - EPS)
     if not sel.any():                   # no effort in the phase (a run cut short)
         return {"max_effort_nm": math.nan, "max_effort_over_limit": math.nan,
                 "max_effort_joint": None, "max_effort_time_s": None,
