@@ -46,7 +46,8 @@ from .composite_fused import (is_paper_law, is_paper_natural_law, paper_friction
                               paper_natural_step, paper_step)
 from rcac_ros.errors import GainError, InputError
 from .joint_friction import (F_GAIN, F_HAT, F_LS, F_RATE, F_VC, JFILT_COLS, JOINT_COLS, P_FRICTION,
-                             friction_gain, gains_at_start, natural_friction_start, rotor_start)
+                             default_beta, friction_gain, gains_at_start, natural_friction_start,
+                             rotor_start)
 from .law_options import FRICTION_FORGETTING, friction_adaptation_option
 from .least_squares import initial_factor
 from .natural_step import lane_constants
@@ -141,7 +142,8 @@ class RecursiveCompositeController:
     P_friction : "feedback", float, (3,) or (n, 3)
         Diagonal adaptation gains of the joint terms, positive; default ``"feedback"``:
         :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at the first step's
-        measured ``q``, growing with the largest armature estimate (doc/design.md §7
+        measured ``q`` (``beta_f``: :func:`~rcac_ros.core.joint_friction.default_beta`),
+        growing with the largest armature estimate (doc/design.md §7
         "Joint terms without per-arm tuning"). Any ``P_friction``: the joint's feedback
         grows with the rotor (:func:`~rcac_ros.core.joint_friction.rotor`).
     friction_adaptation : {None, "gradient", "least_squares"}
@@ -292,7 +294,9 @@ class RecursiveCompositeController:
         self.P_friction = friction_gain(P_friction, n)
         self._friction_default = self.P_friction is None
         self._gain_at_start = True          # rates (and the default gain) at the first state
-        got = gains_at_start(self.model, self.K_D, np.zeros(n), self._friction_default, self.h)
+        self._beta = default_beta(self.channels, n, self.update == "implicit", self.gamma)
+        got = gains_at_start(self.model, self.K_D, np.zeros(n), self._friction_default, self.h,
+                             self._beta)
         P, self._grow, self._rate = got
         if self._friction_default:
             self.P_friction = P
@@ -330,7 +334,8 @@ class RecursiveCompositeController:
         """The first step with ``P_friction="feedback"``: the gain
         :func:`~rcac_ros.core.joint_friction.gains_at_start` at the measured ``q`` and the
         current estimates (doc/design.md §7), then the step."""
-        got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h)
+        got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h,
+                             self._beta)
         if got is not None:
             P, self._grow, self._rate = got
             if P is not None:

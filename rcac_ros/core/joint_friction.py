@@ -79,6 +79,10 @@ from .law_options import P_FRICTION  # noqa: E402  (defined where the boundaries
 #: ``beta_f`` (s) of :func:`feedback_scaled_gain`: the joint terms' rate per unit of the
 #: weighted ``|Y_f,i|^2``.
 BETA_FRICTION = 30.0
+#: ``beta_f`` (s) when every joint has its own prediction channel (``channels="all"``), whose
+#: implicit step (doc/design.md §6) informs each joint's terms: of 30, 100 and 300, the best
+#: over unseen plants (doc/design.md §7)
+BETA_FRICTION_ALL = 100.0
 #: Relative weights ``w`` of the three terms (armature, damping, friction) in
 #: :func:`feedback_scaled_gain`: the armature's column ``qdd_ri`` is the largest and the
 #: fastest-varying of the three.
@@ -515,11 +519,19 @@ def start_posture(q, n):
     return q if q.shape == (n,) and np.all(np.isfinite(q)) else None
 
 
-def gains_at_start(model, K_D, q, default, h):
+def default_beta(channels, n, implicit, gamma):
+    """``beta_f`` of the default gain: :data:`BETA_FRICTION_ALL` when every joint 1..n has
+    its own prediction channel in ``channels`` (a parsed tuple), stepped implicitly and
+    weighted (``gamma > 0``), else :data:`BETA_FRICTION`."""
+    every = set(range(1, n + 1)) <= set(channels)
+    return BETA_FRICTION_ALL if every and implicit and gamma > 0.0 else BETA_FRICTION
+
+
+def gains_at_start(model, K_D, q, default, h, beta=BETA_FRICTION):
     """At the first state: ``(P, grow, rate)``: ``rate`` the rotor's rates
     ``rho_q,i = min(rho_i, 2 / (N h))`` (:func:`joint_rates` at the measured ``q``, ``N``
     :data:`ROTOR_TOLERANCE`) and, with the default gain
-    (``default``), ``P`` the gain :func:`feedback_scaled_gain` at ``q`` and
+    (``default``), ``P`` the gain :func:`feedback_scaled_gain` at ``q`` with ``beta`` and
     ``grow = beta rho_q,i w`` its growth with the rotor (doc/design.md §7; else ``P`` None
     and ``grow`` 0); None if ``q`` is not a posture (the step reports it, and the gains wait
     for the next)."""
@@ -530,7 +542,7 @@ def gains_at_start(model, K_D, q, default, h):
     if not default:
         return None, np.zeros((model.n, 3)), rate
     w = np.asarray(TERM_WEIGHTS, dtype=float)
-    return feedback_scaled_gain(model, K_D, q0), BETA_FRICTION * np.outer(rate, w), rate
+    return feedback_scaled_gain(model, K_D, q0, beta=beta), beta * np.outer(rate, w), rate
 
 
 def friction_gain(value, n):

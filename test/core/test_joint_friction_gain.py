@@ -11,8 +11,9 @@ from chains import frictional
 
 from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
 from rcac_ros.core.crba import mass_matrix
-from rcac_ros.core.joint_friction import (BETA_FRICTION, TERM_WEIGHTS, effective_feedback,
-                                          feedback_matrix, feedback_scaled_gain, joint_feedback)
+from rcac_ros.core.joint_friction import (BETA_FRICTION, BETA_FRICTION_ALL, TERM_WEIGHTS,
+                                          effective_feedback, feedback_matrix,
+                                          feedback_scaled_gain, joint_feedback)
 from rcac_ros.core.model import PAPER_Q0
 from rcac_ros.errors import GainError
 
@@ -42,6 +43,25 @@ def test_the_gain_is_beta_times_the_effective_feedback_at_the_first_state():
     # first state's, not the zero posture's
     assert not np.allclose(ctrl.P_friction[0],
                            feedback_scaled_gain(model, ctrl.K_D, np.zeros(7))[0])
+
+
+@pytest.mark.parametrize("options, beta", [
+    (dict(channels="all"), BETA_FRICTION_ALL),
+    (dict(channels=list(range(1, 8)) + ["power"]), BETA_FRICTION_ALL),
+    (dict(channels="all", update="explicit"), BETA_FRICTION),
+    (dict(channels="all", gamma=0.0), BETA_FRICTION),
+    (dict(channels=list(range(1, 7))), BETA_FRICTION),
+    (dict(), BETA_FRICTION),
+])
+def test_beta_is_the_channels_one_only_when_every_joint_has_an_implicit_channel(options, beta):
+    """``beta_f`` = 100 s needs every joint's own channel, stepped implicitly and weighted
+    (``gamma > 0``); any other law keeps 30 s (doc/design.md §7)."""
+    model = css_arm((0.0, 0.0, -9.81))
+    q0 = np.array(PAPER_Q0)
+    ctrl = RecursiveCompositeController(model, K_D=300.0, joint_friction=True, **options)
+    ctrl.step(q0, np.zeros(7), q0, np.zeros(7), np.zeros(7))
+    np.testing.assert_allclose(ctrl.P_friction, feedback_scaled_gain(model, ctrl.K_D, q0, beta),
+                               rtol=1e-12)
 
 
 def link_inertias(model):

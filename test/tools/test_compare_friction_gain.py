@@ -44,3 +44,13 @@ def test_direct_friction_tracks_the_rigid_panda_as_the_direct_law():
     # (three orders of magnitude above the stable law's: not a matter of a factor)
     uniform = rms(scenario, "direct_friction", P_friction=300.0)
     assert uniform > 1000.0 * direct, (uniform, direct)
+
+
+def test_all_friction_tracks_the_rigid_panda_as_the_all_law():
+    """The default gain of ``channels="all"`` (``beta_f`` = 100 s, above the tracking
+    step's 30 s) on the rigid panda: the joint terms' truth is 0, and the law may not track worse
+    than the friction-blind ``all`` law (a factor 2, as above)."""
+    scenario = C.SCENARIOS["panda_rigid"]()
+    blind = rms(scenario, "all")
+    aware = rms(scenario, "all_friction")
+    assert aware < 2.0 * blind, (aware, blind)

@@ -51,7 +51,6 @@ from rcac_ros.tools.args import add_engine_argument, output_dir, positive_float
 from rcac_ros.tools.runs.closed_loop import closed_loop
 from rcac_ros.core.law_options import P_FRICTION as P_FRICTION_DEFAULT
 from rcac_ros.tools.demos.compare_report import markdown
-from rcac_ros.tools.demos.friction import P_FRICTION
 from rcac_ros.tools.runs.scenarios import controller, FIXED_P
 
 #: Forgetting rate lambda_0 (1/s) of the least-squares laws (bound: trace(P_i(0)), per link).
@@ -110,13 +109,14 @@ LAWS = {
                                             joint_friction=True, P_friction=INERTIA_SCALED)),
     "ls_natural": ("rcac", dict(adaptation="least_squares", forgetting=LS_FORGETTING,
                                 geometry="natural")),
-    # the joint terms (doc/design.md §7): "all" with the gains of rcac friction-demo; the
-    # direct and paper laws, adapting them mostly from the tracking term (an explicit step,
-    # stable only below a gain set by the joint's inertia), with the inertia-scaled gain
+    # the joint terms (doc/design.md §7) with the library's default gain, scaled from each
+    # joint's feedback: the direct and paper laws adapt them mostly from the tracking term
+    # (an explicit step, beta_f = 30 s); "all" from every joint's channel (beta_f = 100 s)
     "direct_friction": ("rcac", dict(gamma=0.0, joint_friction=True,
                                      P_friction=INERTIA_SCALED)),
     "paper_friction": ("rcac", dict(joint_friction=True, P_friction=INERTIA_SCALED)),
-    "all_friction": ("rcac", dict(channels="all", joint_friction=True, P_friction=P_FRICTION)),
+    "all_friction": ("rcac", dict(channels="all", joint_friction=True,
+                                  P_friction=INERTIA_SCALED)),
 }
 
 #: The laws the paper and payload scenarios run by default (every law but ``fixed``, the

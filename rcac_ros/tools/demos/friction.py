@@ -4,10 +4,11 @@ The plant is the built-in simulator with the joint terms of doc/design.md §7 in
 law's model class: the Panda of example-robot-data with armature 0.1 kg m^2, damping 0.5
 N m s/rad and Coulomb friction 0.5 N m (``tanh(qd / v_c)``, v_c = 0.1 rad/s) on every joint,
 the values of the MuJoCo scenario of ``rcac compare``. The law is the recursive composite
-law with ``joint_friction=True``, every channel (``channels="all"``) and
-``hold_compensation=True`` (``--no-hold-compensation``: the plain hold), starting from zero
-joint estimates; the links are the URDF's, the last adapting from it as in the payload demo
-(every one with ``--adapt-links``, none with ``--links-known``). The desired motion excites
+law with ``joint_friction=True``, every channel (``channels="all"``), the library's default
+joint gain (doc/design.md §7) and ``hold_compensation=True`` (``--no-hold-compensation``: the
+plain hold), starting from zero joint estimates; the links are the URDF's, the last
+adapting from it as in the payload demo (every one with ``--adapt-links``, none with
+``--links-known``). The desired motion excites
 every joint in both directions: a sinusoid of 0.4 rad per joint about the "ready" posture,
 0.35-0.55 Hz (peak speeds 0.9-1.4 rad/s).
 
@@ -25,7 +26,7 @@ import os
 import numpy as np
 
 from rcac_ros.core import SinusoidTrajectory
-from rcac_ros.core.law_options import FRICTION_ADAPTATIONS
+from rcac_ros.core.law_options import FRICTION_ADAPTATIONS, P_FRICTION
 from rcac_ros.tools.args import output_dir, positive_float
 from rcac_ros.tools.runs.scenarios import GAINS, READY, gains_for, load_panda
 
@@ -34,8 +35,6 @@ TRUTH = (0.1, 0.5, 0.5)
 #: The excitation: amplitude (rad) and frequency (Hz) of each joint's sinusoid.
 AMPLITUDE = (0.4,) * 7
 FREQUENCY = (0.35, 0.4, 0.45, 0.38, 0.5, 0.42, 0.55)
-#: Diagonal gains of the joint terms (armature, damping, friction).
-P_FRICTION = (300.0, 300.0, 300.0)
 #: The goals (relative error after the run): armature and viscous 10 %, Coulomb 15 %.
 GOALS = (0.10, 0.10, 0.15)
 NAMES = ("armature", "damping", "friction")
@@ -128,7 +127,7 @@ def run(args):
     report.update(duration_s=args.duration, adapt_links=args.adapt_links,
                   links_known=args.links_known, friction_adaptation=args.friction_adaptation,
                   hold_compensation=args.hold_compensation,
-                  rms_error_rad=rms, P_friction=list(P_FRICTION), channels="all")
+                  rms_error_rad=rms, P_friction=P_FRICTION, channels="all")
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "metrics.json"), "w", encoding="utf-8") as f:
         json.dump(report, f, indent=2)
