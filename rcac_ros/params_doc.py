@@ -29,15 +29,26 @@ def _range(p):
     return text + (" each" if p.type.endswith("_array") else "")
 
 
-def markdown(node):
-    """The Markdown table of ``node``'s parameters."""
+def _row(p):
+    kind = p.type + (" (1 or n)" if p.per_joint else "")
+    return (f"| `{p.name}` | {kind} | {_cell(p.default)} | {_range(p)} | "
+            f"{'' if p.read_only else 'yes'} | {p.description} |")
+
+
+def shared():
+    """The rows both nodes declare alike (the same Markdown row), in the controller's order."""
+    simulator = {_row(p) for p in TABLE["simulator"]}
+    return [p for p in TABLE["controller"] if _row(p) in simulator]
+
+
+def markdown(node=None):
+    """The Markdown table of ``node``'s own parameters (``None``: those both nodes share)."""
     lines = ["| name | type | default | range | settable | description |",
              "| --- | --- | --- | --- | --- | --- |"]
-    for p in TABLE[node]:
-        kind = p.type + (" (1 or n)" if p.per_joint else "")
-        lines.append(f"| `{p.name}` | {kind} | {_cell(p.default)} | {_range(p)} | "
-                     f"{'' if p.read_only else 'yes'} | {p.description} |")
-    return "\n".join(lines)
+    common = {_row(p) for p in shared()}
+    rows = [_row(p) for p in shared()] if node is None else \
+        [_row(p) for p in TABLE[node] if _row(p) not in common]
+    return "\n".join(lines + rows)
 
 
 def document():
@@ -52,7 +63,8 @@ def document():
              "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
-                  markdown(node)]
+                  "Also: [both nodes](#both-nodes).", "", markdown(node)]
+    parts += ["", "## both nodes", "", markdown()]
     return "\n".join(parts) + "\n"
 
 

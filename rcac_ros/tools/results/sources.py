@@ -101,10 +101,10 @@ SOURCES = {
         plots=("payload_summary.png", "link7_estimates.png")),
     "friction": Source(
         "Joint friction and rotor inertia learnt, the last link adapting",
-        "The Panda on the built-in simulator with armature 0.1 kg m^2, damping 0.5 N m s/rad "
-        "and tanh friction 0.5 N m on every joint, the law `channels=\"all\"` with "
-        "`joint_friction=True`, `hold_compensation=True` from zero joint estimates "
-        "(doc/tools.md, `rcac friction-demo`).",
+        "The Panda on the built-in simulator, armature 0.1 kg m^2, damping 0.5 N m s/rad, tanh "
+        "friction 0.5 N m on every joint; `channels=\"all\"`, `joint_friction=True` (default "
+        "gain), `hold_compensation=True`, zero joint estimates (doc/tools.md, "
+        "`rcac friction-demo`).",
         render_friction, ["rcac", "friction-demo", "--out", "{out}"], "metrics.json",
         plots=("friction_estimates.png",)),
     "friction_adapt_links": Source(
