@@ -8,9 +8,8 @@ law with ``joint_friction=True``, every channel (``channels="all"``), the librar
 joint gain (doc/design.md §7) and ``hold_compensation=True`` (``--no-hold-compensation``: the
 plain hold), starting from zero joint estimates; the links are the URDF's, the last
 adapting from it as in the payload demo (every one with ``--adapt-links``, none with
-``--links-known``). The desired motion excites
-every joint in both directions: a sinusoid of 0.4 rad per joint about the "ready" posture,
-0.35-0.55 Hz (peak speeds 0.9-1.4 rad/s).
+``--links-known``). The desired motion excites every joint in both directions: a sinusoid of
+0.4 rad per joint about the "ready" posture, 0.35-0.55 Hz (peak speeds 0.9-1.4 rad/s).
 
 Known limit: joint 1's armature and link 1's inertia about the joint 1 axis enter the
 dynamics only as their sum (the base joint's axis is fixed), so with ``--adapt-links`` the
