@@ -55,16 +55,16 @@ def document():
     """The whole of ``doc/parameters.md``."""
     parts = ["# Node parameters", "",
              "Generated from `rcac_ros/params.py` by `python -m rcac_ros.params_doc > "
-             "doc/parameters.md`; do not edit by hand (a test compares the two).",
+             "doc/parameters.md`; do not edit by hand.",
              "Ranges are inclusive, `(` excludes the bound; doubles must be written with a "
              "decimal point in a YAML file. Settable parameters can be changed with "
              "`ros2 param set` while the node runs; the others are read once at start-up (the "
              "managed controller: at each configure). The controller also takes per-joint "
              "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
+    parts += ["", "## both nodes", "", "Each node declares its own.", "", markdown()]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
-                  "Also: [both nodes](#both-nodes).", "", markdown(node)]
-    parts += ["", "## both nodes", "", markdown()]
+                  markdown(node)]
     return "\n".join(parts) + "\n"
 
 

@@ -42,9 +42,9 @@ from .pseudo_inertia import (barrier_gains_into, initial_estimates, is_body, lam
                              matched_gain, natural_gains_into, natural_metric_option, nu_gain,
                              pseudo_inertia)
 from .retraction import retract_rows
-from .joint_friction import (FOLLOW_TIME, P_FRICTION, friction_gain, friction_natural_gain,
-                             gains_at_start,
-                             natural_friction_start, retract_terms)
+from .joint_friction import (FOLLOW_TIME, P_FRICTION, default_beta, friction_gain,
+                             friction_natural_gain, gains_at_start, natural_friction_start,
+                             retract_terms)
 from .regressor import fill_regressor
 from .spatial import P0, propagate
 
@@ -304,8 +304,10 @@ class SlotineLiCompositeController:
             self.P_friction = friction_gain(P_friction, n)
             self._friction_default = self.P_friction is None
             self._gain_at_start = True      # rates (and the default gain) at the first state
+            # every joint's torque informs the prediction term, as channels="all" does
+            self._beta = default_beta(range(1, n + 1), n, self.update == "implicit", self.gamma)
             P, self._grow, self._rate = gains_at_start(model, self.K_D, np.zeros(n),
-                                                       self._friction_default, self.h)
+                                                       self._friction_default, self.h, self._beta)
             if self._friction_default:
                 self.P_friction = P
             self.friction_hat0 = model.joint_terms() if friction_hat0 is None else \
@@ -385,7 +387,8 @@ class SlotineLiCompositeController:
         if not self._compiled:
             self.compile()
         if self.joint_friction and self._gain_at_start:     # doc/design.md §7
-            got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h)
+            got = gains_at_start(self.model, self.K_D, q, self._friction_default, self.h,
+                                 self._beta)
             if got is not None:
                 P, self._grow, self._rate = got
                 if P is not None:

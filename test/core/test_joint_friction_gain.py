@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from chains import frictional
 
-from rcac_ros.core import PaperTrajectory, RecursiveCompositeController, Simulator, css_arm
+from rcac_ros.core import (PaperTrajectory, RecursiveCompositeController,
+                           SlotineLiCompositeController, Simulator, css_arm)
 from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.joint_friction import (BETA_FRICTION, BETA_FRICTION_ALL, TERM_WEIGHTS,
                                           effective_feedback, feedback_matrix,
@@ -62,6 +63,33 @@ def test_beta_is_the_channels_one_only_when_every_joint_has_an_implicit_channel(
     ctrl.step(q0, np.zeros(7), q0, np.zeros(7), np.zeros(7))
     np.testing.assert_allclose(ctrl.P_friction, feedback_scaled_gain(model, ctrl.K_D, q0, beta),
                                rtol=1e-12)
+
+
+@pytest.mark.parametrize("options", [{}, dict(update="explicit"), dict(gamma=0.0)])
+def test_slotine_li_takes_the_gain_of_channels_all(options):
+    """Slotine-Li is ``channels="all"`` step by step (doc/design.md §8): with the default gain
+    too, whatever its update and ``gamma``."""
+    model = css_arm((0.0, 0.0, -9.81))
+    q0 = np.array(PAPER_Q0)
+    gains = dict(K_D=300.0, joint_friction=True, **options)
+    ours = RecursiveCompositeController(model, channels="all", **gains)
+    theirs = SlotineLiCompositeController(model, **gains)
+    for ctrl in (ours, theirs):
+        ctrl.step(q0, np.zeros(7), q0, np.zeros(7), np.zeros(7))
+    np.testing.assert_allclose(theirs.P_friction, ours.P_friction, rtol=1e-12)
+
+
+def test_the_panda_learns_its_joint_terms_in_20_s_with_the_default_gain():
+    """``rcac friction-demo`` as shipped (the last link adapting), 20 s from zero joint
+    estimates with the library's default gain: every armature and damping within the demo's
+    10 % and every Coulomb term within its 15 %."""
+    from rcac_ros.tools.demos.friction import GOALS, run_friction_demo
+    from rcac_ros.tools.runs.scenarios import find_panda_urdf
+    if find_panda_urdf() is None:
+        pytest.skip("example-robot-data not installed")
+    _, hist, truth, _ = run_friction_demo(20.0, record_every=10000)
+    worst = (np.abs(hist[-1] - truth) / truth).max(axis=0)
+    assert np.all(worst <= np.array(GOALS)), worst
 
 
 def link_inertias(model):

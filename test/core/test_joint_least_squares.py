@@ -133,16 +133,3 @@ def test_the_panda_learns_its_joint_terms_with_its_links_known():
                                           friction_adaptation="least_squares")
     worst = (np.abs(hist[-1] - truth) / truth).max(axis=0)
     assert np.all(worst <= np.array(GOALS)), worst
-
-
-def test_the_panda_learns_its_joint_terms_in_20_s_with_the_default_gain():
-    """``rcac friction-demo`` as shipped (the last link adapting), 20 s from zero joint
-    estimates with the library's default gain: every armature and damping within the demo's
-    10 % and every Coulomb term within its 15 %."""
-    from rcac_ros.tools.demos.friction import GOALS, run_friction_demo
-    from rcac_ros.tools.runs.scenarios import find_panda_urdf
-    if find_panda_urdf() is None:
-        pytest.skip("example-robot-data not installed")
-    _, hist, truth, _ = run_friction_demo(20.0, record_every=10000)
-    worst = (np.abs(hist[-1] - truth) / truth).max(axis=0)
-    assert np.all(worst <= np.array(GOALS)), worst

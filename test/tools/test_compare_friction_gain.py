@@ -1,9 +1,11 @@
-"""``rcac compare``'s friction-aware direct law on the rigid panda (built-in simulator): the
-explicit tracking step of the joint terms with the library's default gain (scaled from each
-joint's feedback) tracks as well as the friction-blind direct law, where a uniform gain too
-large for the light wrist joints does not (doc/design.md §7, "Gain and step")."""
+"""``rcac compare``'s friction-aware laws on the rigid panda (built-in simulator), with the
+library's default gain (scaled from each joint's feedback): the direct law's explicit tracking
+step tracks as well as the friction-blind direct law, where a uniform gain too large for the
+light wrist joints does not; ``all_friction`` (every joint's channel, Euclidean or natural
+geometry) as well as the blind ``all`` law (doc/design.md §7)."""
 
 import numpy as np
+import pytest
 
 from rcac_ros.core.crba import mass_matrix
 from rcac_ros.core.joint_friction import BETA_FRICTION, TERM_WEIGHTS
@@ -46,11 +48,12 @@ def test_direct_friction_tracks_the_rigid_panda_as_the_direct_law():
     assert uniform > 1000.0 * direct, (uniform, direct)
 
 
-def test_all_friction_tracks_the_rigid_panda_as_the_all_law():
+@pytest.mark.parametrize("geometry", [{}, dict(geometry="natural", theta_hat0=C.NATURAL_START)])
+def test_all_friction_tracks_the_rigid_panda_as_the_all_law(geometry):
     """The default gain of ``channels="all"`` (``beta_f`` = 100 s, above the tracking
     step's 30 s) on the rigid panda: the joint terms' truth is 0, and the law may not track worse
     than the friction-blind ``all`` law (a factor 2, as above)."""
     scenario = C.SCENARIOS["panda_rigid"]()
-    blind = rms(scenario, "all")
-    aware = rms(scenario, "all_friction")
+    blind = rms(scenario, "all", **geometry)
+    aware = rms(scenario, "all_friction", **geometry)
     assert aware < 2.0 * blind, (aware, blind)

@@ -60,9 +60,8 @@ LS_FORGETTING = 1.0
 #: where the scenario gives none.
 NATURAL_START = "natural_default"
 
-#: ``P_friction`` of the friction-aware direct and paper laws: the library's default, each
-#: joint's gain scaled from its feedback at the start (doc/design.md §7 "Joint terms without
-#: per-arm tuning").
+#: ``P_friction`` of the friction-aware laws: the library's default, each joint's gain scaled
+#: from its feedback at the start (doc/design.md §7 "Joint terms without per-arm tuning").
 INERTIA_SCALED = P_FRICTION_DEFAULT
 
 #: law -> (controller class, keyword arguments on top of the scenario's gains).
@@ -207,9 +206,9 @@ def scenario_names(names):
 
 
 def friction_gain_for(scenario):
-    """``P_friction`` (n, 3) the friction-aware laws use on ``scenario``: the library's
-    :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at its start (doc/design.md
-    §7)."""
+    """``P_friction`` (n, 3) the friction-aware direct and paper laws use on ``scenario``: the
+    library's :func:`~rcac_ros.core.joint_friction.feedback_scaled_gain` at its start with
+    ``beta_f`` = 30 s (``all_friction``: 100 s, doc/design.md §7)."""
     from rcac_ros.core.joint_friction import feedback_scaled_gain
     return feedback_scaled_gain(scenario.model, np.asarray(scenario.gains["K_D"], float),
                                 scenario.q0)

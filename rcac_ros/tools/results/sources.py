@@ -172,8 +172,8 @@ SOURCES = {
             "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
     "friction_unseen_all": Source(
         "Joint terms on unseen plants, every joint's channel",
-        "As above with `channels: all` (`campaigns/friction_{panda,ur5,xarm7}_all.yaml`): the "
-        "default joint gain `beta_f` = 100 s (doc/design.md §7).",
+        "Other plants (seed 34), `channels: all`: `campaigns/friction_*_all.yaml` "
+        "(doc/design.md §7).",
         render_friction_unseen,
         [["rcac", "sweep", f"campaigns/friction_{arm}_all.yaml", "--out", f"{{out}}/{arm}",
           "--quiet"] for arm in ("panda", "ur5", "xarm7")]
