@@ -36,18 +36,17 @@ def _row(p):
 
 
 def shared():
-    """The rows both nodes declare alike (the same Markdown row), in the controller's order."""
-    simulator = {_row(p) for p in TABLE["simulator"]}
-    return [p for p in TABLE["controller"] if _row(p) in simulator]
+    """The Markdown rows both nodes declare alike, in the controller's order."""
+    simulator = set(map(_row, TABLE["simulator"]))
+    return [row for row in map(_row, TABLE["controller"]) if row in simulator]
 
 
 def markdown(node=None):
     """The Markdown table of ``node``'s own parameters (``None``: those both nodes share)."""
     lines = ["| name | type | default | range | settable | description |",
              "| --- | --- | --- | --- | --- | --- |"]
-    common = {_row(p) for p in shared()}
-    rows = [_row(p) for p in shared()] if node is None else \
-        [_row(p) for p in TABLE[node] if _row(p) not in common]
+    common = shared()
+    rows = common if node is None else [r for r in map(_row, TABLE[node]) if r not in common]
     return "\n".join(lines + rows)
 
 

@@ -37,6 +37,16 @@ def campaign_commands(name):
              "--plot", "{out}/report.png"]]
 
 
+def unseen_commands(suffix=""):
+    """The unseen-plant campaigns ``campaigns/friction_<arm><suffix>.yaml`` of the three arms,
+    then their paired ratios (doc/campaigns.md "Unseen plants")."""
+    arms = ("panda", "ur5", "xarm7")
+    return ([["rcac", "sweep", f"campaigns/friction_{arm}{suffix}.yaml", "--out",
+              f"{{out}}/{arm}", "--quiet"] for arm in arms]
+            + [["python", "-m", "rcac_ros.tools.sweep.paired"]
+               + [f"{{out}}/{arm}" for arm in arms] + ["--out", "{out}"]])
+
+
 # --- the table of sources -------------------------------------------------------------------
 
 class Source:
@@ -165,20 +175,12 @@ SOURCES = {
         "`campaigns/friction_{panda,ur5,xarm7}.yaml`: 70 MuJoCo plants per arm, joint terms "
         "drawn per joint (doc/campaigns.md \"Unseen plants\"); the blind law against "
         "`joint_friction=True` with default gains, paired (the same plant for both).",
-        render_friction_unseen,
-        [["rcac", "sweep", f"campaigns/friction_{arm}.yaml", "--out", f"{{out}}/{arm}",
-          "--quiet"] for arm in ("panda", "ur5", "xarm7")]
-        + [["python", "-m", "rcac_ros.tools.sweep.paired", "{out}/panda", "{out}/ur5",
-            "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
+        render_friction_unseen, unseen_commands(), "ratios.json", plots=("ratios.png",)),
     "friction_unseen_all": Source(
         "Joint terms on unseen plants, every joint's channel",
         "Other plants (seed 34), `channels: all`: `campaigns/friction_*_all.yaml` "
         "(doc/design.md §7).",
-        render_friction_unseen,
-        [["rcac", "sweep", f"campaigns/friction_{arm}_all.yaml", "--out", f"{{out}}/{arm}",
-          "--quiet"] for arm in ("panda", "ur5", "xarm7")]
-        + [["python", "-m", "rcac_ros.tools.sweep.paired", "{out}/panda", "{out}/ur5",
-            "{out}/xarm7", "--out", "{out}"]], "ratios.json", plots=("ratios.png",)),
+        render_friction_unseen, unseen_commands("_all"), "ratios.json", plots=("ratios.png",)),
     "friction_ros": Source(
         "Joint terms over ROS 2",
         "Both nodes over DDS in lockstep, the paper's arm on MuJoCo with joint friction; the "
