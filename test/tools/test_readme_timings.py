@@ -19,7 +19,7 @@ def test_the_committed_source_renders_the_sentence_of_the_template():
     assert fields["demo_min"] > 0 and fields["test_min"] > 0
     assert render_timings(fields).endswith(f"({fields['tests']}).")
     assert render_timings(FIELDS) == (
-        "Measured on this checkout on 2031-01-02 (8 cores, Python 3.12.1): `make demo` 0.5 min "
+        "On this checkout: `make demo` 0.5 min "
         "(the venv as it was, 20 s simulated in 24 s, plots), `make test` 12.0 min (240 passed, "
         "3 skipped, 1 xfailed).")
 

@@ -162,8 +162,7 @@ def render_bench_ros_modes(d):
 
 
 #: the sentence of ``make readme-timings``'s figures
-TIMINGS_TEMPLATE = ("Measured on {where} on {date} ({cores} cores, Python {python}): "
-                    "`make demo` {demo_min:.1f} min ({demo_parts}), `make test` "
+TIMINGS_TEMPLATE = ("On {where}: `make demo` {demo_min:.1f} min ({demo_parts}), `make test` "
                     "{test_min:.1f} min ({tests}).")
 
 

@@ -99,8 +99,7 @@ SOURCES = {
                          "{out}/startup.json"], "startup.json"),
     "timings": Source(
         "The two make targets",
-        "`make demo` and `make test` timed on a fresh clone, as a new user runs them (venv, "
-        "install, the one-time compile of the kernels, the run).",
+        "`make demo` and `make test` timed as a new user runs them.",
         render_timings, shown="make readme-timings"),
     "payload": Source(
         "An unknown payload",
