@@ -181,31 +181,6 @@ def cholesky_entries(a00, a11, a22, a33, a01, a02, a12, a03, a13, a23):
 
 
 @njit(cache=True, inline="always")
-def inverse_entries(l00, l10, l11, l20, l21, l22, l30, l31, l32, l33):
-    """``J^-1 = L^-T L^-1`` from the entries of a factor :func:`cholesky_entries` found
-    (``ok``), unrolled on scalars: ``(k00, k01, k02, k03, k11, k12, k13, k22, k23, k33)``,
-    the upper triangle of the symmetric inverse."""
-    i00, i11, i22, i33 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33    # L^-1 (lower)
-    i10 = -(l10 * i00) * i11
-    i20 = -(l20 * i00 + l21 * i10) * i22
-    i30 = -(l30 * i00 + l31 * i10 + l32 * i20) * i33
-    i21 = -(l21 * i11) * i22
-    i31 = -(l31 * i11 + l32 * i21) * i33
-    i32 = -(l32 * i22) * i33
-    k00 = 0.0 + i00 * i00 + i10 * i10 + i20 * i20 + i30 * i30
-    k01 = 0.0 + i10 * i11 + i20 * i21 + i30 * i31
-    k02 = 0.0 + i20 * i22 + i30 * i32
-    k03 = 0.0 + i30 * i33
-    k11 = 0.0 + i11 * i11 + i21 * i21 + i31 * i31
-    k12 = 0.0 + i21 * i22 + i31 * i32
-    k13 = 0.0 + i31 * i33
-    k22 = 0.0 + i22 * i22 + i32 * i32
-    k23 = 0.0 + i32 * i33
-    k33 = 0.0 + i33 * i33
-    return k00, k01, k02, k03, k11, k12, k13, k22, k23, k33
-
-
-@njit(cache=True, inline="always")
 def positive_definite4(a00, a11, a22, a33, a01, a02, a12, a03, a13, a23):
     """True if the symmetric 4x4 with these 10 entries is positive definite: every pivot of
     its ``L D L^T`` (L unit lower) > 0, the verdict of :func:`cholesky_entries` up to

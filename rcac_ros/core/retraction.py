@@ -9,14 +9,14 @@ A step ``Delta = J(theta_lin - theta_hat)`` of a link's pseudo-inertia
 positive definite for any Delta (eigenvalues of ``I + aZ + a^2 Z^2/2`` lie in [1/2, 5/2]),
 with a numerical floor ``lambda_min(J+) >= FLOOR tr(J+)`` (:func:`retract`); with the
 metric ``"barrier"`` the Euclidean step is shortened instead (:func:`retract_short`).
-O(1) per link: 4x4 products and one 4x4 Cholesky factorisation.
+O(1) per link: 4x4 products and ``J_hat^-1`` by ``L D L^T`` (no square root).
 """
 
 import math
 
 from ._jit import njit
-from .pseudo_inertia import (cholesky_entries, inverse_entries, positive_definite4, pseudo_entries,
-                             theta_from_entries)
+from .pseudo_inertia import (cholesky_entries, inverse_ldl_entries, positive_definite4,
+                             pseudo_entries, theta_from_entries)
 
 
 #: Numerical floor of the retraction: lambda_min(J) >= FLOOR tr(J) after every step, far
@@ -58,8 +58,10 @@ def retract(old, oo, new, on):
     unchanged), ``a = min(1, 1/||Z||_F)``, ``Z = L^-1 Delta L^-T`` (module docstring).
     Returns ``a`` (1: the step was not shortened). ``old`` and ``new`` may share an array.
     The 4x4 algebra is unrolled on the 10 entries of each symmetric matrix (J_hat, Delta,
-    J_hat^-1, Delta J_hat^-1 Delta, the trial J+), the 16 of ``J_hat^-1 Delta`` and the
-    factor's 10, in registers.
+    J_hat^-1, Delta J_hat^-1 Delta, the trial J+) and the 16 of ``J_hat^-1 Delta``, in
+    registers; ``J_hat^-1`` comes from ``L D L^T`` (four divisions, no square root,
+    :func:`~rcac_ros.core.pseudo_inertia.inverse_ldl_entries`), and ``||Z||_F^2 =
+    tr((J_hat^-1 Delta)^2)`` needs no factor of its own.
 
     Floating point: ``a`` is halved (at most :data:`HALVINGS` times) until ``J+ - FLOOR
     tr(J+) 1`` passes a Cholesky factorisation, so every stored J stays clear of rounding
@@ -69,14 +71,12 @@ def retract(old, oo, new, on):
     """
     (j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, d00, d11, d22, d33, d01, d02, d12,
      d03, d13, d23, n0, n1, n2) = step_entries(old, oo, new, on)
-    ok, l00, l10, l11, l20, l21, l22, l30, l31, l32, l33 = cholesky_entries(
+    ok, k00, k01, k02, k03, k11, k12, k13, k22, k23, k33 = inverse_ldl_entries(  # J_hat^-1
         j00, j11, j22, j33, j01, j02, j12, j03, j13, j23)
     if not ok:                                     # never, from a checked start
         theta_from_entries(j00, j11, j22, j33, j01, j02, j12, j03, j13, j23, n0, n1, n2,
                            new, on)
         return 0.0
-    k00, k01, k02, k03, k11, k12, k13, k22, k23, k33 = inverse_entries(   # J_hat^-1
-        l00, l10, l11, l20, l21, l22, l30, l31, l32, l33)
     tr_inv = k00 + k11 + k22 + k33                # >= 1 / lambda_min(J_hat)
     # J_hat^-1 Delta
     m00 = k00 * d00 + k01 * d01 + k02 * d02 + k03 * d03

@@ -3,7 +3,7 @@ same equations written with 4x4 arrays and loops, bit for bit.
 
 Reference: :func:`reference_gain` and :func:`reference_retract` below, the 4x4 loops of
 the first implementation (through :func:`pseudo_inertia_into`, :func:`dual_into`,
-:func:`cholesky4`, :func:`inverse_cholesky4` and :func:`theta_from_pseudo`), the same
+:func:`cholesky4`, :func:`reference_ldl_inverse` and :func:`theta_from_pseudo`), the same
 operations in the same order.
 Every branch of the retraction is reached: a full step, a step shortened to ``||Z|| = 1``,
 halvings and the floor's factorisation, a step kept out (``a = 0``), a start that is not
@@ -18,9 +18,8 @@ import pinocchio as pin
 from numba import njit
 
 from rcac_ros.core import theta_from_inertia
-from rcac_ros.core.pseudo_inertia import (cholesky4, dual_into, inverse_cholesky4,
-                                          natural_gain_apply, pseudo_inertia, pseudo_inertia_into,
-                                          theta_from_pseudo)
+from rcac_ros.core.pseudo_inertia import (cholesky4, dual_into, natural_gain_apply,
+                                          pseudo_inertia, pseudo_inertia_into, theta_from_pseudo)
 from rcac_ros.core.retraction import COND_SHORTCUT, FLOOR, HALVINGS, NU_RATIO, retract
 
 
@@ -46,24 +45,53 @@ def reference_gain(th, o, g, go, out, oo, k, Pnu, po, J, G, T):
 
 
 @njit(cache=False)
+def reference_ldl_inverse(J, L, K):
+    """``K = J^-1`` with 4x4 arrays: ``J = L D L^T`` (L unit lower below the diagonal of
+    ``L``, ``U = L D`` above it, transposed), ``M = L^-1`` in place of L's lower triangle,
+    ``K = M^T D^-1 M``; False at the first pivot that is not > 0."""
+    r = np.empty(4)
+    for k in range(4):
+        d = J[k, k]
+        for m in range(k):
+            d -= L[k, m] * L[m, k]                 # U_km L_km (U above, L below)
+        if not d > 0.0:
+            return False
+        r[k] = 1.0 / d
+        for i in range(k + 1, 4):
+            u = J[i, k]
+            for m in range(k):
+                u -= L[m, i] * L[k, m]             # U_im L_km
+            L[k, i] = u                             # U_ik kept above the diagonal
+            L[i, k] = u * r[k]
+    for i in range(1, 4):                           # M = L^-1 (unit lower), in place
+        for j in range(i):
+            v = -L[i, j]
+            for k in range(j + 1, i):
+                v -= L[i, k] * L[k, j]
+            L[i, j] = v
+    for p in range(4):
+        for q in range(p, 4):
+            v = r[q] if p == q else r[q] * L[q, p]
+            for k in range(q + 1, 4):
+                v += L[k, q] * (r[k] * L[k, p])
+            K[p, q] = v
+            K[q, p] = v
+    return True
+
+
+@njit(cache=False)
 def reference_retract(old, oo, new, on, J, D, L, K):
-    """The retraction with 4x4 arrays: ``L^-1`` in place, ``J^-1``, ``J^-1 D``, ``D J^-1 D``,
+    """The retraction with 4x4 arrays: ``J^-1`` (:func:`reference_ldl_inverse`), ``J^-1 D``,
+    ``D J^-1 D``,
     the halvings with a Cholesky factorisation of ``J+ - FLOOR tr(J+) 1``."""
     pseudo_inertia_into(old, oo, J)
     pseudo_inertia_into(new, on, D)
     for i in range(4):
         for j in range(4):
             D[i, j] -= J[i, j]
-    if not inverse_cholesky4(J, L):
+    if not reference_ldl_inverse(J, L, K):
         theta_from_pseudo(J, new[on + 4], new[on + 5], new[on + 6], new, on)
         return 0.0
-    for i in range(4):
-        for j in range(i, 4):
-            acc = 0.0
-            for m in range(j, 4):
-                acc += L[m, i] * L[m, j]
-            K[i, j] = acc
-            K[j, i] = acc
     tr_inv = K[0, 0] + K[1, 1] + K[2, 2] + K[3, 3]
     for i in range(4):
         for j in range(4):
