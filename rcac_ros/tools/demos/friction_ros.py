@@ -77,6 +77,9 @@ def plot(duration, runs, path):
             for j in range(est.shape[1]):
                 ax.plot(t, est[:, j, c], lw=0.8, label=f"joint {j + 1}")
             ax.axhline(TRUTH[c], color="k", ls="--", lw=1.0, label="plant")
+            # linear up to the decade of the plant's value, logarithmic beyond: the plant's
+            # line stays readable beside estimates that take up link errors (doc/tools.md)
+            ax.set_yscale("symlog", linthresh=10.0 ** np.floor(np.log10(TRUTH[c])))
             ax.set_title(f"{NAMES[c]} estimate (aware)")
             ax.set_xlabel("t [s]")
         axes[1].legend(fontsize=7, ncol=2)
