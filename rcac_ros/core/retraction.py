@@ -9,7 +9,8 @@ A step ``Delta = J(theta_lin - theta_hat)`` of a link's pseudo-inertia
 positive definite for any Delta (eigenvalues of ``I + aZ + a^2 Z^2/2`` lie in [1/2, 5/2]),
 with a numerical floor ``lambda_min(J+) >= FLOOR tr(J+)`` (:func:`retract`); with the
 metric ``"barrier"`` the Euclidean step is shortened instead (:func:`retract_short`).
-O(1) per link: 4x4 products and ``J_hat^-1`` by ``L D L^T`` (no square root).
+O(1) per link: 4x4 products and ``J_hat^-1`` from its ``L D L^T`` (no square root); the
+floor's Cholesky factorisation only past :data:`COND_SHORTCUT`.
 """
 
 import math
@@ -59,7 +60,8 @@ def retract(old, oo, new, on):
     Returns ``a`` (1: the step was not shortened). ``old`` and ``new`` may share an array.
     The 4x4 algebra is unrolled on the 10 entries of each symmetric matrix (J_hat, Delta,
     J_hat^-1, Delta J_hat^-1 Delta, the trial J+) and the 16 of ``J_hat^-1 Delta``, in
-    registers; ``J_hat^-1`` comes from ``L D L^T`` (four divisions, no square root,
+    registers; ``J_hat^-1`` comes from J_hat's own ``L D L^T`` (L unit lower, not the
+    Cholesky factor of Z; four divisions, no square root,
     :func:`~rcac_ros.core.pseudo_inertia.inverse_ldl_entries`), and ``||Z||_F^2 =
     tr((J_hat^-1 Delta)^2)`` needs no factor of its own.
 

@@ -3,8 +3,8 @@ same equations written with 4x4 arrays and loops, bit for bit.
 
 Reference: :func:`reference_gain` and :func:`reference_retract` below, the 4x4 loops of
 the first implementation (through :func:`pseudo_inertia_into`, :func:`dual_into`,
-:func:`cholesky4`, :func:`reference_ldl_inverse` and :func:`theta_from_pseudo`), the same
-operations in the same order.
+:func:`cholesky4` and :func:`theta_from_pseudo`) and, for ``J^-1``, the loops of its
+``L D L^T`` (:func:`reference_ldl_inverse`): the same operations in the same order.
 Every branch of the retraction is reached: a full step, a step shortened to ``||Z|| = 1``,
 halvings and the floor's factorisation, a step kept out (``a = 0``), a start that is not
 positive definite and a step that is not finite; ``old`` and ``new`` share one array as in
@@ -82,8 +82,7 @@ def reference_ldl_inverse(J, L, K):
 @njit(cache=False)
 def reference_retract(old, oo, new, on, J, D, L, K):
     """The retraction with 4x4 arrays: ``J^-1`` (:func:`reference_ldl_inverse`), ``J^-1 D``,
-    ``D J^-1 D``,
-    the halvings with a Cholesky factorisation of ``J+ - FLOOR tr(J+) 1``."""
+    ``D J^-1 D``, the halvings with a Cholesky factorisation of ``J+ - FLOOR tr(J+) 1``."""
     pseudo_inertia_into(old, oo, J)
     pseudo_inertia_into(new, on, D)
     for i in range(4):

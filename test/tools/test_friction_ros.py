@@ -64,7 +64,8 @@ def test_blind_and_aware_runs_over_ros_match_the_offline_loop(tmp_path):
     from rcac_ros.core.model import PAPER_Q0
     from rcac_ros.tools.runs.closed_loop import closed_loop
     model, plant = css_arm(), load_model(str(out / "plant.yaml"))
-    assert np.allclose(plant.armature, 5.0) and np.allclose(plant.damping, 200.0)
+    assert np.allclose([plant.armature, plant.damping, plant.friction],
+                       np.array([[5.0], [200.0], [100.0]]))
     ctrl = RecursiveCompositeController(model, joint_friction=True)
     q0 = np.array(PAPER_Q0)
     closed_loop(ctrl, PaperTrajectory(q0), DURATION, plant=plant, q0=q0, qd0=np.zeros(n),
