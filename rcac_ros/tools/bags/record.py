@@ -165,7 +165,8 @@ class BagRecorder:
         self._latched = {topics.resolve(topics.PAYLOAD, topics.SIMULATOR_NODE):
                          topics.qos(10, transient_local=True)}
         self.use_sim_time = bool(use_sim_time)
-        self.t0 = time.monotonic()
+        #: the start on the clock of the receive stamps (the bag's), ns
+        self.t0_ns = time.time_ns()
         self.node = Node(node_name, context=context, parameter_overrides=[
             Parameter("use_sim_time", Parameter.Type.BOOL, self.use_sim_time)])
         self._clock = self.node.get_clock()
@@ -176,7 +177,8 @@ class BagRecorder:
         self.counts = {name: 0 for name, _ in self.topics}
         #: messages a single publisher sent that never arrived (sequence-number gaps)
         self.gaps = {name: 0 for name, _ in self.topics}
-        #: seconds since start when each topic got its first matched publisher / message
+        #: seconds since start when each topic got its first matched publisher (the event's
+        #: callback) / message (its receive stamp), both on the receive stamps' clock
         self.matched_at = {}
         self.first_at = {}
         self.first_stamp = None
@@ -212,7 +214,7 @@ class BagRecorder:
 
     def _on_matched(self, name, info):
         if info.current_count > 0 and name not in self.matched_at:
-            self.matched_at[name] = time.monotonic() - self.t0
+            self.matched_at[name] = 1e-9 * (time.time_ns() - self.t0_ns)
 
     def _register(self, name):
         infos = self.node.get_publishers_info_by_topic(name)
@@ -221,14 +223,14 @@ class BagRecorder:
     def _on_message(self, name, data, info):
         if self._closed:
             return
+        received = info.get("received_timestamp") or time.time_ns()
         if name not in self._writer.topics:
             self._register(name)
-            now = time.monotonic() - self.t0
+            now = 1e-9 * (received - self.t0_ns)
             self.first_at[name] = now
             matched = self.matched_at.setdefault(name, now)
             self._log(f"rcac record: first message on {name} at {now:.3f} s (its publisher "
                       f"matched at {matched:.3f} s)")
-        received = info.get("received_timestamp") or time.time_ns()
         if name == topics.CLOCK:
             self.sim_time = clock_seconds(data)
             self._clock_recv.append(received)
