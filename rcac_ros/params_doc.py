@@ -41,13 +41,10 @@ def shared():
     return [row for row in map(_row, TABLE["controller"]) if row in simulator]
 
 
-def markdown(node=None):
-    """The Markdown table of ``node``'s own parameters (``None``: those both nodes share)."""
-    lines = ["| name | type | default | range | settable | description |",
-             "| --- | --- | --- | --- | --- | --- |"]
-    common = shared()
-    rows = common if node is None else [r for r in map(_row, TABLE[node]) if r not in common]
-    return "\n".join(lines + rows)
+def markdown(rows):
+    """The Markdown table of parameter ``rows`` (:func:`_row`)."""
+    return "\n".join(["| name | type | default | range | settable | description |",
+                      "| --- | --- | --- | --- | --- | --- |"] + rows)
 
 
 def document():
@@ -60,10 +57,11 @@ def document():
              "`ros2 param set` while the node runs; the others are read once at start-up (the "
              "managed controller: at each configure). The controller also takes per-joint "
              "gain overrides `gains.<joint>.<K_D|Lambda|P>` (doubles; see doc/nodes.md)."]
-    parts += ["", "## both nodes", "", "Each node declares its own.", "", markdown()]
+    common = shared()
+    parts += ["", "## both nodes", "", "Each node declares its own.", "", markdown(common)]
     for node, config in (("controller", "controller.yaml"), ("simulator", "simulator.yaml")):
         parts += ["", f"## {node} (`ros2 run rcac_ros {node}`, `config/{config}`)", "",
-                  markdown(node)]
+                  markdown([r for r in map(_row, TABLE[node]) if r not in common])]
     return "\n".join(parts) + "\n"
 
 
